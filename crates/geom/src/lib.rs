@@ -1,0 +1,308 @@
+//! Shared geometry types of voxlod: the [`Triangle`] record every stage passes on, the
+//! voxel [`Grid`] (world-to-voxel transform and chunk addressing) and Morton codes.
+//!
+//! Every other stage crate depends on this one and on nothing else of voxlod's, so the
+//! stages only meet through these plain types.
+//!
+//! ```
+//! use voxlod_geom::{Grid, morton3};
+//! // a 1024³ grid over the cube [0,2]³: 4×4×4 leaf chunks, 3 levels
+//! let grid = Grid::new([0.0; 3], 2.0, 1024).unwrap();
+//! assert_eq!(grid.chunks_per_axis(), 4);
+//! assert_eq!(grid.levels(), 3);
+//! assert_eq!(grid.to_grid([1.0, 1.0, 1.0]), [512.0, 512.0, 512.0]);
+//! assert_eq!(morton3(1, 0, 0), 1);
+//! assert_eq!(morton3(0, 1, 0), 2);
+//! ```
+
+use bytemuck::{Pod, Zeroable};
+
+/// Voxels per chunk along one axis (the Chajdas paper's 256³ chunks: 8 bits per coordinate).
+pub const CHUNK: u32 = 256;
+/// log2 of [`CHUNK`].
+pub const CHUNK_BITS: u32 = 8;
+
+/// `flags` bit: the triangle carries per-vertex normals in `n`; otherwise `n` is zero and the
+/// face normal is used.
+pub const TRI_HAS_NORMALS: u32 = 1;
+/// `flags` bit: the colours come from the mesh (vertex or material colour), not the default.
+pub const TRI_HAS_COLORS: u32 = 2;
+
+/// Colour given to triangles whose mesh has neither vertex nor material colours: opaque white.
+pub const DEFAULT_COLOR: [u8; 4] = [255, 255, 255, 255];
+
+/// One triangle with its per-vertex attributes, as ingest yields it and as tile bins store it
+/// (88 bytes, plain old data, little-endian on disk).
+///
+/// Positions are in world units when ingest yields them and in grid units (voxels, see
+/// [`Grid::to_grid`]) once the tile stage has binned them.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct Triangle {
+    /// Vertex positions.
+    pub v: [[f32; 3]; 3],
+    /// Vertex normals (not necessarily unit length); all zero unless `flags & TRI_HAS_NORMALS`.
+    pub n: [[f32; 3]; 3],
+    /// Vertex colours, RGBA8.
+    pub c: [[u8; 4]; 3],
+    /// `TRI_HAS_NORMALS | TRI_HAS_COLORS`.
+    pub flags: u32,
+}
+
+impl Triangle {
+    /// A triangle with face normal and the default colour.
+    pub fn new(v: [[f32; 3]; 3]) -> Self {
+        Triangle { v, n: [[0.0; 3]; 3], c: [DEFAULT_COLOR; 3], flags: 0 }
+    }
+
+    /// Twice the area vector `(v1 - v0) × (v2 - v0)` in f64.
+    pub fn cross(&self) -> [f64; 3] {
+        let a = sub64(self.v[1], self.v[0]);
+        let b = sub64(self.v[2], self.v[0]);
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    }
+
+    /// True if all nine coordinates are finite.
+    pub fn is_finite(&self) -> bool {
+        self.v.iter().flatten().all(|x| x.is_finite())
+    }
+
+    /// True if the triangle has zero area (two equal vertices or collinear), judged exactly in
+    /// f64 on the stored f32 coordinates.
+    pub fn is_degenerate(&self) -> bool {
+        let c = self.cross();
+        c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0
+    }
+}
+
+fn sub64(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
+    [a[0] as f64 - b[0] as f64, a[1] as f64 - b[1] as f64, a[2] as f64 - b[2] as f64]
+}
+
+/// Axis-aligned bounds accumulated in f64.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounds {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+impl Default for Bounds {
+    fn default() -> Self {
+        Bounds { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] }
+    }
+}
+
+impl Bounds {
+    pub fn add_point(&mut self, p: [f32; 3]) {
+        for a in 0..3 {
+            self.min[a] = self.min[a].min(p[a] as f64);
+            self.max[a] = self.max[a].max(p[a] as f64);
+        }
+    }
+    pub fn add_triangle(&mut self, t: &Triangle) {
+        for v in &t.v {
+            self.add_point(*v);
+        }
+    }
+    pub fn merge(&mut self, o: &Bounds) {
+        for a in 0..3 {
+            self.min[a] = self.min[a].min(o.min[a]);
+            self.max[a] = self.max[a].max(o.max[a]);
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        !(self.min[0] <= self.max[0])
+    }
+    /// Largest extent over the three axes.
+    pub fn max_extent(&self) -> f64 {
+        (0..3).map(|a| self.max[a] - self.min[a]).fold(0.0, f64::max)
+    }
+}
+
+/// Why a grid cannot be made.
+#[derive(Clone, Debug, PartialEq)]
+pub enum GridError {
+    /// `resolution` is not 256·2^k.
+    Resolution(u32),
+    /// The cube size is zero, negative or not finite.
+    Size(f64),
+}
+
+impl std::fmt::Display for GridError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            GridError::Resolution(r) => {
+                write!(f, "resolution {r} is not 256·2^k (256, 512, 1024, 2048, 4096, …, 65536)")
+            }
+            GridError::Size(s) => write!(f, "the mesh's bounding cube has size {s}; it must be finite and > 0"),
+        }
+    }
+}
+impl std::error::Error for GridError {}
+
+/// The voxel grid: a cube of `resolution³` voxels whose minimum corner is `origin` (world units)
+/// and whose voxels have edge `voxel_size`. Grid coordinate `g = (p - origin) / voxel_size`;
+/// voxel `i` covers `[i, i+1]` on each axis. Leaf chunks are 256³ blocks of voxels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grid {
+    pub origin: [f64; 3],
+    pub voxel_size: f64,
+    pub resolution: u32,
+}
+
+impl Grid {
+    /// Largest supported resolution (chunk coordinates then fit 8 bits per axis).
+    pub const MAX_RESOLUTION: u32 = 65536;
+
+    /// A grid over the cube of edge `size` at `origin`.
+    pub fn new(origin: [f64; 3], size: f64, resolution: u32) -> Result<Grid, GridError> {
+        if resolution < CHUNK || !resolution.is_power_of_two() || resolution > Self::MAX_RESOLUTION {
+            return Err(GridError::Resolution(resolution));
+        }
+        if !(size.is_finite() && size > 0.0) {
+            return Err(GridError::Size(size));
+        }
+        Ok(Grid { origin, voxel_size: size / resolution as f64, resolution })
+    }
+
+    /// The grid that fits a mesh's bounds: the bounding cube is the bounds' largest extent,
+    /// anchored at the bounds' minimum corner. A flat or point-like mesh gets a cube of edge 1.
+    pub fn fit(bounds: &Bounds, resolution: u32) -> Result<Grid, GridError> {
+        let mut size = bounds.max_extent();
+        if size == 0.0 {
+            size = 1.0;
+        }
+        Grid::new(bounds.min, size, resolution)
+    }
+
+    /// World position to grid coordinates (voxel units), rounded to f32.
+    #[inline]
+    pub fn to_grid(&self, p: [f32; 3]) -> [f32; 3] {
+        let s = 1.0 / self.voxel_size;
+        [
+            ((p[0] as f64 - self.origin[0]) * s) as f32,
+            ((p[1] as f64 - self.origin[1]) * s) as f32,
+            ((p[2] as f64 - self.origin[2]) * s) as f32,
+        ]
+    }
+
+    /// Leaf chunks per axis, `resolution / 256`.
+    pub fn chunks_per_axis(&self) -> u32 {
+        self.resolution / CHUNK
+    }
+
+    /// Number of LOD levels: level 0 are the leaf chunks, the last level is one root chunk.
+    pub fn levels(&self) -> u32 {
+        self.chunks_per_axis().trailing_zeros() + 1
+    }
+
+    /// The inclusive range of leaf chunk coordinates, per axis, that a triangle in grid
+    /// coordinates may produce voxels in: every voxel `i` with `[i, i+1]` touching the
+    /// triangle's bounding box, clamped to the grid. This is a superset of the voxels either
+    /// voxelization mode marks, so binning by it loses nothing.
+    pub fn chunk_range(&self, t: &Triangle) -> Option<([u32; 3], [u32; 3])> {
+        let r = self.resolution as f32;
+        let mut lo = [0u32; 3];
+        let mut hi = [0u32; 3];
+        for a in 0..3 {
+            let mn = t.v[0][a].min(t.v[1][a]).min(t.v[2][a]);
+            let mx = t.v[0][a].max(t.v[1][a]).max(t.v[2][a]);
+            if !(mx >= 0.0 && mn <= r) {
+                return None;
+            }
+            let vlo = (mn.floor() - 1.0).clamp(0.0, r - 1.0) as u32;
+            let vhi = mx.floor().clamp(0.0, r - 1.0) as u32;
+            lo[a] = vlo / CHUNK;
+            hi[a] = vhi / CHUNK;
+        }
+        Some((lo, hi))
+    }
+}
+
+/// Spreads the low 21 bits of `v` so there are two zero bits between each.
+#[inline]
+pub fn part1by2(v: u32) -> u64 {
+    let mut x = v as u64 & 0x1f_ffff;
+    x = (x | (x << 32)) & 0x001f_0000_0000_ffff;
+    x = (x | (x << 16)) & 0x001f_0000_ff00_00ff;
+    x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
+    x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
+    x = (x | (x << 2)) & 0x1249_2492_4924_9249;
+    x
+}
+
+/// Inverse of [`part1by2`].
+#[inline]
+pub fn compact1by2(x: u64) -> u32 {
+    let mut x = x & 0x1249_2492_4924_9249;
+    x = (x ^ (x >> 2)) & 0x10c3_0c30_c30c_30c3;
+    x = (x ^ (x >> 4)) & 0x100f_00f0_0f00_f00f;
+    x = (x ^ (x >> 8)) & 0x001f_0000_ff00_00ff;
+    x = (x ^ (x >> 16)) & 0x001f_0000_0000_ffff;
+    x = (x ^ (x >> 32)) & 0x1f_ffff;
+    x as u32
+}
+
+/// Morton (Z-order) code of a 3D point with up to 21 bits per axis: bit `3i` is bit `i` of x,
+/// bit `3i+1` of y, bit `3i+2` of z.
+#[inline]
+pub fn morton3(x: u32, y: u32, z: u32) -> u64 {
+    part1by2(x) | (part1by2(y) << 1) | (part1by2(z) << 2)
+}
+
+/// Inverse of [`morton3`].
+#[inline]
+pub fn demorton3(m: u64) -> [u32; 3] {
+    [compact1by2(m), compact1by2(m >> 1), compact1by2(m >> 2)]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn morton_roundtrip_and_order() {
+        for &(x, y, z) in &[(0, 0, 0), (1, 2, 3), (255, 255, 255), (65535, 1, 40000), (12345, 54321, 7)] {
+            assert_eq!(demorton3(morton3(x, y, z)), [x, y, z]);
+        }
+        // brute-force bit interleave
+        for x in 0..8u32 {
+            for y in 0..8u32 {
+                for z in 0..8u32 {
+                    let mut m = 0u64;
+                    for b in 0..3 {
+                        m |= (((x >> b) & 1) as u64) << (3 * b);
+                        m |= (((y >> b) & 1) as u64) << (3 * b + 1);
+                        m |= (((z >> b) & 1) as u64) << (3 * b + 2);
+                    }
+                    assert_eq!(morton3(x, y, z), m);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn grid_rejects_bad_resolution() {
+        assert!(Grid::new([0.0; 3], 1.0, 1000).is_err());
+        assert!(Grid::new([0.0; 3], 1.0, 128).is_err());
+        assert!(Grid::new([0.0; 3], 0.0, 256).is_err());
+        assert!(Grid::new([0.0; 3], f64::NAN, 256).is_err());
+        assert_eq!(Grid::new([0.0; 3], 1.0, 4096).unwrap().levels(), 5);
+    }
+
+    #[test]
+    fn chunk_range_covers_touching_voxels() {
+        let g = Grid::new([0.0; 3], 512.0, 512).unwrap();
+        // a triangle touching the plane x = 256 exactly from below touches voxel 256's face
+        let t = Triangle::new([[250.0, 10.0, 10.0], [256.0, 11.0, 10.0], [250.0, 12.0, 11.0]]);
+        let (lo, hi) = g.chunk_range(&t).unwrap();
+        assert_eq!(lo, [0, 0, 0]);
+        assert_eq!(hi, [1, 0, 0]);
+        // a triangle starting exactly at x = 256 also touches voxel 255
+        let t = Triangle::new([[256.0, 10.0, 10.0], [260.0, 11.0, 10.0], [258.0, 12.0, 11.0]]);
+        assert_eq!(g.chunk_range(&t).unwrap().0, [0, 0, 0]);
+        // the far face of the grid is clamped into the last voxel
+        let t = Triangle::new([[512.0, 512.0, 512.0], [511.5, 512.0, 512.0], [512.0, 511.5, 512.0]]);
+        assert_eq!(g.chunk_range(&t).unwrap(), ([1, 1, 1], [1, 1, 1]));
+    }
+}
