@@ -1,0 +1,338 @@
+//! Passes 2 and 3 of tiling: per-chunk counts, the layout of the bins file (one pre-sized
+//! region per non-empty chunk, chunks in Morton order) and the budgeted scatter into it.
+
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+use voxlod_geom::{morton3, Grid, Triangle};
+
+use crate::{TileError, TRIANGLE_BYTES};
+
+/// Triangle counts per leaf chunk, dense over the grid's `(R/256)³` chunks.
+pub struct ChunkCounts {
+    n: u32,
+    counts: Vec<u64>,
+}
+
+impl ChunkCounts {
+    pub fn new(grid: &Grid) -> Result<ChunkCounts, TileError> {
+        let n = grid.chunks_per_axis();
+        let total = (n as u64).pow(3);
+        if total > u32::MAX as u64 {
+            return Err(TileError::TooManyChunks(total));
+        }
+        Ok(ChunkCounts { n, counts: vec![0; total as usize] })
+    }
+
+    #[inline]
+    fn index(&self, c: [u32; 3]) -> usize {
+        ((c[2] as usize * self.n as usize) + c[1] as usize) * self.n as usize + c[0] as usize
+    }
+
+    #[inline]
+    pub(crate) fn add_range(&mut self, lo: [u32; 3], hi: [u32; 3]) {
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    let i = self.index([x, y, z]);
+                    self.counts[i] += 1;
+                }
+            }
+        }
+    }
+
+    /// Triangles binned into chunk `c`.
+    pub fn get(&self, c: [u32; 3]) -> u64 {
+        self.counts[self.index(c)]
+    }
+
+    /// Sum over all chunks (a triangle spanning k chunks counts k times).
+    pub fn total(&self) -> u64 {
+        self.counts.iter().sum()
+    }
+
+    /// The non-empty chunks, in Morton order of their coordinates, with their regions laid out
+    /// back to back.
+    pub fn layout(&self) -> Vec<ChunkBin> {
+        let mut chunks: Vec<ChunkBin> = Vec::new();
+        for z in 0..self.n {
+            for y in 0..self.n {
+                for x in 0..self.n {
+                    let count = self.get([x, y, z]);
+                    if count > 0 {
+                        chunks.push(ChunkBin { coord: [x, y, z], morton: morton3(x, y, z), start: 0, count });
+                    }
+                }
+            }
+        }
+        chunks.sort_unstable_by_key(|c| c.morton);
+        let mut start = 0;
+        for c in &mut chunks {
+            c.start = start;
+            start += c.count;
+        }
+        chunks
+    }
+}
+
+/// One non-empty leaf chunk and its region in the bins file (in triangles).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ChunkBin {
+    /// Chunk coordinates (units of 256 voxels).
+    pub coord: [u32; 3],
+    /// `morton3(coord)`.
+    pub morton: u64,
+    /// First triangle of the region.
+    pub start: u64,
+    /// Triangles in the region.
+    pub count: u64,
+}
+
+impl ChunkBin {
+    /// Minimum voxel corner of the chunk in grid coordinates.
+    pub fn origin(&self) -> [u32; 3] {
+        [self.coord[0] * 256, self.coord[1] * 256, self.coord[2] * 256]
+    }
+}
+
+/// The scatter pass in progress.
+pub(crate) struct Scatter<'g> {
+    grid: &'g Grid,
+    path: PathBuf,
+    file: File,
+    chunks: Vec<ChunkBin>,
+    /// Chunk linear index -> position in `chunks`.
+    slot: Vec<u32>,
+    n: u32,
+    /// Triangles already written per chunk.
+    written: Vec<u64>,
+    buffers: Vec<Vec<Triangle>>,
+    buffered: u64,
+    budget: u64,
+}
+
+impl<'g> Scatter<'g> {
+    pub(crate) fn create(grid: &'g Grid, counts: &ChunkCounts, path: &Path, buffer_bytes: u64) -> Result<Scatter<'g>, TileError> {
+        let chunks = counts.layout();
+        let mut slot = vec![u32::MAX; counts.counts.len()];
+        for (i, c) in chunks.iter().enumerate() {
+            slot[counts.index(c.coord)] = i as u32;
+        }
+        let total: u64 = chunks.iter().map(|c| c.count).sum();
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(path)
+            .map_err(TileError::io("create", path))?;
+        file.set_len(total * TRIANGLE_BYTES).map_err(TileError::io("resize", path))?;
+        let k = chunks.len();
+        Ok(Scatter {
+            grid,
+            path: path.to_path_buf(),
+            file,
+            chunks,
+            slot,
+            n: counts.n,
+            written: vec![0; k],
+            buffers: (0..k).map(|_| Vec::new()).collect(),
+            buffered: 0,
+            budget: buffer_bytes.max(TRIANGLE_BYTES * 1024),
+        })
+    }
+
+    /// Bins a batch of grid-space triangles.
+    pub(crate) fn push(&mut self, tris: &[Triangle]) -> Result<(), TileError> {
+        for t in tris {
+            let Some((lo, hi)) = self.grid.chunk_range(t) else { continue };
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        let li = ((z as usize * self.n as usize) + y as usize) * self.n as usize + x as usize;
+                        let s = self.slot[li];
+                        debug_assert!(s != u32::MAX, "count and scatter passes disagree");
+                        self.buffers[s as usize].push(*t);
+                        self.buffered += 1;
+                    }
+                }
+            }
+            if self.buffered * TRIANGLE_BYTES >= self.budget {
+                self.flush()?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes every buffered triangle to its chunk's region and releases the buffers.
+    fn flush(&mut self) -> Result<(), TileError> {
+        for (i, buf) in self.buffers.iter_mut().enumerate() {
+            if buf.is_empty() {
+                continue;
+            }
+            let c = &self.chunks[i];
+            if self.written[i] + buf.len() as u64 > c.count {
+                return Err(TileError::Callback(format!(
+                    "chunk {:?} received more triangles than counted ({} > {}): the spool changed between passes",
+                    c.coord,
+                    self.written[i] + buf.len() as u64,
+                    c.count
+                )));
+            }
+            let off = (c.start + self.written[i]) * TRIANGLE_BYTES;
+            self.file.write_all_at(bytemuck::cast_slice(buf), off).map_err(TileError::io("write", &self.path))?;
+            self.written[i] += buf.len() as u64;
+            *buf = Vec::new();
+        }
+        self.buffered = 0;
+        Ok(())
+    }
+
+    pub(crate) fn finish(mut self) -> Result<Bins, TileError> {
+        self.flush()?;
+        for (i, c) in self.chunks.iter().enumerate() {
+            if self.written[i] != c.count {
+                return Err(TileError::Callback(format!(
+                    "chunk {:?} received {} triangles but {} were counted: the spool changed between passes",
+                    c.coord, self.written[i], c.count
+                )));
+            }
+        }
+        self.file.sync_data().map_err(TileError::io("sync", &self.path))?;
+        Ok(Bins { path: self.path, file: self.file, chunks: self.chunks })
+    }
+}
+
+/// The finished bins file: non-empty leaf chunks in Morton order, each with its triangles
+/// (grid coordinates, in input order).
+pub struct Bins {
+    path: PathBuf,
+    file: File,
+    chunks: Vec<ChunkBin>,
+}
+
+impl Bins {
+    pub fn chunks(&self) -> &[ChunkBin] {
+        &self.chunks
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Total triangle records in the file.
+    pub fn total(&self) -> u64 {
+        self.chunks.iter().map(|c| c.count).sum()
+    }
+
+    /// Hands chunk `i`'s triangles to `f` in input order, `batch` at a time, through a buffer of
+    /// that size (memory is bounded whatever the chunk holds).
+    pub fn read_chunk(&self, i: usize, batch: usize, f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>) -> Result<(), TileError> {
+        assert!(batch > 0);
+        let c = self.chunks[i];
+        let mut buf = vec![Triangle::new([[0.0; 3]; 3]); batch.min(c.count as usize).max(1)];
+        let mut done = 0u64;
+        while done < c.count {
+            let n = (c.count - done).min(buf.len() as u64) as usize;
+            let off = (c.start + done) * TRIANGLE_BYTES;
+            self.file.read_exact_at(bytemuck::cast_slice_mut(&mut buf[..n]), off).map_err(TileError::io("read", &self.path))?;
+            f(&buf[..n])?;
+            done += n as u64;
+        }
+        Ok(())
+    }
+
+    /// Removes the bins file.
+    pub fn remove(self) -> Result<(), TileError> {
+        std::fs::remove_file(&self.path).map_err(TileError::io("remove", &self.path))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Spooler;
+    use voxlod_geom::{demorton3, Bounds};
+
+    fn lcg(s: &mut u64) -> f32 {
+        *s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((*s >> 40) as f32) / (1u64 << 24) as f32
+    }
+
+    /// Brute force: a chunk must hold exactly the triangles whose chunk range contains it, in
+    /// input order, for any scatter budget (several flushes vs one).
+    #[test]
+    fn bins_match_brute_force_for_any_budget() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut s = 7u64;
+        let mut tris = Vec::new();
+        for i in 0..3000 {
+            let c = [lcg(&mut s) * 10.0, lcg(&mut s) * 10.0, lcg(&mut s) * 10.0];
+            let r = if i % 50 == 0 { 6.0 } else { 0.3 };
+            let mut t = Triangle::new([c, [c[0] + r * lcg(&mut s), c[1], c[2] + r], [c[0], c[1] + r * lcg(&mut s), c[2]]]);
+            t.c[0] = [(i % 256) as u8, (i / 256) as u8, 0, 255];
+            tris.push(t);
+        }
+        let mut sp = Spooler::create(&dir.path().join("spool")).unwrap();
+        for b in tris.chunks(700) {
+            sp.push(b).unwrap();
+        }
+        let spool = sp.finish().unwrap();
+        let mut bounds = Bounds::default();
+        tris.iter().for_each(|t| bounds.add_triangle(t));
+        assert_eq!(spool.bounds, bounds);
+        let grid = Grid::fit(&spool.bounds, 1024).unwrap();
+        let counts = spool.count(&grid, &mut |_, _| {}).unwrap();
+        let mut previous: Option<Vec<Vec<Triangle>>> = None;
+        for budget in [TRIANGLE_BYTES * 1024, 1 << 30] {
+            let bins = spool.scatter(&grid, &counts, &dir.path().join(format!("bins{budget}")), budget, &mut |_, _| {}).unwrap();
+            let mut all = Vec::new();
+            let mut last = None;
+            for (i, c) in bins.chunks().iter().enumerate() {
+                assert!(last.map_or(true, |m| m < c.morton), "chunks not in Morton order");
+                last = Some(c.morton);
+                assert_eq!(demorton3(c.morton), c.coord);
+                let mut got = Vec::new();
+                bins.read_chunk(i, 100, &mut |b| {
+                    got.extend_from_slice(b);
+                    Ok(())
+                })
+                .unwrap();
+                let want: Vec<Triangle> = tris
+                    .iter()
+                    .map(|t| crate::spool::to_grid(&grid, t))
+                    .filter(|g| {
+                        let (lo, hi) = grid.chunk_range(g).unwrap();
+                        (0..3).all(|a| lo[a] <= c.coord[a] && c.coord[a] <= hi[a])
+                    })
+                    .collect();
+                assert_eq!(got, want, "chunk {:?}", c.coord);
+                all.push(got);
+            }
+            // every chunk with a triangle in range is present
+            let mut expect_chunks = 0;
+            for z in 0..4 {
+                for y in 0..4 {
+                    for x in 0..4 {
+                        expect_chunks += (counts.get([x, y, z]) > 0) as usize;
+                    }
+                }
+            }
+            assert_eq!(bins.chunks().len(), expect_chunks);
+            if let Some(p) = &previous {
+                assert_eq!(p, &all, "scatter result depends on the buffer budget");
+            }
+            previous = Some(all);
+        }
+    }
+
+    #[test]
+    fn truncated_spool_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("spool");
+        std::fs::write(&p, vec![0u8; TRIANGLE_BYTES as usize * 3 + 5]).unwrap();
+        let e = crate::Spool::open(&p).unwrap_err();
+        assert!(e.to_string().contains("not a whole number"), "{e}");
+    }
+}
