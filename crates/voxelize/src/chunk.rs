@@ -1,0 +1,255 @@
+//! Voxelizing one 256³ chunk (Chajdas, Reitinger & Westermann, "Scalable rendering for very
+//! large meshes", WSCG 2014, section 3) with the overlap tests of [`crate::overlap`] and
+//! clipped-area weighted attributes ([`crate::clip`]).
+//!
+//! Memory is bounded by the chunk: a dense 256³ `u32` slot index (64 MiB, allocated once as zero
+//! pages, cleared sparsely after each chunk) and one accumulator per occupied voxel.
+
+use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, pack_normal, Voxel};
+use voxlod_geom::{Triangle, CHUNK, TRI_HAS_NORMALS};
+
+use crate::clip::{area_scale, Poly};
+use crate::overlap::{to_f64, TriSetup};
+use crate::Mode;
+
+const N: usize = (CHUNK * CHUNK * CHUNK) as usize;
+
+/// Sums of one voxel's contributions, in f64 and in triangle order.
+#[derive(Clone, Copy, Debug, Default)]
+struct Acc {
+    /// Local index `x + 256 (y + 256 z)`.
+    idx: u32,
+    /// Σ w, Σ w·n, Σ w·c
+    w: f64,
+    wn: [f64; 3],
+    wc: [f64; 4],
+    /// count, Σ n, Σ c (the fallback when Σ w = 0)
+    k: u32,
+    un: [f64; 3],
+    uc: [f64; 4],
+}
+
+/// Per-triangle attribute interpolation: barycentrics at a point, vertex normals / colours.
+struct Attrs {
+    v0: [f64; 3],
+    e1: [f64; 3],
+    e2: [f64; 3],
+    n: [f64; 3],
+    inv_nn: f64,
+    face: [f64; 3],
+    vn: Option<[[f64; 3]; 3]>,
+    vc: [[f64; 4]; 3],
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+impl Attrs {
+    fn new(t: &Triangle) -> Attrs {
+        let v = to_f64(&t.v);
+        let e1 = sub(v[1], v[0]);
+        let e2 = sub(v[2], v[0]);
+        let n = cross(e1, e2);
+        let nn = dot(n, n);
+        let len = nn.sqrt();
+        let face = [n[0] / len, n[1] / len, n[2] / len];
+        let vn = (t.flags & TRI_HAS_NORMALS != 0).then(|| t.n.map(|q| q.map(|c| c as f64)));
+        let vc = t.c.map(|q| q.map(|c| c as f64));
+        Attrs {
+            v0: v[0],
+            e1,
+            e2,
+            n,
+            inv_nn: 1.0 / nn,
+            face,
+            vn,
+            vc,
+        }
+    }
+
+    /// (normal, colour) at point `q` of the triangle's plane.
+    #[inline]
+    fn at(&self, q: [f64; 3]) -> ([f64; 3], [f64; 4]) {
+        let d = sub(q, self.v0);
+        let l1 = dot(cross(d, self.e2), self.n) * self.inv_nn;
+        let l2 = dot(cross(self.e1, d), self.n) * self.inv_nn;
+        let l = [1.0 - l1 - l2, l1, l2];
+        let normal = match &self.vn {
+            Some(vn) => {
+                let m = [0, 1, 2].map(|k| l[0] * vn[0][k] + l[1] * vn[1][k] + l[2] * vn[2][k]);
+                let len = dot(m, m).sqrt();
+                if len > 0.0 && len.is_finite() {
+                    [m[0] / len, m[1] / len, m[2] / len]
+                } else {
+                    self.face
+                }
+            }
+            None => self.face,
+        };
+        let c = &self.vc;
+        let colour = [0, 1, 2, 3].map(|k| l[0] * c[0][k] + l[1] * c[1][k] + l[2] * c[2][k]);
+        (normal, colour)
+    }
+}
+
+/// Reusable per-thread chunk voxelizer; see the crate docs for the attribute rules.
+pub struct ChunkVoxelizer {
+    mode: Mode,
+    origin: [u32; 3],
+    /// slot + 1 of each local voxel, 0 = empty
+    slot: Vec<u32>,
+    acc: Vec<Acc>,
+    skipped: u64,
+}
+
+impl ChunkVoxelizer {
+    /// A voxelizer for `mode`; allocates the 64 MiB slot index (zeroed pages, touched lazily).
+    pub fn new(mode: Mode) -> Self {
+        ChunkVoxelizer {
+            mode,
+            origin: [0; 3],
+            slot: vec![0u32; N],
+            acc: Vec::new(),
+            skipped: 0,
+        }
+    }
+
+    /// The voxelization mode.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    /// Start a chunk whose minimum voxel corner is `origin` (grid coordinates, multiples of 256).
+    /// Discards anything added since the last `finish`.
+    pub fn begin(&mut self, origin: [u32; 3]) {
+        debug_assert!(
+            origin.iter().all(|c| c % CHUNK == 0),
+            "chunk origin {origin:?} not a multiple of 256"
+        );
+        self.reset();
+        self.origin = origin;
+    }
+
+    fn reset(&mut self) {
+        for a in &self.acc {
+            self.slot[a.idx as usize] = 0;
+        }
+        self.acc.clear();
+    }
+
+    /// Add triangles in grid coordinates. Each is clipped to the chunk (voxel range clamped to
+    /// `[origin, origin+255]`). Zero-area and non-finite triangles are skipped and counted.
+    pub fn add(&mut self, tris: &[Triangle]) {
+        let o = self.origin.map(|c| c as i64);
+        let lo = o.map(|c| c.min(i32::MAX as i64) as i32);
+        let hi = o.map(|c| (c + CHUNK as i64 - 1).min(i32::MAX as i64) as i32);
+        for t in tris {
+            let Some(s) = TriSetup::new(&t.v, self.mode) else {
+                self.skipped += 1;
+                continue;
+            };
+            let lo_s = s.swizzle(lo);
+            let hi_s = s.swizzle(hi);
+            if (0..3).any(|k| s.bmax[k] < lo_s[k] || s.bmin[k] > hi_s[k]) {
+                continue;
+            }
+            let attrs = Attrs::new(t);
+            let scale = area_scale(s.n);
+            let tri = Poly::triangle(&s.v);
+            let tri_centroid =
+                [0, 1, 2].map(|k| (t.v[0][k] as f64 + t.v[1][k] as f64 + t.v[2][k] as f64) / 3.0);
+            let mut column = tri;
+            let slot = &mut self.slot;
+            let acc = &mut self.acc;
+            s.scan(lo_s, hi_s, |p, first| {
+                if first {
+                    // the four side planes once per column
+                    column = tri.clip_column(p[0] as f64, p[1] as f64);
+                }
+                let (w, c) = column.clip_depth(p[2] as f64).area_centroid(scale);
+                let q = match c {
+                    Some(c) => s.unswizzle(c),
+                    None => tri_centroid,
+                };
+                let (n, col) = attrs.at(q);
+                let g = s.unswizzle(p);
+                let local = [0, 1, 2].map(|k| (g[k] as i64 - o[k]) as u32);
+                debug_assert!(local.iter().all(|&c| c < CHUNK));
+                let idx = local[0] + CHUNK * (local[1] + CHUNK * local[2]);
+                let sl = &mut slot[idx as usize];
+                if *sl == 0 {
+                    acc.push(Acc {
+                        idx,
+                        ..Acc::default()
+                    });
+                    *sl = acc.len() as u32;
+                }
+                let a = &mut acc[*sl as usize - 1];
+                a.w += w;
+                a.k += 1;
+                for k in 0..3 {
+                    a.wn[k] += w * n[k];
+                    a.un[k] += n[k];
+                }
+                for k in 0..4 {
+                    a.wc[k] += w * col[k];
+                    a.uc[k] += col[k];
+                }
+            });
+        }
+    }
+
+    /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
+    /// with normal, colour and face mask. Resets for the next `begin`.
+    pub fn finish(&mut self) -> Vec<Voxel> {
+        let mut out: Vec<(u32, Voxel)> = self
+            .acc
+            .iter()
+            .map(|a| {
+                let pos = [
+                    a.idx % CHUNK,
+                    (a.idx / CHUNK) % CHUNK,
+                    a.idx / (CHUNK * CHUNK),
+                ]
+                .map(|c| c as u8);
+                let (n, c) = average(a);
+                let normal = pack_normal(n);
+                let mask = face_mask(normal) | border_caps(pos);
+                let rgba = c.map(|x| x.round().clamp(0.0, 255.0) as u8);
+                (
+                    morton8(pos[0], pos[1], pos[2]),
+                    Voxel::new(pos, mask, normal, pack_color(rgba)),
+                )
+            })
+            .collect();
+        out.sort_unstable_by_key(|&(m, _)| m);
+        self.reset();
+        out.into_iter().map(|(_, v)| v).collect()
+    }
+
+    /// Triangles skipped (zero area or non-finite) since this voxelizer was made.
+    pub fn skipped(&self) -> u64 {
+        self.skipped
+    }
+}
+
+/// The voxel's (normal, colour): area-weighted means, or unweighted means if Σ w = 0.
+fn average(a: &Acc) -> ([f32; 3], [f64; 4]) {
+    if a.w > 0.0 {
+        (a.wn.map(|x| (x / a.w) as f32), a.wc.map(|x| x / a.w))
+    } else {
+        let k = a.k as f64;
+        (a.un.map(|x| (x / k) as f32), a.uc.map(|x| x / k))
+    }
+}

@@ -1,0 +1,178 @@
+//! Exact area and centroid of a triangle inside a closed voxel box, by Sutherland–Hodgman
+//! clipping (Sutherland & Hodgman, "Reentrant polygon clipping", CACM 1974). These are the
+//! weights and interpolation points of the voxel attributes (see the crate docs).
+//!
+//! The clipping order is fixed so that the chunk voxelizer's factored clipping (the four side
+//! planes once per column, the two depth planes per voxel) gives bit-identical results: the
+//! triangle is swizzled to its dominant axis (as in [`crate::TriSetup`]) and clipped against
+//! `x ≥ p_x`, `x ≤ p_x+1`, `y ≥ p_y`, `y ≤ p_y+1`, `z ≥ p_z`, `z ≤ p_z+1` in swizzled coordinates.
+
+use crate::overlap::{cross_f64, dominant_axis, swizzle, to_f64};
+
+/// Most vertices a triangle clipped by six planes can have.
+pub const MAX_POLY: usize = 9;
+
+/// A convex polygon of at most [`MAX_POLY`] vertices.
+#[derive(Clone, Copy, Debug)]
+pub struct Poly {
+    pub len: usize,
+    pub p: [[f64; 3]; MAX_POLY],
+}
+
+impl Poly {
+    /// The triangle as a polygon.
+    #[inline]
+    pub fn triangle(v: &[[f64; 3]; 3]) -> Poly {
+        let mut p = [[0.0; 3]; MAX_POLY];
+        p[..3].copy_from_slice(v);
+        Poly { len: 3, p }
+    }
+
+    #[inline]
+    pub fn vertices(&self) -> &[[f64; 3]] {
+        &self.p[..self.len]
+    }
+
+    /// Keeps the part with `x[k] ≥ b` (`upper == false`) or `x[k] ≤ b` (`upper == true`).
+    /// Points on the plane are inside; an intersection point is made only where an edge strictly
+    /// crosses the plane, as `in + t·(out − in)` from the inside end, with coordinate `k` set to
+    /// `b` exactly. When every vertex is inside the polygon is returned unchanged.
+    #[inline]
+    pub fn clip(&self, k: usize, b: f64, upper: bool) -> Poly {
+        let dist = |q: &[f64; 3]| if upper { b - q[k] } else { q[k] - b };
+        if self.vertices().iter().all(|q| dist(q) >= 0.0) {
+            return *self;
+        }
+        let mut out = Poly {
+            len: 0,
+            p: [[0.0; 3]; MAX_POLY],
+        };
+        for i in 0..self.len {
+            let a = self.p[i];
+            let c = self.p[(i + 1) % self.len];
+            let da = dist(&a);
+            let dc = dist(&c);
+            if da >= 0.0 {
+                out.push(a);
+            }
+            if (da > 0.0 && dc < 0.0) || (da < 0.0 && dc > 0.0) {
+                let (pin, pout, din, dout) = if da > 0.0 {
+                    (a, c, da, dc)
+                } else {
+                    (c, a, dc, da)
+                };
+                let t = din / (din - dout);
+                let mut q = [
+                    pin[0] + t * (pout[0] - pin[0]),
+                    pin[1] + t * (pout[1] - pin[1]),
+                    pin[2] + t * (pout[2] - pin[2]),
+                ];
+                q[k] = b;
+                out.push(q);
+            }
+        }
+        out
+    }
+
+    #[inline]
+    fn push(&mut self, q: [f64; 3]) {
+        debug_assert!(self.len < MAX_POLY);
+        if self.len < MAX_POLY {
+            self.p[self.len] = q;
+            self.len += 1;
+        }
+    }
+
+    /// Clips to the column `[x, x+1] × [y, y+1]` (axes 0 and 1).
+    #[inline]
+    pub fn clip_column(&self, x: f64, y: f64) -> Poly {
+        self.clip(0, x, false)
+            .clip(0, x + 1.0, true)
+            .clip(1, y, false)
+            .clip(1, y + 1.0, true)
+    }
+
+    /// Clips to the slab `z ∈ [z, z+1]` (axis 2).
+    #[inline]
+    pub fn clip_depth(&self, z: f64) -> Poly {
+        self.clip(2, z, false).clip(2, z + 1.0, true)
+    }
+
+    /// Area and centroid of the polygon, which lies in a plane whose normal `n` has `n[2] ≠ 0`:
+    /// the fan `p0, p_i, p_{i+1}` is measured in the xy projection (`a_i`, shoelace) and scaled
+    /// by `area_scale = |n| / |n_z|`. Centroid = `Σ a_i (p0+p_i+p_{i+1})/3 / Σ a_i`. If the area
+    /// is zero the centroid is the mean of the vertices, and `None` if there are none.
+    #[inline]
+    pub fn area_centroid(&self, area_scale: f64) -> (f64, Option<[f64; 3]>) {
+        if self.len == 0 {
+            return (0.0, None);
+        }
+        let p0 = self.p[0];
+        let mut a2 = 0.0;
+        let mut c = [0.0; 3];
+        for i in 1..self.len.saturating_sub(1) {
+            let u = [self.p[i][0] - p0[0], self.p[i][1] - p0[1]];
+            let w = [self.p[i + 1][0] - p0[0], self.p[i + 1][1] - p0[1]];
+            let ai = u[0] * w[1] - u[1] * w[0];
+            a2 += ai;
+            for k in 0..3 {
+                c[k] += ai * (p0[k] + self.p[i][k] + self.p[i + 1][k]);
+            }
+        }
+        if a2 != 0.0 {
+            let s = 1.0 / (3.0 * a2);
+            (
+                0.5 * a2.abs() * area_scale,
+                Some([c[0] * s, c[1] * s, c[2] * s]),
+            )
+        } else {
+            let inv = 1.0 / self.len as f64;
+            let mut m = [0.0; 3];
+            for q in self.vertices() {
+                for k in 0..3 {
+                    m[k] += q[k] * inv;
+                }
+            }
+            (0.0, Some(m))
+        }
+    }
+}
+
+/// `|n| / |n_z|` for a swizzled normal.
+#[inline]
+pub(crate) fn area_scale(n: [f64; 3]) -> f64 {
+    (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt() / n[2].abs()
+}
+
+/// Exact area of the triangle (grid units, voxel²) inside the closed voxel box `[p, p+1]³`,
+/// and the centroid of that clipped polygon. If the clipped polygon has zero area the centroid is
+/// the mean of its vertices; if the triangle misses the box (or has zero area or a non-finite
+/// coordinate) the result is `(0.0, centroid of the triangle)`.
+pub fn clipped_area(v: &[[f32; 3]; 3], voxel: [i32; 3]) -> (f64, [f64; 3]) {
+    let o = to_f64(v);
+    let tri_centroid = [
+        (o[0][0] + o[1][0] + o[2][0]) / 3.0,
+        (o[0][1] + o[1][1] + o[2][1]) / 3.0,
+        (o[0][2] + o[1][2] + o[2][2]) / 3.0,
+    ];
+    let n = cross_f64(&o);
+    if n == [0.0; 3] || !o.iter().flatten().all(|c| c.is_finite()) {
+        return (0.0, tri_centroid);
+    }
+    let swz = swizzle(dominant_axis(n));
+    let sw = |p: [f64; 3]| [p[swz[0]], p[swz[1]], p[swz[2]]];
+    let tri = Poly::triangle(&[sw(o[0]), sw(o[1]), sw(o[2])]);
+    let p = sw(voxel.map(|c| c as f64));
+    let poly = tri.clip_column(p[0], p[1]).clip_depth(p[2]);
+    let (area, c) = poly.area_centroid(area_scale(sw(n)));
+    match c {
+        Some(c) => {
+            let mut u = [0.0; 3];
+            for k in 0..3 {
+                u[swz[k]] = c[k];
+            }
+            (area, u)
+        }
+        None => (0.0, tri_centroid),
+    }
+}

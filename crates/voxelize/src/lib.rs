@@ -1,0 +1,124 @@
+//! CPU surface voxelization of one 256³ chunk at a time, with the factored triangle/box overlap
+//! tests of Rauwendaal & Bailey, "Hybrid Computational Voxelization Using the Graphics
+//! Pipeline", JCGT 2(1) 2013 (section 3.1 and the Appendix, Figures 17 and 18).
+//!
+//! * [`overlap`]: the per-triangle setup [`TriSetup`] and [`voxelize_triangle`], in two modes
+//!   ([`Mode::Conservative`], 26-separating: every voxel the closed triangle touches;
+//!   [`Mode::Thin`], 6-separating: the naive digital plane restricted to the triangle). The exact
+//!   definitions, and where they differ from the paper's pseudocode, are in that module's docs.
+//! * [`clip`]: [`clipped_area`], the triangle's area inside a voxel and its centroid.
+//! * [`chunk`]: [`ChunkVoxelizer`], which accumulates attributes per voxel of a chunk and emits
+//!   the 12-byte [`voxlod_format::Voxel`] records sorted by Morton code.
+//! * [`grid`]: [`voxelize_grid`], a whole in-memory grid, chunks in parallel.
+//!
+//! Grid coordinates: voxel `p` is the closed box `[p, p+1]³`; triangles are given in grid
+//! coordinates (`Grid::to_grid`).
+//!
+//! # Attributes (the GPU voxelizer reproduces these)
+//!
+//! For every triangle `T` (in `add` order) and every voxel `p` that the overlap test marks:
+//! * weight `w` = area of `T ∩ [p, p+1]³` in voxel² ([`clipped_area`]: Sutherland–Hodgman in f64,
+//!   swizzled to `T`'s dominant axis, planes in the order x−, x+, y−, y+, z−, z+; area from the
+//!   xy shoelace of the fan from the first vertex times `|n|/|n_z|`);
+//! * interpolation point `q` = centroid of that clipped polygon (mean of its vertices if its area
+//!   is zero, the triangle's centroid if it is empty);
+//! * barycentrics at `q`: with `e1 = v1−v0`, `e2 = v2−v0`, `n = e1×e2`, `d = q−v0`:
+//!   `λ1 = ((d×e2)·n)/(n·n)`, `λ2 = ((e1×d)·n)/(n·n)`, `λ0 = 1−λ1−λ2` (not clamped);
+//! * normal = `normalize(Σ λ_k n_k)` of the vertex normals if `flags & TRI_HAS_NORMALS` (the unit
+//!   face normal `n/|n|` if that sum is zero or not finite), else the unit face normal `n/|n|`
+//!   (its sign follows the winding `v0, v1, v2`);
+//! * colour = `Σ λ_k c_k` of the RGBA8 vertex colours as reals in 0..255.
+//!
+//! Per voxel, in f64 and in triangle order: `W = Σ w`, `N = Σ w·normal`, `C = Σ w·colour`, plus
+//! the count `K` and the unweighted sums `N′`, `C′`. If `W > 0` the voxel's normal is `N / W` and
+//! its colour `C / W`; otherwise (only touched on its boundary, e.g. conservative ties) `N′ / K`
+//! and `C′ / K`. Encoding: normal word = `pack_normal(normal as f32)`, face mask =
+//! `face_mask(normal word) | border_caps(pos)`, colour = `pack_color(round(colour) clamped to
+//! 0..255)` with round half away from zero. Voxels are sorted by `morton8` of their in-chunk
+//! position. A GPU port computing in f32 matches up to rounding.
+//!
+//! # Example
+//!
+//! ```
+//! use voxlod_geom::Triangle;
+//! use voxlod_voxelize::{voxelize_triangle, clipped_area, ChunkVoxelizer, Mode};
+//!
+//! // a triangle in the plane z = 2.5 covering the lower-left half of [0,2]²
+//! let v = [[0.0, 0.0, 2.5], [2.0, 0.0, 2.5], [0.0, 2.0, 2.5]];
+//! let mut thin = Vec::new();
+//! voxelize_triangle(&v, [0; 3], [255; 3], Mode::Thin, &mut |p| thin.push(p));
+//! assert_eq!(thin, vec![[0, 0, 2], [0, 1, 2], [1, 0, 2]]);
+//! let (area, centroid) = clipped_area(&v, [1, 0, 2]);
+//! assert!((area - 0.5).abs() < 1e-12);
+//! assert!((centroid[0] - 4.0 / 3.0).abs() < 1e-12 && (centroid[1] - 1.0 / 3.0).abs() < 1e-12);
+//!
+//! let mut cv = ChunkVoxelizer::new(Mode::Conservative);
+//! cv.begin([0, 0, 0]);
+//! cv.add(&[Triangle::new(v)]);
+//! let voxels = cv.finish();
+//! // (1,1,2) is touched at the corner (1,1), (2,0,2) and (0,2,2) at a vertex
+//! assert_eq!(voxels.len(), 6);
+//! assert_eq!(voxels[0].pos(), [0, 0, 2]);
+//! assert_eq!(voxels[0].normal_f32(), [0.0, 0.0, 1.0]);
+//! ```
+
+pub mod chunk;
+pub mod clip;
+pub mod grid;
+pub mod overlap;
+
+pub use chunk::ChunkVoxelizer;
+pub use clip::clipped_area;
+pub use grid::{voxelize_grid, GridVoxels};
+pub use overlap::{voxelize_triangle, TriSetup};
+
+use std::fmt;
+use std::str::FromStr;
+
+/// Surface voxelization mode (Schwarz & Seidel 2010 separability).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// 26-separating: every voxel whose closed box meets the closed triangle.
+    Conservative,
+    /// 6-separating: the triangle against the diamond inscribed in each voxel.
+    Thin,
+}
+
+/// A string that is neither `conservative` nor `thin`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown voxelization mode {0:?} (expected \"conservative\" or \"thin\")")]
+pub struct ParseModeError(pub String);
+
+impl FromStr for Mode {
+    type Err = ParseModeError;
+    fn from_str(s: &str) -> Result<Mode, ParseModeError> {
+        match s {
+            "conservative" => Ok(Mode::Conservative),
+            "thin" => Ok(Mode::Thin),
+            _ => Err(ParseModeError(s.to_string())),
+        }
+    }
+}
+
+impl fmt::Display for Mode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Mode::Conservative => "conservative",
+            Mode::Thin => "thin",
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mode_strings_roundtrip() {
+        for m in [Mode::Conservative, Mode::Thin] {
+            assert_eq!(m.to_string().parse::<Mode>(), Ok(m));
+        }
+        assert!("Thin".parse::<Mode>().is_err());
+    }
+}
