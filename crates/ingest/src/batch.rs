@@ -1,0 +1,84 @@
+//! Batching of triangles for the caller: every reader pushes triangles here one by one;
+//! degenerate ones are counted and dropped, the rest are handed on in batches of
+//! [`BATCH`] triangles, with a progress report per batch.
+
+use crate::{IngestError, IngestStats};
+use voxlod_geom::Triangle;
+
+/// Triangles per batch handed to the caller's callback (64 Ki triangles = 5.5 MiB).
+pub const BATCH: usize = 1 << 16;
+
+pub(crate) struct Emitter<'a> {
+    batch: Vec<Triangle>,
+    f: &'a mut dyn FnMut(&[Triangle]) -> Result<(), IngestError>,
+    progress: &'a mut dyn FnMut(u64, u64),
+    pub stats: IngestStats,
+    /// Input bytes consumed so far; readers update it, the emitter reports it.
+    pub bytes_done: u64,
+    pub bytes_total: u64,
+}
+
+impl<'a> Emitter<'a> {
+    pub fn new(
+        f: &'a mut dyn FnMut(&[Triangle]) -> Result<(), IngestError>,
+        progress: &'a mut dyn FnMut(u64, u64),
+        bytes_total: u64,
+    ) -> Self {
+        Emitter {
+            batch: Vec::with_capacity(BATCH),
+            f,
+            progress,
+            stats: IngestStats::default(),
+            bytes_done: 0,
+            bytes_total,
+        }
+    }
+
+    /// A triangle whose corners repeat a vertex index: zero area, skipped and counted.
+    #[inline]
+    pub fn repeated_index(&mut self) {
+        self.stats.degenerate_skipped += 1;
+        self.stats.repeated_index += 1;
+    }
+
+    /// Reports progress at input byte `bytes` without emitting anything.
+    pub fn report(&mut self, bytes: u64) {
+        self.bytes_done = bytes;
+        (self.progress)(bytes.min(self.bytes_total), self.bytes_total);
+    }
+
+    /// Takes one triangle; drops it if it has exactly zero area.
+    #[inline]
+    pub fn push(&mut self, t: Triangle) -> Result<(), IngestError> {
+        debug_assert!(
+            t.is_finite(),
+            "readers refuse non-finite vertices before emitting"
+        );
+        if t.is_degenerate() {
+            self.stats.degenerate_skipped += 1;
+            return Ok(());
+        }
+        self.batch.push(t);
+        self.stats.triangles += 1;
+        if self.batch.len() == BATCH {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) -> Result<(), IngestError> {
+        if !self.batch.is_empty() {
+            (self.f)(&self.batch)?;
+            self.batch.clear();
+        }
+        (self.progress)(self.bytes_done.min(self.bytes_total), self.bytes_total);
+        Ok(())
+    }
+
+    /// Hands on the last partial batch and reports completion.
+    pub fn finish(mut self) -> Result<IngestStats, IngestError> {
+        self.bytes_done = self.bytes_total;
+        self.flush()?;
+        Ok(self.stats)
+    }
+}

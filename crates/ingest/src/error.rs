@@ -1,0 +1,128 @@
+//! Errors of the ingest stage: every one names the file, what is wrong and where.
+
+use std::fmt;
+use std::path::PathBuf;
+
+/// Where in an input file a problem was found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Location {
+    /// 1-based line number of a text file (for `.ply.gz`: of the decompressed text).
+    Line(u64),
+    /// Byte offset from the start of the file (for `.ply.gz`: of the decompressed stream).
+    Byte(u64),
+    /// Record `index` (0-based) of PLY element `element`, starting at byte `offset`
+    /// (decompressed offset for gzip input).
+    Record {
+        element: String,
+        index: u64,
+        offset: u64,
+    },
+    /// Nowhere more precise than the file itself.
+    File,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Location::Line(l) => write!(f, "line {l}"),
+            Location::Byte(b) => write!(f, "byte offset {b}"),
+            Location::Record {
+                element,
+                index,
+                offset,
+            } => {
+                write!(f, "{element} {index} (byte offset {offset})")
+            }
+            Location::File => write!(f, "whole file"),
+        }
+    }
+}
+
+/// Why a mesh cannot be read. Bad input never panics; it ends up here.
+#[derive(Debug, thiserror::Error)]
+pub enum IngestError {
+    /// The operating system refused to open, map or read the file.
+    #[error("{}: cannot read: {source}", .path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file has no bytes at all.
+    #[error("{}: the file is empty", .path.display())]
+    Empty { path: PathBuf },
+    /// Neither the extension nor the first bytes say PLY, OBJ or STL.
+    #[error("{}: unknown mesh format: {reason}", .path.display())]
+    UnknownFormat { path: PathBuf, reason: String },
+    /// The PLY header (or the STL preamble) is not well formed.
+    #[error("{}: malformed header at line {line}: {message}", .path.display())]
+    Header {
+        path: PathBuf,
+        line: u64,
+        message: String,
+    },
+    /// A value in the body cannot be parsed or makes no sense (bad number, absurd list count,
+    /// missing or extra values on a line, unknown keyword).
+    #[error("{}: {at}: {message}", .path.display())]
+    Malformed {
+        path: PathBuf,
+        at: Location,
+        message: String,
+    },
+    /// The file ends before the data its header (or its own counts) promise.
+    #[error("{}: truncated at {at}: {what} needs {expected} bytes but only {got} are left", .path.display())]
+    Truncated {
+        path: PathBuf,
+        at: Location,
+        what: String,
+        expected: u64,
+        got: u64,
+    },
+    /// A face refers to a vertex that does not exist.
+    #[error(
+        "{}: {at}: face {face} corner {corner} refers to vertex {index}, but the file has {vertices} vertices",
+        .path.display()
+    )]
+    IndexOutOfRange {
+        path: PathBuf,
+        at: Location,
+        face: u64,
+        corner: u64,
+        index: i64,
+        vertices: u64,
+    },
+    /// A vertex coordinate is NaN or infinite. Such input is refused, not silently dropped.
+    #[error("{}: {at}: vertex {vertex} has a non-finite coordinate {coords:?}", .path.display())]
+    NonFinite {
+        path: PathBuf,
+        at: Location,
+        vertex: u64,
+        coords: [f64; 3],
+    },
+    /// The OBJ reader (tobj) failed; tobj does not report where, so neither can we.
+    #[error("{}: OBJ reader (tobj) failed: {message}", .path.display())]
+    Obj { path: PathBuf, message: String },
+    /// The caller's batch callback failed; streaming stopped there.
+    #[error("triangle consumer failed: {0}")]
+    Callback(String),
+}
+
+impl IngestError {
+    pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
+        IngestError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+    pub(crate) fn malformed(
+        path: &std::path::Path,
+        at: Location,
+        message: impl Into<String>,
+    ) -> Self {
+        IngestError::Malformed {
+            path: path.to_path_buf(),
+            at,
+            message: message.into(),
+        }
+    }
+}

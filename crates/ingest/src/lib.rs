@@ -1,0 +1,222 @@
+//! The ingest stage of voxlod: streams the triangles of a mesh file, with per-vertex normals
+//! and colours when the file has them, as [`voxlod_geom::Triangle`] records in world
+//! coordinates, in file order, in batches.
+//!
+//! Formats (detected by extension, confirmed by the first bytes):
+//! * **PLY** (`.ply`, `.ply.gz`): ascii, binary_little_endian, binary_big_endian, optionally
+//!   gzip-compressed. Elements in any order, unknown elements and properties skipped, faces
+//!   (polygons, fan-triangulated) and `tristrips` (restart at -1). Vertex normals `nx ny nz`;
+//!   vertex colours `red green blue [alpha]` (or `diffuse_*`, `r g b a`), uchar 0–255 or
+//!   float 0–1.
+//! * **OBJ** (`.obj`) through `tobj`: polygons fan-triangulated, MTL `Kd` as the colour of
+//!   the triangle, `vn` normals when every face corner has one. Textures are ignored.
+//! * **STL** (`.stl`): binary and ASCII; the facet normal is ignored.
+//!
+//! Memory: binary PLY and binary STL are memory-mapped and vertices are read in place —
+//! memory use does not grow with the mesh. ASCII and gzip PLY can only be read front to back,
+//! so their vertices are parsed into a compact array (12 bytes per vertex, +12 with normals,
+//! +4 with colours): O(vertices) memory, freed when [`MeshSource::stream`] returns. ASCII
+//! STL needs no vertex array. OBJ is loaded whole by `tobj`: O(file size) memory.
+//!
+//! Triangles of exactly zero area (repeated vertex index or [`Triangle::is_degenerate`]) are
+//! skipped and counted in [`IngestStats`]. NaN or infinite vertex coordinates are refused
+//! with an error naming the vertex.
+//!
+//! ```
+//! use voxlod_ingest::MeshSource;
+//! let dir = std::env::temp_dir().join(format!("voxlod-ingest-doc-{}", std::process::id()));
+//! std::fs::create_dir_all(&dir).unwrap();
+//! let path = dir.join("quad.ply");
+//! std::fs::write(&path, "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\n\
+//!     property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+//!     end_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n").unwrap();
+//!
+//! let mesh = MeshSource::open(&path).unwrap();
+//! assert_eq!(mesh.info().format, "ply ascii");
+//! let mut tris = Vec::new();
+//! let stats = mesh
+//!     .stream(&mut |batch| { tris.extend_from_slice(batch); Ok(()) }, &mut |_done, _total| {})
+//!     .unwrap();
+//! assert_eq!((stats.polygons, stats.triangles), (1, 2)); // the quad is fanned from corner 0
+//! assert_eq!(tris[1].v, [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]);
+//! std::fs::remove_dir_all(&dir).unwrap();
+//! ```
+
+mod batch;
+mod error;
+mod obj;
+mod ply;
+mod ply_faces;
+mod ply_header;
+mod ply_records;
+mod ply_vertices;
+mod stl;
+
+pub use batch::BATCH;
+pub use error::{IngestError, Location};
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use voxlod_geom::Triangle;
+
+/// What [`MeshSource::open`] learnt about a mesh before reading its body.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct MeshInfo {
+    pub path: PathBuf,
+    /// `"ply ascii"`, `"ply binary_little_endian"`, `"ply binary_big_endian"` (each with
+    /// `" (gzip)"` appended for `.ply.gz`), `"obj"`, `"stl binary"` or `"stl ascii"`.
+    pub format: String,
+    /// Vertex count as declared (PLY) or read (OBJ `v` lines); 3 per facet for binary STL,
+    /// 0 for ASCII STL (unknown before reading).
+    pub vertices: u64,
+    /// Polygon count as declared (PLY `face` elements; `tristrips` not counted), OBJ `f`
+    /// lines, binary STL facets; 0 for ASCII STL.
+    pub faces: u64,
+    /// Triangles carry vertex normals (`TRI_HAS_NORMALS`).
+    pub has_normals: bool,
+    /// Triangles carry vertex or material colours (`TRI_HAS_COLORS`), for at least some.
+    pub has_colors: bool,
+    /// Things that did not stop reading but the user should know (missing MTL file,
+    /// ignored partial normals, trailing bytes, no faces).
+    pub warnings: Vec<String>,
+}
+
+/// Counts of one [`MeshSource::stream`] run.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct IngestStats {
+    /// Triangles handed to the callback.
+    pub triangles: u64,
+    /// Triangles of exactly zero area that were skipped (includes `repeated_index`).
+    pub degenerate_skipped: u64,
+    /// Polygons read (PLY face records, OBJ `f` lines, STL facets).
+    pub polygons: u64,
+    /// The part of `degenerate_skipped` whose corners repeat a vertex index (what
+    /// `meshstat.py` counts as degenerate); the rest have distinct indices but zero area.
+    pub repeated_index: u64,
+}
+
+enum Reader {
+    Ply(ply::PlySource),
+    Obj(obj::ObjSource),
+    Stl(stl::StlSource),
+}
+
+/// An opened mesh file, ready to stream its triangles (any number of times).
+pub struct MeshSource {
+    info: MeshInfo,
+    reader: Reader,
+    file_len: u64,
+}
+
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Format {
+    Ply { gz: bool },
+    Obj,
+    Stl,
+}
+
+fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
+    let gz = head.starts_with(&[0x1f, 0x8b]);
+    let starts_ply = head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n");
+    let unknown = |reason: String| {
+        Err(IngestError::UnknownFormat {
+            path: path.to_path_buf(),
+            reason,
+        })
+    };
+    if name.ends_with(".ply") || name.ends_with(".ply.gz") {
+        // the header parser reports a file that is neither gzip nor starts with "ply"
+        return Ok(Format::Ply { gz });
+    }
+    if name.ends_with(".obj") || name.ends_with(".stl") {
+        if gz {
+            return unknown("gzip-compressed OBJ/STL is not supported; decompress it first".into());
+        }
+        return Ok(if name.ends_with(".obj") {
+            Format::Obj
+        } else {
+            Format::Stl
+        });
+    }
+    if starts_ply || (gz && ply::gz_holds_ply(path)) {
+        return Ok(Format::Ply { gz });
+    }
+    if stl::is_ascii_stl(head, len)
+        || (head.len() >= 84
+            && len == 84 + 50 * u32::from_le_bytes([head[80], head[81], head[82], head[83]]) as u64)
+    {
+        return Ok(Format::Stl);
+    }
+    unknown(format!(
+        "the extension of {name:?} is not .ply, .ply.gz, .obj or .stl, and the content is not PLY or STL"
+    ))
+}
+
+impl MeshSource {
+    /// Opens a mesh: detects the format by extension (and magic bytes) and reads the header
+    /// (PLY), the counts (OBJ: one pass over the file) or the facet count (binary STL).
+    pub fn open(path: &Path) -> Result<MeshSource, IngestError> {
+        let file_len = std::fs::metadata(path)
+            .map_err(|e| IngestError::io(path, e))?
+            .len();
+        if file_len == 0 {
+            return Err(IngestError::Empty {
+                path: path.to_path_buf(),
+            });
+        }
+        let mut head = Vec::with_capacity(512);
+        std::fs::File::open(path)
+            .and_then(|f| f.take(512).read_to_end(&mut head))
+            .map_err(|e| IngestError::io(path, e))?;
+        let (reader, info) = match detect(path, &head, file_len)? {
+            Format::Ply { gz } => {
+                let (s, i) = ply::PlySource::open(path, gz, file_len)?;
+                (Reader::Ply(s), i)
+            }
+            Format::Obj => {
+                let (s, i) = obj::ObjSource::open(path)?;
+                (Reader::Obj(s), i)
+            }
+            Format::Stl => {
+                let (s, i) = stl::StlSource::open(path, &head, file_len)?;
+                (Reader::Stl(s), i)
+            }
+        };
+        Ok(MeshSource {
+            info,
+            reader,
+            file_len,
+        })
+    }
+
+    pub fn info(&self) -> &MeshInfo {
+        &self.info
+    }
+
+    /// Streams every triangle in file order, in batches of up to [`BATCH`] triangles,
+    /// calling `f` per batch. Degenerate triangles (exactly zero area) are skipped and
+    /// counted. `progress(bytes_done, bytes_total)` is called after each batch (input bytes;
+    /// compressed bytes for gzip; a two-pass read counts the file twice). Stops with the
+    /// first error, including one returned by `f`.
+    pub fn stream(
+        &self,
+        f: &mut dyn FnMut(&[Triangle]) -> Result<(), IngestError>,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<IngestStats, IngestError> {
+        let total = match &self.reader {
+            Reader::Ply(p) => p.progress_total(),
+            _ => self.file_len,
+        };
+        let mut em = batch::Emitter::new(f, progress, total);
+        match &self.reader {
+            Reader::Ply(p) => p.stream(&mut em)?,
+            Reader::Obj(o) => o.stream(&mut em)?,
+            Reader::Stl(s) => s.stream(&mut em)?,
+        }
+        em.finish()
+    }
+}

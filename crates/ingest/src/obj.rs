@@ -1,0 +1,278 @@
+//! Wavefront OBJ reading through `tobj` (triangulated as fans, like PLY polygons), with the
+//! MTL diffuse colour `Kd` as the colour of all three corners and `vn` normals when every
+//! face corner names one. `tobj` loads the whole file into memory: OBJ input costs
+//! O(file) memory.
+//!
+//! Because `tobj` reports errors without a line number, [`scan`] first walks the file once
+//! and checks what can be checked cheaply (numbers, finite positions, face indices), so the
+//! common errors name their line.
+
+use crate::batch::Emitter;
+use crate::{IngestError, Location, MeshInfo};
+use std::collections::HashSet;
+use std::fs::File;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use voxlod_geom::{Triangle, DEFAULT_COLOR, TRI_HAS_COLORS, TRI_HAS_NORMALS};
+
+pub(crate) struct ObjSource {
+    path: PathBuf,
+    polygons: u64,
+    /// Every face corner names a normal: use the `vn` normals.
+    use_normals: bool,
+}
+
+struct Scan {
+    vertices: u64,
+    normals: u64,
+    colored_vertices: u64,
+    faces: u64,
+    corners_without_normal: u64,
+    mtllibs: Vec<String>,
+    used_materials: HashSet<String>,
+}
+
+fn tokens(line: &str) -> std::str::SplitAsciiWhitespace<'_> {
+    line.split_ascii_whitespace()
+}
+
+/// Checks the file line by line and counts what it declares.
+fn scan(path: &Path) -> Result<Scan, IngestError> {
+    let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+    let mut r = BufReader::with_capacity(1 << 18, file);
+    let mut s = Scan {
+        vertices: 0,
+        normals: 0,
+        colored_vertices: 0,
+        faces: 0,
+        corners_without_normal: 0,
+        mtllibs: Vec::new(),
+        used_materials: HashSet::new(),
+    };
+    let mut buf = Vec::new();
+    let mut line_no = 0u64;
+    loop {
+        buf.clear();
+        if r.read_until(b'\n', &mut buf)
+            .map_err(|e| IngestError::io(path, e))?
+            == 0
+        {
+            break;
+        }
+        line_no += 1;
+        let at = Location::Line(line_no);
+        let line = String::from_utf8_lossy(&buf);
+        let mut t = tokens(&line);
+        match t.next() {
+            Some("v") => {
+                let vals: Vec<&str> = t.collect();
+                if vals.len() < 3 {
+                    return Err(IngestError::malformed(
+                        path,
+                        at,
+                        "a vertex needs at least 3 coordinates",
+                    ));
+                }
+                let mut p = [0f64; 3];
+                for (k, v) in vals[..3].iter().enumerate() {
+                    p[k] = v.parse::<f32>().map_err(|_| {
+                        IngestError::malformed(path, at.clone(), format!("{v:?} is not a number"))
+                    })? as f64;
+                }
+                if !p.iter().all(|x| x.is_finite()) {
+                    return Err(IngestError::NonFinite {
+                        path: path.to_path_buf(),
+                        at,
+                        vertex: s.vertices,
+                        coords: p,
+                    });
+                }
+                if vals.len() >= 6 {
+                    s.colored_vertices += 1;
+                }
+                s.vertices += 1;
+            }
+            Some("vn") => s.normals += 1,
+            Some("f") => {
+                let mut corner = 0u64;
+                for c in t {
+                    let mut parts = c.split('/');
+                    let v = parts.next().unwrap_or("");
+                    let has_normal = parts.nth(1).is_some_and(|n| !n.is_empty());
+                    let idx: i64 = v.parse().map_err(|_| {
+                        IngestError::malformed(
+                            path,
+                            at.clone(),
+                            format!("face corner {c:?} has no vertex index"),
+                        )
+                    })?;
+                    // 1-based, or negative: relative to the vertices read so far
+                    let resolved = if idx < 0 {
+                        s.vertices as i64 + idx
+                    } else {
+                        idx - 1
+                    };
+                    if idx == 0 || resolved < 0 || resolved as u64 >= s.vertices {
+                        return Err(IngestError::IndexOutOfRange {
+                            path: path.to_path_buf(),
+                            at,
+                            face: s.faces,
+                            corner,
+                            index: idx,
+                            vertices: s.vertices,
+                        });
+                    }
+                    if !has_normal {
+                        s.corners_without_normal += 1;
+                    }
+                    corner += 1;
+                }
+                s.faces += 1;
+            }
+            Some("mtllib") => {
+                let rest = line.trim().strip_prefix("mtllib").unwrap_or("").trim();
+                if !rest.is_empty() {
+                    s.mtllibs.push(rest.to_string());
+                }
+            }
+            Some("usemtl") => {
+                if let Some(name) = t.next() {
+                    s.used_materials.insert(name.to_string());
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(s)
+}
+
+impl ObjSource {
+    pub fn open(path: &Path) -> Result<(ObjSource, MeshInfo), IngestError> {
+        let s = scan(path)?;
+        let mut warnings = Vec::new();
+        let mut has_colors = s.colored_vertices > 0 && s.colored_vertices == s.vertices;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for lib in &s.mtllibs {
+            let p = dir.join(lib);
+            match tobj::load_mtl(&p) {
+                Ok((mats, _)) => {
+                    has_colors |= mats.iter().any(|m| m.diffuse.is_some() && s.used_materials.contains(&m.name));
+                }
+                Err(e) => warnings.push(format!(
+                    "material library {} cannot be read ({e}); its materials get the default colour",
+                    p.display()
+                )),
+            }
+        }
+        if !s.used_materials.is_empty() && s.mtllibs.is_empty() {
+            warnings.push("usemtl without mtllib: materials get the default colour".into());
+        }
+        let use_normals = s.normals > 0 && s.corners_without_normal == 0;
+        if s.normals > 0 && !use_normals {
+            warnings.push(format!(
+                "{} face corners have no normal index; vertex normals ignored, face normals used",
+                s.corners_without_normal
+            ));
+        }
+        let info = MeshInfo {
+            path: path.to_path_buf(),
+            format: "obj".into(),
+            vertices: s.vertices,
+            faces: s.faces,
+            has_normals: use_normals,
+            has_colors,
+            warnings,
+        };
+        Ok((
+            ObjSource {
+                path: path.to_path_buf(),
+                polygons: s.faces,
+                use_normals,
+            },
+            info,
+        ))
+    }
+
+    pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
+        let path = &self.path;
+        let opts = tobj::LoadOptions {
+            triangulate: true,
+            single_index: false,
+            ignore_points: true,
+            ignore_lines: true,
+            ..Default::default()
+        };
+        let (models, materials) = tobj::load_obj(path, &opts).map_err(|e| IngestError::Obj {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        // a missing MTL was reported as a warning at open; its materials get the default colour
+        let materials = materials.unwrap_or_default();
+        em.report(em.bytes_total / 2);
+        for m in &models {
+            let mesh = &m.mesh;
+            let mat = mesh
+                .material_id
+                .and_then(|i| materials.get(i))
+                .and_then(|m| m.diffuse);
+            let vcol =
+                mesh.vertex_color.len() == mesh.positions.len() && !mesh.vertex_color.is_empty();
+            let normals = self.use_normals
+                && mesh.normal_indices.len() == mesh.indices.len()
+                && !mesh.normals.is_empty();
+            let mut flags = if normals { TRI_HAS_NORMALS } else { 0 };
+            if vcol || mat.is_some() {
+                flags |= TRI_HAS_COLORS;
+            }
+            let mat_color = mat
+                .map(|d| rgba8([d[0], d[1], d[2]]))
+                .unwrap_or(DEFAULT_COLOR);
+            let get3 = |a: &[f32], i: usize| -> Option<[f32; 3]> {
+                a.get(3 * i..3 * i + 3).map(|s| [s[0], s[1], s[2]])
+            };
+            for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
+                let tri = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
+                if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+                    em.repeated_index();
+                    continue;
+                }
+                let bad = || IngestError::Obj {
+                    path: path.to_path_buf(),
+                    message: format!("object {:?} triangle {t} refers to missing data", m.name),
+                };
+                let mut out = Triangle::new([[0.0; 3]; 3]);
+                out.flags = flags;
+                for k in 0..3 {
+                    out.v[k] = get3(&mesh.positions, tri[k]).ok_or_else(bad)?;
+                    if normals {
+                        out.n[k] = get3(&mesh.normals, mesh.normal_indices[3 * t + k] as usize)
+                            .ok_or_else(bad)?;
+                    }
+                    out.c[k] = if vcol {
+                        rgba8(get3(&mesh.vertex_color, tri[k]).ok_or_else(bad)?)
+                    } else {
+                        mat_color
+                    };
+                }
+                if !out.is_finite() {
+                    // the scan refuses non-finite positions; this only guards against tobj disagreeing
+                    return Err(IngestError::Obj {
+                        path: path.to_path_buf(),
+                        message: format!(
+                            "object {:?} triangle {t} has a non-finite coordinate",
+                            m.name
+                        ),
+                    });
+                }
+                em.push(out)?;
+            }
+        }
+        em.stats.polygons = self.polygons;
+        Ok(())
+    }
+}
+
+fn rgba8(c: [f32; 3]) -> [u8; 4] {
+    let b = |x: f32| (x * 255.0).round().clamp(0.0, 255.0) as u8;
+    [b(c[0]), b(c[1]), b(c[2]), 255]
+}

@@ -1,0 +1,333 @@
+//! PLY reading: binary files are memory-mapped and their vertices read in place; ASCII and
+//! gzip files are read front to back, vertices into a compact array, faces streamed.
+//! A face element that comes before the vertex element in a front-to-back input is streamed
+//! in a second pass over the file.
+
+use crate::batch::Emitter;
+use crate::ply_faces::stream_faces;
+use crate::ply_header::{parse_header, Element, Encoding, Header};
+use crate::ply_records::{
+    AsciiRecords, Counter, CountingReader, Records, SliceRecords, StreamRecords,
+};
+use crate::ply_vertices::{CompactVertices, MappedVertices, VertexSource};
+use crate::{IngestError, Location, MeshInfo};
+use flate2::read::MultiGzDecoder;
+use memmap2::Mmap;
+use std::cell::Cell;
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+use voxlod_geom::{TRI_HAS_COLORS, TRI_HAS_NORMALS};
+
+pub(crate) struct PlySource {
+    path: PathBuf,
+    header: Header,
+    gz: bool,
+    file_len: u64,
+    /// The whole file, for binary (not gzip) input.
+    map: Option<Mmap>,
+    /// Byte offset of each element needed from the map (vertex and face elements).
+    offsets: Vec<Option<usize>>,
+    /// Passes over the file that front-to-back reading needs (2 if faces precede vertices).
+    passes: u64,
+}
+
+impl PlySource {
+    pub fn open(
+        path: &Path,
+        gz: bool,
+        file_len: u64,
+    ) -> Result<(PlySource, MeshInfo), IngestError> {
+        let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+        let header = if gz {
+            parse_header(path, &mut BufReader::new(MultiGzDecoder::new(file)))?
+        } else {
+            parse_header(path, &mut BufReader::new(file))?
+        };
+        let layout = &header.layout;
+        let mut warnings = Vec::new();
+        if layout.sources.is_empty() {
+            warnings.push("no face or tristrips element: a point cloud, no triangles".to_string());
+        }
+        let mut map = None;
+        let mut offsets = vec![None; header.elements.len()];
+        if !gz && header.encoding != Encoding::Ascii {
+            let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+            // SAFETY: the map is read-only; like every mmap reader we rely on nobody
+            // truncating or rewriting the input file while it is being read.
+            let m = unsafe { Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
+            offsets = match header.encoding {
+                Encoding::BinaryBe => element_offsets::<true>(path, &header, &m)?,
+                _ => element_offsets::<false>(path, &header, &m)?,
+            };
+            map = Some(m);
+        }
+        let passes = if layout.sources.iter().any(|s| s.0 < layout.vertex) {
+            2
+        } else {
+            1
+        };
+        let info = MeshInfo {
+            path: path.to_path_buf(),
+            format: format!(
+                "ply {}{}",
+                header.encoding.name(),
+                if gz { " (gzip)" } else { "" }
+            ),
+            vertices: header.elements[layout.vertex].count,
+            faces: layout
+                .sources
+                .iter()
+                .filter(|s| !s.2)
+                .map(|s| header.elements[s.0].count)
+                .sum(),
+            has_normals: layout.has_normals,
+            has_colors: layout.has_colors,
+            warnings,
+        };
+        Ok((
+            PlySource {
+                path: path.to_path_buf(),
+                header,
+                gz,
+                file_len,
+                map,
+                offsets,
+                passes,
+            },
+            info,
+        ))
+    }
+
+    /// Input bytes the progress reports count up to.
+    pub fn progress_total(&self) -> u64 {
+        if self.map.is_some() {
+            self.file_len
+        } else {
+            self.file_len * self.passes
+        }
+    }
+
+    fn flags(&self) -> u32 {
+        let l = &self.header.layout;
+        (if l.has_normals { TRI_HAS_NORMALS } else { 0 })
+            | (if l.has_colors { TRI_HAS_COLORS } else { 0 })
+    }
+
+    pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
+        match (&self.map, self.header.encoding) {
+            (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, em),
+            (Some(m), _) => self.stream_mapped::<false>(m, em),
+            (None, _) => self.stream_sequential(em),
+        }
+    }
+
+    fn stream_mapped<const BE: bool>(
+        &self,
+        data: &[u8],
+        em: &mut Emitter,
+    ) -> Result<(), IngestError> {
+        let l = &self.header.layout;
+        let vel = &self.header.elements[l.vertex];
+        let voff = self.offsets[l.vertex].unwrap_or(data.len());
+        match vel.fixed_size() {
+            Some(stride) => {
+                // element_offsets checked that the vertex records lie inside the file
+                let end = voff + vel.count as usize * stride;
+                let verts = MappedVertices::<BE>::new(&data[voff..end], vel, l);
+                self.faces_from_map::<BE, _>(data, &verts, em)
+            }
+            None => {
+                let mut src = SliceRecords::<BE>::new(&self.path, data, voff);
+                let verts =
+                    CompactVertices::load(&self.path, &mut src, vel, l, &mut |b| em.report(b))?;
+                self.faces_from_map::<BE, _>(data, &verts, em)
+            }
+        }
+    }
+
+    fn faces_from_map<const BE: bool, V: VertexSource>(
+        &self,
+        data: &[u8],
+        verts: &V,
+        em: &mut Emitter,
+    ) -> Result<(), IngestError> {
+        for &(ei, list, strips) in &self.header.layout.sources {
+            let off = self.offsets[ei].unwrap_or(data.len());
+            let mut src = SliceRecords::<BE>::new(&self.path, data, off);
+            stream_faces(
+                &self.path,
+                &mut src,
+                &self.header.elements[ei],
+                list,
+                strips,
+                verts,
+                self.flags(),
+                em,
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Opens the file positioned at the first body byte. The counter starts at `start`.
+    fn open_body(&self, start: u64) -> Result<(BufReader<Box<dyn Read>>, Counter), IngestError> {
+        let path = &self.path;
+        let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+        let counter: Counter = Rc::new(Cell::new(start));
+        let counting = CountingReader {
+            inner: file,
+            count: counter.clone(),
+        };
+        let inner: Box<dyn Read> = if self.gz {
+            Box::new(MultiGzDecoder::new(counting))
+        } else {
+            Box::new(counting)
+        };
+        let mut r = BufReader::with_capacity(1 << 18, inner);
+        let want = self.header.bytes;
+        let skipped = std::io::copy(&mut (&mut r).take(want), &mut std::io::sink())
+            .map_err(|e| IngestError::io(path, e))?;
+        if skipped != want {
+            return Err(IngestError::malformed(
+                path,
+                Location::File,
+                "the file changed since its header was read",
+            ));
+        }
+        Ok((r, counter))
+    }
+
+    fn stream_sequential(&self, em: &mut Emitter) -> Result<(), IngestError> {
+        let mut verts = None;
+        let mut done = vec![false; self.header.layout.sources.len()];
+        for pass in 0..self.passes {
+            let (r, counter) = self.open_body(pass * self.file_len)?;
+            match self.header.encoding {
+                Encoding::Ascii => {
+                    let mut src = AsciiRecords::new(&self.path, r, counter, self.header.lines);
+                    self.pass(&mut src, &mut verts, &mut done, em)?;
+                }
+                Encoding::BinaryLe => {
+                    let mut src =
+                        StreamRecords::<_, false>::new(&self.path, r, counter, self.header.bytes);
+                    self.pass(&mut src, &mut verts, &mut done, em)?;
+                }
+                Encoding::BinaryBe => {
+                    let mut src =
+                        StreamRecords::<_, true>::new(&self.path, r, counter, self.header.bytes);
+                    self.pass(&mut src, &mut verts, &mut done, em)?;
+                }
+            }
+        }
+        debug_assert!(done.iter().all(|&d| d));
+        Ok(())
+    }
+
+    /// One front-to-back pass: loads the vertices if not yet loaded, streams every face
+    /// element not yet done whose vertices are known, skips everything else, and stops after
+    /// the last element it needs.
+    fn pass<R: Records>(
+        &self,
+        src: &mut R,
+        verts: &mut Option<CompactVertices>,
+        done: &mut [bool],
+        em: &mut Emitter,
+    ) -> Result<(), IngestError> {
+        let l = &self.header.layout;
+        let mut last = if verts.is_none() { l.vertex } else { 0 };
+        for (s, d) in l.sources.iter().zip(done.iter()) {
+            if !d {
+                last = last.max(s.0);
+            }
+        }
+        for (i, el) in self.header.elements.iter().enumerate().take(last + 1) {
+            if i == l.vertex && verts.is_none() {
+                *verts = Some(CompactVertices::load(&self.path, src, el, l, &mut |b| {
+                    em.report(b)
+                })?);
+                continue;
+            }
+            if let Some(si) = l.sources.iter().position(|s| s.0 == i) {
+                if let (false, Some(v)) = (done[si], verts.as_ref()) {
+                    let (_, list, strips) = l.sources[si];
+                    stream_faces(&self.path, src, el, list, strips, v, self.flags(), em)?;
+                    done[si] = true;
+                    continue;
+                }
+            }
+            skip_element(src, el)?;
+        }
+        Ok(())
+    }
+}
+
+fn skip_element<R: Records>(src: &mut R, el: &Element) -> Result<(), IngestError> {
+    src.element(&el.name, el.count);
+    for r in 0..el.count {
+        src.skip_record(el, r)?;
+    }
+    Ok(())
+}
+
+/// Byte offsets of the elements up to the last one the mesh needs. Fixed-size elements are
+/// stepped over arithmetically (and must fit in the file); variable-size ones before a needed
+/// element are walked record by record.
+fn element_offsets<const BE: bool>(
+    path: &Path,
+    header: &Header,
+    data: &[u8],
+) -> Result<Vec<Option<usize>>, IngestError> {
+    let l = &header.layout;
+    let last = l
+        .sources
+        .iter()
+        .map(|s| s.0)
+        .chain([l.vertex])
+        .max()
+        .unwrap_or(l.vertex);
+    let mut offsets = vec![None; header.elements.len()];
+    let mut off = header.bytes as usize;
+    for (i, el) in header.elements.iter().enumerate().take(last + 1) {
+        offsets[i] = Some(off);
+        match el.fixed_size() {
+            Some(size) => {
+                let left = (data.len() - off) as u64;
+                let need = el.count.checked_mul(size as u64).unwrap_or(u64::MAX);
+                if need > left {
+                    return Err(IngestError::Truncated {
+                        path: path.to_path_buf(),
+                        at: Location::Record {
+                            element: el.name.clone(),
+                            index: 0,
+                            offset: off as u64,
+                        },
+                        what: format!(
+                            "element {:?} ({} records of {size} bytes)",
+                            el.name, el.count
+                        ),
+                        expected: need,
+                        got: left,
+                    });
+                }
+                off += need as usize;
+            }
+            None if i == last => break,
+            None => {
+                let mut src = SliceRecords::<BE>::new(path, data, off);
+                skip_element(&mut src, el)?;
+                off = src.pos;
+            }
+        }
+    }
+    Ok(offsets)
+}
+
+/// True if the gzip stream in `path` decompresses to something starting with "ply".
+pub(crate) fn gz_holds_ply(path: &Path) -> bool {
+    let Ok(f) = File::open(path) else {
+        return false;
+    };
+    let mut r = BufReader::new(MultiGzDecoder::new(f));
+    matches!(r.fill_buf(), Ok(b) if b.starts_with(b"ply"))
+}
