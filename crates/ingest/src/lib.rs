@@ -132,6 +132,9 @@ fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
         // the header parser reports a file that is neither gzip nor starts with "ply"
         return Ok(Format::Ply { gz });
     }
+    if name.ends_with(".obj.gz") || name.ends_with(".stl.gz") {
+        return unknown("gzip-compressed OBJ/STL is not supported; decompress it first".into());
+    }
     if name.ends_with(".obj") || name.ends_with(".stl") {
         if gz {
             return unknown("gzip-compressed OBJ/STL is not supported; decompress it first".into());

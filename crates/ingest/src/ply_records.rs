@@ -144,6 +144,11 @@ pub(crate) fn decode_f64<const BE: bool>(b: &[u8], ty: Scalar) -> f64 {
     decode::<BE>(b, ty)
 }
 
+/// A read error inside the body (for gzip: a corrupt or cut compressed stream).
+fn read_failed(path: &Path, at: Location, e: std::io::Error) -> IngestError {
+    IngestError::malformed(path, at, format!("read failed: {e}"))
+}
+
 fn negative_count(path: &Path, at: Location, k: i64) -> IngestError {
     IngestError::malformed(path, at, format!("negative list count {k}"))
 }
@@ -205,17 +210,17 @@ impl<const BE: bool> Records for SliceRecords<'_, BE> {
     }
     #[inline]
     fn f32(&mut self, ty: Scalar) -> Result<f32, IngestError> {
-        let b = self.take(ty.size(), || format!("a {} value", ty.name()))?;
+        let b = self.take(ty.size(), || format!("one {} value", ty.name()))?;
         Ok(decode_f32::<BE>(b, ty))
     }
     #[inline]
     fn f64(&mut self, ty: Scalar) -> Result<f64, IngestError> {
-        let b = self.take(ty.size(), || format!("a {} value", ty.name()))?;
+        let b = self.take(ty.size(), || format!("one {} value", ty.name()))?;
         Ok(decode::<BE>(b, ty))
     }
     #[inline]
     fn int(&mut self, ty: Scalar) -> Result<i64, IngestError> {
-        let b = self.take(ty.size(), || format!("a {} value", ty.name()))?;
+        let b = self.take(ty.size(), || format!("one {} value", ty.name()))?;
         Ok(decode_int::<BE>(b, ty))
     }
     #[inline]
@@ -245,7 +250,7 @@ impl<const BE: bool> Records for SliceRecords<'_, BE> {
     fn skip(&mut self, kind: Kind) -> Result<(), IngestError> {
         match kind {
             Kind::Scalar(s) => self
-                .take(s.size(), || format!("a {} value", s.name()))
+                .take(s.size(), || format!("one {} value", s.name()))
                 .map(drop),
             Kind::List { count, item } => {
                 let k = self.list_count(count, item)?;
@@ -330,7 +335,7 @@ impl<'a, R: BufRead, const BE: bool> StreamRecords<'a, R, BE> {
                     return Err(IngestError::Truncated {
                         path: self.path.to_path_buf(),
                         at: self.location(),
-                        what: format!("a {} value", ty.name()),
+                        what: format!("one {} value", ty.name()),
                         expected: n as u64,
                         got: got as u64,
                     });
