@@ -41,12 +41,20 @@ impl Voxel {
     #[inline]
     pub fn new(pos: [u8; 3], mask: u8, normal: u32, color: u32) -> Voxel {
         debug_assert!(mask <= FACE_ALL);
-        Voxel { pos_mask: pack_pos(pos, mask), normal, color }
+        Voxel {
+            pos_mask: pack_pos(pos, mask),
+            normal,
+            color,
+        }
     }
     /// Position inside the chunk.
     #[inline]
     pub fn pos(&self) -> [u8; 3] {
-        [self.pos_mask as u8, (self.pos_mask >> 8) as u8, (self.pos_mask >> 16) as u8]
+        [
+            self.pos_mask as u8,
+            (self.pos_mask >> 8) as u8,
+            (self.pos_mask >> 16) as u8,
+        ]
     }
     /// Face mask (6 bits, `FACE_*`).
     #[inline]
@@ -62,7 +70,11 @@ impl Voxel {
     /// The decoded normal, components in [-1, 1] (not renormalized).
     pub fn normal_f32(&self) -> [f32; 3] {
         let q = unpack_normal(self.normal);
-        [q[0] as f32 / NORMAL_SCALE, q[1] as f32 / NORMAL_SCALE, q[2] as f32 / NORMAL_SCALE]
+        [
+            q[0] as f32 / NORMAL_SCALE,
+            q[1] as f32 / NORMAL_SCALE,
+            q[2] as f32 / NORMAL_SCALE,
+        ]
     }
     /// RGBA8 colour.
     pub fn rgba(&self) -> [u8; 4] {
@@ -100,7 +112,9 @@ pub fn pack_normal(n: [f32; 3]) -> u32 {
     }
     let mut w = 0u32;
     for (a, &c) in n.iter().enumerate() {
-        let q = ((c / len) * NORMAL_SCALE).round().clamp(-NORMAL_SCALE, NORMAL_SCALE) as i32;
+        let q = ((c / len) * NORMAL_SCALE)
+            .round()
+            .clamp(-NORMAL_SCALE, NORMAL_SCALE) as i32;
         w |= ((q as u32) & 0x3ff) << (10 * a);
     }
     w
@@ -187,7 +201,10 @@ mod tests {
     #[test]
     fn face_rules() {
         assert_eq!(face_mask(pack_normal([1.0, 0.0, 0.0])), FACE_POS_X);
-        assert_eq!(face_mask(pack_normal([-1.0, 1.0, 0.0])), FACE_NEG_X | FACE_POS_Y);
+        assert_eq!(
+            face_mask(pack_normal([-1.0, 1.0, 0.0])),
+            FACE_NEG_X | FACE_POS_Y
+        );
         assert_eq!(face_mask(0), FACE_ALL);
         assert_eq!(border_caps([0, 5, 255]), FACE_NEG_X | FACE_POS_Z);
         assert_eq!(border_caps([3, 5, 7]), 0);
@@ -195,7 +212,14 @@ mod tests {
 
     #[test]
     fn morton8_matches_bit_interleave() {
-        for &(x, y, z) in &[(0u8, 0u8, 0u8), (1, 0, 0), (0, 1, 0), (0, 0, 1), (255, 255, 255), (17, 200, 3)] {
+        for &(x, y, z) in &[
+            (0u8, 0u8, 0u8),
+            (1, 0, 0),
+            (0, 1, 0),
+            (0, 0, 1),
+            (255, 255, 255),
+            (17, 200, 3),
+        ] {
             let mut m = 0u32;
             for b in 0..8 {
                 m |= (((x >> b) & 1) as u32) << (3 * b);

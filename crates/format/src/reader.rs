@@ -1,0 +1,467 @@
+//! The validating reader: memory-maps a file, checks the header, the index and every index
+//! entry up front (so a corrupt file fails at `open` with a message naming what is wrong), and
+//! checks each payload's checksums when a node is read. Nothing in a file can make it panic.
+
+use std::cell::RefCell;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use memmap2::Mmap;
+
+use crate::block::unshuffle;
+use crate::layout::{
+    child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, NODE_ENTRY_SIZE, VERSION,
+};
+use crate::voxel::Voxel;
+use crate::{FileSpec, FormatError, MAX_NODE_VOXELS};
+
+/// A voxlod file opened for reading. `Send + Sync`: threads may read nodes concurrently.
+pub struct Reader {
+    path: PathBuf,
+    map: Mmap,
+    header: Header,
+    nodes: Vec<NodeEntry>,
+}
+
+impl std::fmt::Debug for Reader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Reader")
+            .field("path", &self.path)
+            .field("header", &self.header)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Reader {
+    /// Opens and validates `path`: the header (magic, version, size, checksum, fields), that
+    /// the index and manifest lie inside the file and the file ends with the manifest, the
+    /// index and manifest checksums, and every entry (level and position inside the grid,
+    /// voxel count in 1..=256³, payload range inside the payload region and after the previous
+    /// payload, bounds, reserved fields, index order, child masks exactly the stored children,
+    /// every node below the root with its parent, total voxel count).
+    ///
+    /// The file must not be modified while the reader is alive (it is memory-mapped).
+    pub fn open(path: &Path) -> Result<Reader, FormatError> {
+        let io = |op: &'static str| {
+            move |source| FormatError::Io {
+                path: path.to_owned(),
+                op,
+                source,
+            }
+        };
+        let file = File::open(path).map_err(io("opening"))?;
+        let len = file.metadata().map_err(io("reading the file size"))?.len();
+        let head = |what: String| FormatError::Header {
+            path: path.to_owned(),
+            what,
+        };
+        if len < HEADER_SIZE as u64 {
+            return Err(head(format!(
+                "the file is {len} bytes, shorter than the {HEADER_SIZE}-byte header"
+            )));
+        }
+        // SAFETY: the map is only read; the documented contract is that the file is not
+        // modified while mapped (as for every memory-mapped reader).
+        let map = unsafe { Mmap::map(&file) }.map_err(io("memory-mapping"))?;
+        if map.len() as u64 != len {
+            return Err(head(format!(
+                "the file changed size while opening ({len} → {} bytes)",
+                map.len()
+            )));
+        }
+        let h: Header = bytemuck::pod_read_unaligned(&map[..HEADER_SIZE as usize]);
+        check_header(&h, len).map_err(head)?;
+
+        let index_err = |what: String| FormatError::Index {
+            path: path.to_owned(),
+            what,
+        };
+        let index = &map[h.index_offset as usize..(h.index_offset + h.index_size) as usize];
+        let crc = crc32fast::hash(index);
+        if crc != h.index_crc32 {
+            return Err(index_err(format!(
+                "checksum mismatch (header says {:08x}, index has {crc:08x})",
+                h.index_crc32
+            )));
+        }
+        let manifest =
+            &map[h.manifest_offset as usize..(h.manifest_offset + h.manifest_size) as usize];
+        let crc = crc32fast::hash(manifest);
+        if crc != h.manifest_crc32 {
+            return Err(FormatError::Manifest {
+                path: path.to_owned(),
+                what: format!(
+                    "checksum mismatch (header says {:08x}, manifest has {crc:08x})",
+                    h.manifest_crc32
+                ),
+            });
+        }
+        let nodes: Vec<NodeEntry> = index
+            .chunks_exact(NODE_ENTRY_SIZE as usize)
+            .map(bytemuck::pod_read_unaligned)
+            .collect();
+        let reader = Reader {
+            path: path.to_owned(),
+            map,
+            header: h,
+            nodes,
+        };
+        reader.check_entries()?;
+        Ok(reader)
+    }
+
+    fn node_error(&self, index: usize, what: String) -> FormatError {
+        let e = &self.nodes[index];
+        FormatError::Node {
+            path: self.path.clone(),
+            index,
+            level: e.level,
+            pos: e.pos(),
+            what,
+        }
+    }
+
+    /// Per-entry checks, then the tree structure (child masks, parents).
+    fn check_entries(&self) -> Result<(), FormatError> {
+        let spec = self.spec();
+        let h = &self.header;
+        let mut prev_end = HEADER_SIZE as u64;
+        let mut total = 0u64;
+        let mut prev_key = None;
+        for (i, e) in self.nodes.iter().enumerate() {
+            let bad = |what: String| Err(self.node_error(i, what));
+            if e.level >= h.levels {
+                return bad(format!(
+                    "level {} but the file has {} levels",
+                    e.level, h.levels
+                ));
+            }
+            if !spec.contains_node(e.level, e.pos()) {
+                return bad(format!(
+                    "position outside the level's grid of {} chunks per axis",
+                    spec.chunks_per_axis(e.level)
+                ));
+            }
+            if e.voxel_count == 0 || e.voxel_count > MAX_NODE_VOXELS {
+                return bad(format!(
+                    "voxel count {} is outside 1..={MAX_NODE_VOXELS}",
+                    e.voxel_count
+                ));
+            }
+            if e.child_mask > 0xff || (e.level == 0 && e.child_mask != 0) {
+                return bad(format!(
+                    "child mask {:#x} is invalid at level {}",
+                    e.child_mask, e.level
+                ));
+            }
+            let end = e.payload_offset.checked_add(e.payload_size);
+            match end {
+                Some(end) if e.payload_size > 0 && e.payload_offset >= prev_end && end <= h.index_offset => prev_end = end,
+                _ => {
+                    return bad(format!(
+                        "payload at {} of {} bytes is not inside the payload region [{prev_end}, {}) after the previous payload",
+                        e.payload_offset, e.payload_size, h.index_offset
+                    ))
+                }
+            }
+            let (lo, hi) = (e.bounds_min, e.bounds_max);
+            if lo[3] != 0 || hi[3] != 0 || (0..3).any(|a| lo[a] > hi[a]) {
+                return bad(format!("bounds {lo:?}..={hi:?} are invalid"));
+            }
+            if e.reserved != [0, 0] {
+                return bad("reserved fields are not zero".into());
+            }
+            let key = order_key(e.level, e.pos());
+            if prev_key.is_some_and(|p| key <= p) {
+                return bad(
+                    "out of index order (post-order, children in Morton order) or a duplicate node"
+                        .into(),
+                );
+            }
+            prev_key = Some(key);
+            total += e.voxel_count as u64;
+        }
+        if total != h.total_voxels {
+            return Err(FormatError::Index {
+                path: self.path.clone(),
+                what: format!(
+                    "the nodes hold {total} voxels but the header says {}",
+                    h.total_voxels
+                ),
+            });
+        }
+        let top = h.levels - 1;
+        for (i, e) in self.nodes.iter().enumerate() {
+            let mut present = 0u32;
+            if e.level > 0 {
+                for o in 0..8 {
+                    if self.find(e.level - 1, child_pos(e.pos(), o)).is_some() {
+                        present |= 1 << o;
+                    }
+                }
+            }
+            if present != e.child_mask {
+                return Err(self.node_error(
+                    i,
+                    format!(
+                        "child mask {:#010b} but the stored children are {present:#010b}",
+                        e.child_mask
+                    ),
+                ));
+            }
+            if e.level < top
+                && self
+                    .find(e.level + 1, [e.x / 2, e.y / 2, e.z / 2])
+                    .is_none()
+            {
+                return Err(self.node_error(i, "its parent is missing".into()));
+            }
+        }
+        Ok(())
+    }
+
+    /// The file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+    /// The validated header.
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+    /// The grid the file covers.
+    pub fn spec(&self) -> FileSpec {
+        let h = &self.header;
+        FileSpec {
+            resolution: h.resolution,
+            levels: h.levels,
+            mode: h.mode,
+            origin: h.origin,
+            voxel_size: h.voxel_size,
+        }
+    }
+    /// File size in bytes.
+    pub fn file_size(&self) -> u64 {
+        self.map.len() as u64
+    }
+    /// Sum of the voxel counts of all nodes.
+    pub fn total_voxels(&self) -> u64 {
+        self.header.total_voxels
+    }
+    /// The node index, in index order.
+    pub fn nodes(&self) -> &[NodeEntry] {
+        &self.nodes
+    }
+    /// The index of the root node (the last entry), or `None` for a file without voxels.
+    pub fn root(&self) -> Option<usize> {
+        self.find(self.header.levels - 1, [0, 0, 0])
+    }
+    /// Index of each child (octant `i = dx | dy<<1 | dz<<2`) of node `index`.
+    pub fn children(&self, index: usize) -> [Option<usize>; 8] {
+        let Some(e) = self.nodes.get(index) else {
+            return [None; 8];
+        };
+        std::array::from_fn(|o| {
+            if e.child_mask >> o & 1 == 0 {
+                return None;
+            }
+            self.find(e.level - 1, child_pos(e.pos(), o as u32))
+        })
+    }
+
+    /// The raw manifest bytes (UTF-8 JSON).
+    pub fn manifest_bytes(&self) -> &[u8] {
+        let h = &self.header;
+        &self.map[h.manifest_offset as usize..(h.manifest_offset + h.manifest_size) as usize]
+    }
+    /// The manifest, parsed.
+    pub fn manifest(&self) -> Result<serde_json::Value, FormatError> {
+        serde_json::from_slice(self.manifest_bytes()).map_err(|e| FormatError::Manifest {
+            path: self.path.clone(),
+            what: format!("not valid JSON: {e}"),
+        })
+    }
+
+    /// Index of the node at `level`, `pos`, if stored (binary search in the index order).
+    pub fn find(&self, level: u32, pos: [u32; 3]) -> Option<usize> {
+        if !self.spec().contains_node(level, pos) {
+            return None;
+        }
+        let key = order_key(level, pos);
+        self.nodes
+            .binary_search_by_key(&key, |e| order_key(e.level, e.pos()))
+            .ok()
+    }
+
+    /// The compressed payload of node `index` (its range was validated by `open`).
+    pub fn payload(&self, index: usize) -> Option<&[u8]> {
+        let e = self.nodes.get(index)?;
+        Some(&self.map[e.payload_offset as usize..(e.payload_offset + e.payload_size) as usize])
+    }
+
+    /// Reads node `index` into `out` (cleared first; reuse it across calls to avoid
+    /// allocation): checks the payload checksum, decompresses, checks the size and block
+    /// checksum, undoes the transform, checks Morton order and the bounds. Errors name the node.
+    pub fn read_node_into(&self, index: usize, out: &mut Vec<Voxel>) -> Result<(), FormatError> {
+        out.clear();
+        let Some(payload) = self.payload(index) else {
+            return Err(FormatError::NoSuchNode {
+                path: self.path.clone(),
+                index,
+                count: self.nodes.len(),
+            });
+        };
+        let e = self.nodes[index];
+        let crc = crc32fast::hash(payload);
+        if crc != e.payload_crc32 {
+            return Err(self.node_error(
+                index,
+                format!(
+                    "payload checksum mismatch (index says {:08x}, payload has {crc:08x})",
+                    e.payload_crc32
+                ),
+            ));
+        }
+        let n = e.voxel_count as usize;
+        let result = SCRATCH.with(|cell| -> Result<(), String> {
+            let mut scratch = cell.borrow_mut();
+            let (dctx, block) = &mut *scratch;
+            if dctx.is_none() {
+                *dctx = Some(zstd::bulk::Decompressor::new().map_err(|e| format!("zstd: {e}"))?);
+            }
+            let d = dctx.as_mut().expect("decompressor was just set");
+            block.clear();
+            block.reserve(12 * n);
+            let got = d
+                .decompress_to_buffer(payload, block)
+                .map_err(|e| format!("zstd decompression failed: {e}"))?;
+            if got != 12 * n {
+                return Err(format!(
+                    "decompressed to {got} bytes, expected 12·{n} = {}",
+                    12 * n
+                ));
+            }
+            let crc = crc32fast::hash(block);
+            if crc != e.block_crc32 {
+                return Err(format!(
+                    "block checksum mismatch (index says {:08x}, block has {crc:08x})",
+                    e.block_crc32
+                ));
+            }
+            let bounds = unshuffle(block, n, out)?;
+            if bounds != e.bounds() {
+                return Err(format!(
+                    "voxel bounds {:?} differ from the index's {:?}",
+                    bounds,
+                    e.bounds()
+                ));
+            }
+            if block.capacity() > 64 << 20 {
+                *block = Vec::new(); // don't keep a huge buffer per thread
+            }
+            Ok(())
+        });
+        result.map_err(|what| {
+            out.clear();
+            self.node_error(index, what)
+        })
+    }
+
+    /// Reads node `index` into a new vector (see [`read_node_into`](Self::read_node_into)).
+    pub fn read_node(&self, index: usize) -> Result<Vec<Voxel>, FormatError> {
+        let mut out = Vec::new();
+        self.read_node_into(index, &mut out)?;
+        Ok(out)
+    }
+}
+
+thread_local! {
+    // Per-thread zstd context and decompression buffer, reused across reads.
+    static SCRATCH: RefCell<(Option<zstd::bulk::Decompressor<'static>>, Vec<u8>)> = const { RefCell::new((None, Vec::new())) };
+}
+
+/// Header checks in the order that gives the most useful message first.
+fn check_header(h: &Header, len: u64) -> Result<(), String> {
+    if h.magic != MAGIC {
+        return Err(format!(
+            "magic bytes are {:02x?}, expected {:02x?} (\"VOXLOD\\0\\x01\"): not a voxlod file",
+            h.magic, MAGIC
+        ));
+    }
+    if h.version != VERSION {
+        return Err(format!(
+            "format version {} is not supported (this reader reads version {VERSION})",
+            h.version
+        ));
+    }
+    if h.header_size != HEADER_SIZE {
+        return Err(format!(
+            "header size is {}, expected {HEADER_SIZE}",
+            h.header_size
+        ));
+    }
+    let crc = h.compute_crc();
+    if crc != h.header_crc32 {
+        return Err(format!(
+            "checksum mismatch (stored {:08x}, computed {crc:08x}): corrupt or unfinished file",
+            h.header_crc32
+        ));
+    }
+    let spec = FileSpec {
+        resolution: h.resolution,
+        levels: h.levels,
+        mode: h.mode,
+        origin: h.origin,
+        voxel_size: h.voxel_size,
+    };
+    spec.validate()?;
+    if h.flags != 0 || h.reserved != 0 {
+        return Err(format!(
+            "reserved fields are not zero (flags {:#x}, reserved {:#x})",
+            h.flags, h.reserved
+        ));
+    }
+    if h.index_offset < HEADER_SIZE as u64 || h.index_offset % 8 != 0 {
+        return Err(format!(
+            "index offset {} is not a multiple of 8 after the header",
+            h.index_offset
+        ));
+    }
+    if h.node_count.checked_mul(NODE_ENTRY_SIZE as u64) != Some(h.index_size) {
+        return Err(format!(
+            "index size {} is not node count {} · {NODE_ENTRY_SIZE}",
+            h.index_size, h.node_count
+        ));
+    }
+    let index_end = h
+        .index_offset
+        .checked_add(h.index_size)
+        .filter(|&e| e <= len);
+    let Some(index_end) = index_end else {
+        return Err(format!(
+            "the node index [{}, +{}) extends past the end of the {len}-byte file (truncated?)",
+            h.index_offset, h.index_size
+        ));
+    };
+    if h.manifest_offset != index_end {
+        return Err(format!(
+            "manifest offset {} does not follow the index (ends at {index_end})",
+            h.manifest_offset
+        ));
+    }
+    let Some(end) = h
+        .manifest_offset
+        .checked_add(h.manifest_size)
+        .filter(|&e| e <= len)
+    else {
+        return Err(format!(
+            "the manifest [{}, +{}) extends past the end of the {len}-byte file (truncated?)",
+            h.manifest_offset, h.manifest_size
+        ));
+    };
+    if end != len {
+        return Err(format!(
+            "the file is {len} bytes but should end with the manifest at {end}"
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,322 @@
+//! The streamed writer: payloads go to disk as nodes are finished (leaves in Morton order,
+//! each parent right after its last child, as the brief's "Write" stage asks), only the
+//! 64-byte index entries stay in memory. The file is built under a temporary name and renamed
+//! into place when complete, so `path` never holds a partial file.
+
+use std::ffi::OsString;
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use bytemuck::Zeroable;
+
+use crate::layout::{child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, VERSION};
+use crate::{EncodedNode, FileSpec, FormatError};
+
+/// Writes one voxlod file. See the crate documentation for an example.
+///
+/// Nodes must come in index order (post-order, children in Morton order) with exact child
+/// masks; [`write_node`](Self::write_node) refuses anything else without writing, so the
+/// writer stays usable after such an error. After an I/O error it refuses everything.
+/// Dropping a writer that was not finished removes its temporary file.
+pub struct Writer {
+    path: PathBuf,
+    tmp_path: PathBuf,
+    file: Option<BufWriter<File>>,
+    spec: FileSpec,
+    entries: Vec<NodeEntry>,
+    keys: Vec<u128>,
+    offset: u64,
+    total_voxels: u64,
+    failed: bool,
+}
+
+/// The temporary file a [`Writer`] for `path` builds: `path` with `.tmp` appended to its file
+/// name (`out.voxlod` → `out.voxlod.tmp`), in the same directory so the final rename is atomic.
+pub fn temp_path(path: &Path) -> PathBuf {
+    let mut s = OsString::from(path.as_os_str());
+    s.push(".tmp");
+    PathBuf::from(s)
+}
+
+impl Writer {
+    /// Creates (or truncates) [`temp_path`]`(path)` and writes the placeholder (all-zero) header.
+    pub fn create(path: &Path, spec: FileSpec) -> Result<Writer, FormatError> {
+        spec.validate().map_err(|what| FormatError::Spec {
+            path: path.to_owned(),
+            what,
+        })?;
+        let tmp_path = temp_path(path);
+        let file = File::create(&tmp_path).map_err(|source| FormatError::Io {
+            path: tmp_path.clone(),
+            op: "creating the temporary file",
+            source,
+        })?;
+        let mut w = Writer {
+            path: path.to_owned(),
+            tmp_path,
+            file: Some(BufWriter::with_capacity(1 << 20, file)),
+            spec,
+            entries: Vec::new(),
+            keys: Vec::new(),
+            offset: 0,
+            total_voxels: 0,
+            failed: false,
+        };
+        w.write(
+            &[0u8; HEADER_SIZE as usize],
+            "writing the placeholder header",
+        )?;
+        Ok(w)
+    }
+
+    /// The spec the file is written with.
+    pub fn spec(&self) -> &FileSpec {
+        &self.spec
+    }
+
+    /// Number of nodes written so far.
+    pub fn node_count(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Appends one node. `level` and `pos` must lie in the grid; the node must come after
+    /// every node written so far in index order (post-order over the octree, children in
+    /// Morton order — so no node twice); `child_mask` must be 0 at level 0 and otherwise have
+    /// exactly the bits of the children already written. Violations are errors that write
+    /// nothing.
+    pub fn write_node(
+        &mut self,
+        level: u32,
+        pos: [u32; 3],
+        child_mask: u8,
+        node: &EncodedNode,
+    ) -> Result<(), FormatError> {
+        self.check_usable()?;
+        let bad = |what: String| FormatError::Tree {
+            path: self.path.clone(),
+            level,
+            pos,
+            what,
+        };
+        if !self.spec.contains_node(level, pos) {
+            return Err(bad(format!(
+                "outside the grid ({} levels; level {level} has {} chunks per axis)",
+                self.spec.levels,
+                self.spec.chunks_per_axis(level)
+            )));
+        }
+        let key = order_key(level, pos);
+        if let (Some(&last_key), Some(last)) = (self.keys.last(), self.entries.last()) {
+            if key <= last_key {
+                let why = if key == last_key {
+                    "written twice"
+                } else {
+                    "out of order"
+                };
+                return Err(bad(format!(
+                    "{why}: nodes must be written in post-order with children in Morton order; the previous node was level {} at {:?}",
+                    last.level,
+                    last.pos()
+                )));
+            }
+        }
+        let mut present = 0u8;
+        if level > 0 {
+            for i in 0..8 {
+                if self.find(level - 1, child_pos(pos, i)).is_some() {
+                    present |= 1 << i;
+                }
+            }
+        }
+        if child_mask != present {
+            return Err(bad(format!(
+                "child mask {child_mask:#010b} but the children written are {present:#010b} (a parent comes right after its last child)"
+            )));
+        }
+        let entry = NodeEntry {
+            level,
+            x: pos[0],
+            y: pos[1],
+            z: pos[2],
+            voxel_count: node.voxel_count,
+            child_mask: child_mask as u32,
+            payload_offset: self.offset,
+            payload_size: node.payload.len() as u64,
+            payload_crc32: node.payload_crc32,
+            block_crc32: node.block_crc32,
+            bounds_min: [
+                node.bounds_min[0],
+                node.bounds_min[1],
+                node.bounds_min[2],
+                0,
+            ],
+            bounds_max: [
+                node.bounds_max[0],
+                node.bounds_max[1],
+                node.bounds_max[2],
+                0,
+            ],
+            reserved: [0; 2],
+        };
+        self.write(&node.payload, "writing a node payload")?;
+        self.entries.push(entry);
+        self.keys.push(key);
+        self.total_voxels += node.voxel_count as u64;
+        Ok(())
+    }
+
+    /// Bytes written so far (header placeholder and payloads).
+    pub fn bytes_written(&self) -> u64 {
+        self.offset
+    }
+
+    /// Completes the file: checks that every node below the root has its parent, writes the
+    /// node index and `manifest` (serialized as compact JSON, stored verbatim), patches the
+    /// header, fsyncs, renames [`temp_path`]`(path)` to `path` (replacing any old file) and
+    /// fsyncs the directory. Only then does `path` exist. Returns the file size.
+    pub fn finish(mut self, manifest: &serde_json::Value) -> Result<u64, FormatError> {
+        self.check_usable()?;
+        let top = self.spec.levels - 1;
+        for e in &self.entries {
+            if e.level < top
+                && self
+                    .find(e.level + 1, [e.x / 2, e.y / 2, e.z / 2])
+                    .is_none()
+            {
+                return Err(FormatError::Tree {
+                    path: self.path.clone(),
+                    level: e.level,
+                    pos: e.pos(),
+                    what: "its parent was never written (every node below the root needs one)"
+                        .into(),
+                });
+            }
+        }
+        let pad = (8 - self.offset % 8) % 8;
+        self.write(&[0u8; 8][..pad as usize], "padding before the index")?;
+        let index_offset = self.offset;
+        let entries = std::mem::take(&mut self.entries);
+        let index: &[u8] = bytemuck::cast_slice(&entries);
+        self.write(index, "writing the node index")?;
+        let manifest_bytes = serde_json::to_vec(manifest).map_err(|e| FormatError::Manifest {
+            path: self.path.clone(),
+            what: format!("cannot serialize: {e}"),
+        })?;
+        let manifest_offset = self.offset;
+        self.write(&manifest_bytes, "writing the manifest")?;
+
+        let mut h = Header::zeroed();
+        h.magic = MAGIC;
+        h.version = VERSION;
+        h.header_size = HEADER_SIZE;
+        h.resolution = self.spec.resolution;
+        h.levels = self.spec.levels;
+        h.mode = self.spec.mode;
+        h.origin = self.spec.origin;
+        h.voxel_size = self.spec.voxel_size;
+        h.node_count = entries.len() as u64;
+        h.index_offset = index_offset;
+        h.index_size = index.len() as u64;
+        h.manifest_offset = manifest_offset;
+        h.manifest_size = manifest_bytes.len() as u64;
+        h.total_voxels = self.total_voxels;
+        h.index_crc32 = crc32fast::hash(index);
+        h.manifest_crc32 = crc32fast::hash(&manifest_bytes);
+        h.header_crc32 = h.compute_crc();
+        let size = self.offset;
+
+        let tmp = &self.tmp_path.clone();
+        let io = |op: &'static str| {
+            move |source| FormatError::Io {
+                path: tmp.clone(),
+                op,
+                source,
+            }
+        };
+        let mut buf = self.file.take().ok_or_else(|| FormatError::Poisoned {
+            path: self.path.clone(),
+        })?;
+        self.failed = true; // until the rename succeeds, any exit below leaves the file to Drop
+        buf.flush().map_err(io("flushing"))?;
+        let mut file = buf
+            .into_inner()
+            .map_err(|e| io("flushing")(e.into_error()))?;
+        file.seek(SeekFrom::Start(0))
+            .map_err(io("seeking to the header"))?;
+        file.write_all(bytemuck::bytes_of(&h))
+            .map_err(io("writing the header"))?;
+        file.sync_all().map_err(io("syncing to disk"))?;
+        drop(file);
+        std::fs::rename(&self.tmp_path, &self.path).map_err(|source| FormatError::Io {
+            path: self.path.clone(),
+            op: "renaming the temporary file into place",
+            source,
+        })?;
+        self.failed = false; // finished: nothing left for Drop to remove
+        sync_dir(&self.path)?;
+        Ok(size)
+    }
+
+    fn check_usable(&self) -> Result<(), FormatError> {
+        if self.failed || self.file.is_none() {
+            return Err(FormatError::Poisoned {
+                path: self.path.clone(),
+            });
+        }
+        Ok(())
+    }
+
+    fn find(&self, level: u32, pos: [u32; 3]) -> Option<usize> {
+        self.keys.binary_search(&order_key(level, pos)).ok()
+    }
+
+    fn write(&mut self, bytes: &[u8], op: &'static str) -> Result<(), FormatError> {
+        let Some(f) = self.file.as_mut() else {
+            return Err(FormatError::Poisoned {
+                path: self.path.clone(),
+            });
+        };
+        if let Err(source) = f.write_all(bytes) {
+            self.failed = true;
+            return Err(FormatError::Io {
+                path: self.tmp_path.clone(),
+                op,
+                source,
+            });
+        }
+        self.offset += bytes.len() as u64;
+        Ok(())
+    }
+}
+
+impl Drop for Writer {
+    /// An unfinished writer (dropped, or finish failed) removes its temporary file.
+    fn drop(&mut self) {
+        let finished = self.file.is_none() && !self.failed;
+        drop(self.file.take());
+        if !finished {
+            let _ = std::fs::remove_file(&self.tmp_path);
+        }
+    }
+}
+
+/// Makes the rename durable: fsync the directory holding `path` (Unix; a no-op elsewhere).
+fn sync_dir(path: &Path) -> Result<(), FormatError> {
+    #[cfg(unix)]
+    {
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let io = |source| FormatError::Io {
+            path: dir.to_owned(),
+            op: "syncing the directory",
+            source,
+        };
+        File::open(dir).map_err(io)?.sync_all().map_err(io)?;
+    }
+    #[cfg(not(unix))]
+    let _ = path;
+    Ok(())
+}
