@@ -1,0 +1,141 @@
+//! Finding an adapter and creating the device: Vulkan first (lavapipe on GPU-less machines),
+//! then GL; `WGPU_BACKEND` overrides. Validation errors are captured instead of panicking.
+
+use std::sync::{Arc, Mutex};
+
+use crate::GpuError;
+
+/// A device with its queue and the first uncaptured error, if any.
+pub(crate) struct Gpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub name: String,
+    pub f64: bool,
+    pub limits: wgpu::Limits,
+    pub error: Arc<Mutex<Option<String>>>,
+}
+
+fn request(backends: Option<wgpu::Backends>) -> Result<wgpu::Adapter, String> {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    if let Some(b) = backends {
+        desc.backends = b;
+    }
+    let instance = wgpu::Instance::new(desc);
+    pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        force_fallback_adapter: false,
+        compatible_surface: None,
+        ..Default::default()
+    }))
+    .map_err(|e| e.to_string())
+}
+
+pub(crate) fn open() -> Result<Gpu, GpuError> {
+    let adapter = if std::env::var_os("WGPU_BACKEND").is_some() {
+        request(None).map_err(GpuError::NoAdapter)?
+    } else {
+        match request(Some(wgpu::Backends::VULKAN)) {
+            Ok(a) => a,
+            Err(vk) => request(Some(wgpu::Backends::GL))
+                .map_err(|gl| GpuError::NoAdapter(format!("Vulkan: {vk}; GL: {gl}")))?,
+        }
+    };
+    let info = adapter.get_info();
+    let name = format!("{} ({:?}, {})", info.name, info.backend, info.driver_info);
+    let wanted = wgpu::Features::SHADER_F64;
+    let features = wanted & adapter.features();
+    let limits = adapter.limits();
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("voxlod-gpu"),
+        required_features: features,
+        required_limits: limits.clone(),
+        experimental_features: wgpu::ExperimentalFeatures::disabled(),
+        memory_hints: wgpu::MemoryHints::Performance,
+        trace: wgpu::Trace::Off,
+    }))
+    .map_err(|e| GpuError::Device {
+        adapter: name.clone(),
+        reason: e.to_string(),
+    })?;
+    let error = Arc::new(Mutex::new(None::<String>));
+    let sink = error.clone();
+    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+        if let Ok(mut slot) = sink.lock() {
+            slot.get_or_insert_with(|| e.to_string());
+        }
+    }));
+    Ok(Gpu {
+        device,
+        queue,
+        name,
+        f64: features.contains(wgpu::Features::SHADER_F64),
+        limits,
+        error,
+    })
+}
+
+impl Gpu {
+    /// Fails with the first error the device reported since the last check.
+    pub fn check(&self) -> Result<(), GpuError> {
+        let e = self.error.lock().ok().and_then(|mut s| s.take());
+        match e {
+            Some(reason) => Err(GpuError::Wgpu {
+                adapter: self.name.clone(),
+                reason,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Waits for all submitted work.
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback {
+                adapter: self.name.clone(),
+                reason: e.to_string(),
+            })?;
+        self.check()
+    }
+
+    /// Copies `size` bytes of `src` into `staging` (MAP_READ) and returns them.
+    pub fn read(
+        &self,
+        src: &wgpu::Buffer,
+        staging: &wgpu::Buffer,
+        size: u64,
+    ) -> Result<Vec<u8>, GpuError> {
+        debug_assert!(size <= staging.size() && size <= src.size());
+        if size == 0 {
+            return Ok(Vec::new());
+        }
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(src, 0, staging, 0, size);
+        self.queue.submit([enc.finish()]);
+        self.map_staging(staging, size)
+    }
+
+    /// Maps the first `size` bytes of `staging` after all submitted work and returns them.
+    pub fn map_staging(&self, staging: &wgpu::Buffer, size: u64) -> Result<Vec<u8>, GpuError> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.map_async(wgpu::MapMode::Read, 0..size, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        let fail = |reason: String| GpuError::Readback {
+            adapter: self.name.clone(),
+            reason,
+        };
+        rx.recv()
+            .map_err(|e| fail(e.to_string()))?
+            .map_err(|e| fail(e.to_string()))?;
+        let out = {
+            let view = staging
+                .get_mapped_range(0..size)
+                .map_err(|e| fail(e.to_string()))?;
+            view.to_vec()
+        };
+        staging.unmap();
+        Ok(out)
+    }
+}

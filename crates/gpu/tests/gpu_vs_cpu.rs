@@ -1,0 +1,275 @@
+//! The GPU voxelizer against the CPU reference (`voxlod_voxelize::ChunkVoxelizer`), in both modes
+//! and with all three schemes, on made-up triangles (small, large, slivers, axis-aligned, one
+//! chunk-spanning triangle) and real meshes. These tests need an adapter (lavapipe is enough):
+//! without one they FAIL.
+//!
+//! Allowed differences: voxels decided by an exact tie on a voxel boundary can differ when the
+//! GPU compiler contracts a multiply-add into an FMA (the CPU never does); at most
+//! `TIE_BOUND` per chunk plus one per 10,000 voxels. Normals must agree within one 10-bit step
+//! per component, colours within 1 per channel.
+
+mod common;
+
+use common::*;
+use voxlod_format::Voxel;
+use voxlod_geom::Triangle;
+use voxlod_gpu::{GpuMethod, GpuVoxelizer, DEFAULT_CUTOFF};
+use voxlod_voxelize::{ChunkVoxelizer, Mode};
+
+const TIE_BOUND: usize = 2;
+const METHODS: [GpuMethod; 3] = [GpuMethod::Hybrid, GpuMethod::Triangle, GpuMethod::Fragment];
+
+fn gpu() -> GpuVoxelizer {
+    GpuVoxelizer::new(Mode::Conservative, GpuMethod::Hybrid, DEFAULT_CUTOFF)
+        .unwrap_or_else(|e| panic!("this test needs a GPU adapter (lavapipe is enough): {e}"))
+}
+
+fn cpu(mode: Mode, origin: [u32; 3], tris: &[Triangle]) -> Vec<Voxel> {
+    let mut c = ChunkVoxelizer::new(mode);
+    c.begin(origin);
+    c.add(tris);
+    c.finish()
+}
+
+/// Runs every mode and scheme on one chunk, checks against the CPU and that the three schemes
+/// agree bit for bit; returns the CPU voxel count.
+fn check(g: &mut GpuVoxelizer, name: &str, origin: [u32; 3], tris: &[Triangle]) -> usize {
+    let mut total = 0;
+    for mode in [Mode::Conservative, Mode::Thin] {
+        let want = cpu(mode, origin, tris);
+        total += want.len();
+        g.set_mode(mode);
+        let mut first: Option<Vec<Voxel>> = None;
+        for m in METHODS {
+            g.set_method(m, DEFAULT_CUTOFF);
+            let got = g.voxelize_chunk(origin, tris).unwrap();
+            let d = compare(&want, &got);
+            let (small, large) = g.last_split();
+            eprintln!("{name} {mode} {m}: split {small}/{large} {d:?}");
+            let bound = TIE_BOUND + want.len() / 10_000;
+            assert!(
+                d.only_cpu + d.only_gpu <= bound,
+                "{name} {mode} {m}: voxel sets differ: {d:?}"
+            );
+            assert_eq!(
+                (d.normal, d.colour, d.mask),
+                (0, 0, 0),
+                "{name} {mode} {m}: attributes differ: {d:?}"
+            );
+            match m {
+                GpuMethod::Fragment => assert_eq!(small, 0),
+                GpuMethod::Triangle | GpuMethod::Hybrid => {}
+            }
+            match &first {
+                None => first = Some(got),
+                Some(f) => assert!(
+                    f == &got,
+                    "{name} {mode}: {m} differs from hybrid: {:?}",
+                    compare(f, &got)
+                ),
+            }
+        }
+    }
+    total
+}
+
+fn o(origin: [u32; 3], p: [f32; 3]) -> [f32; 3] {
+    [
+        origin[0] as f32 + p[0],
+        origin[1] as f32 + p[1],
+        origin[2] as f32 + p[2],
+    ]
+}
+
+fn random_point(rng: &mut Rng, origin: [u32; 3], lo: f32, hi: f32) -> [f32; 3] {
+    o(
+        origin,
+        [rng.range(lo, hi), rng.range(lo, hi), rng.range(lo, hi)],
+    )
+}
+
+#[test]
+fn small_triangles() {
+    let mut g = gpu();
+    let mut rng = Rng(0x1234_5678);
+    let origin = [256, 0, 512];
+    let mut tris = Vec::new();
+    for i in 0..4000 {
+        let c = random_point(&mut rng, origin, -3.0, 259.0);
+        let s = if i % 4 == 0 { 3.0 } else { 1.0 };
+        let v = [0, 1, 2].map(|_| {
+            [
+                c[0] + rng.range(-s, s),
+                c[1] + rng.range(-s, s),
+                c[2] + rng.range(-s, s),
+            ]
+        });
+        let mut t = Triangle::new(v);
+        decorate(&mut t, &mut rng, i % 2 == 0);
+        tris.push(t);
+    }
+    assert!(check(&mut g, "small", origin, &tris) > 10_000);
+}
+
+#[test]
+fn large_triangles() {
+    let mut g = gpu();
+    let mut rng = Rng(0x9e37_79b9);
+    let origin = [0, 256, 0];
+    let mut tris = Vec::new();
+    for i in 0..24 {
+        let v = [0, 1, 2].map(|_| random_point(&mut rng, origin, -80.0, 336.0));
+        let mut t = Triangle::new(v);
+        decorate(&mut t, &mut rng, i % 2 == 0);
+        tris.push(t);
+    }
+    assert!(check(&mut g, "large", origin, &tris) > 100_000);
+}
+
+#[test]
+fn slivers() {
+    let mut g = gpu();
+    let mut rng = Rng(42);
+    let origin = [0, 0, 0];
+    let mut tris = Vec::new();
+    for i in 0..300 {
+        let a = random_point(&mut rng, origin, 0.0, 256.0);
+        let len = if i % 3 == 0 { 200.0 } else { 20.0 };
+        let d = [
+            rng.range(-len, len),
+            rng.range(-len, len),
+            rng.range(-len, len),
+        ];
+        let b = [a[0] + d[0], a[1] + d[1], a[2] + d[2]];
+        let t_ = rng.f();
+        let w = 10f32.powf(rng.range(-3.0, -1.0));
+        let c = [
+            a[0] + t_ * d[0] + w,
+            a[1] + t_ * d[1] - w,
+            a[2] + t_ * d[2] + w * 0.5,
+        ];
+        let mut t = Triangle::new([a, b, c]);
+        decorate(&mut t, &mut rng, i % 2 == 0);
+        tris.push(t);
+    }
+    assert!(check(&mut g, "slivers", origin, &tris) > 1000);
+}
+
+#[test]
+fn axis_aligned_ties() {
+    // vertices on integer and half-integer coordinates, triangles in voxel planes and along
+    // voxel edges: the exact ties of the closed-box tests
+    let mut g = gpu();
+    let mut rng = Rng(7);
+    let origin = [0, 0, 0];
+    let mut tris = Vec::new();
+    for i in 0..600 {
+        let q = |rng: &mut Rng, s: f32| (rng.range(-s, s) * 2.0).round() / 2.0;
+        let c = [
+            rng.range(2.0, 250.0).round(),
+            rng.range(2.0, 250.0).round(),
+            rng.range(2.0, 250.0).round(),
+        ];
+        let axis = i % 3;
+        let s = if i % 5 == 0 { 12.0 } else { 3.0 };
+        let mut v = [c; 3];
+        for (k, p) in v.iter_mut().enumerate().skip(1) {
+            for a in 0..3 {
+                if a != axis {
+                    p[a] += q(&mut rng, s);
+                }
+            }
+            if i % 4 == 0 {
+                p[axis] += k as f32 * 0.5; // tilted, still on half-integers
+            }
+        }
+        let mut t = Triangle::new(v);
+        decorate(&mut t, &mut rng, i % 2 == 1);
+        tris.push(t);
+    }
+    // a triangle exactly on the chunk's far faces and one on its near faces
+    tris.push(Triangle::new([
+        [256.0, 10.0, 10.0],
+        [256.0, 40.0, 10.0],
+        [256.0, 10.0, 50.0],
+    ]));
+    tris.push(Triangle::new([
+        [0.0, 10.0, 10.0],
+        [0.0, 40.0, 10.0],
+        [0.0, 10.0, 50.0],
+    ]));
+    assert!(check(&mut g, "axis-aligned", origin, &tris) > 1000);
+}
+
+#[test]
+fn chunk_spanning_triangle() {
+    let mut g = gpu();
+    let origin = [512, 256, 0];
+    let mut t = Triangle::new([
+        o(origin, [-10.0, -10.0, 3.3]),
+        o(origin, [300.0, 5.0, 100.0]),
+        o(origin, [20.0, 290.0, 250.0]),
+    ]);
+    t.c = [[255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 128]];
+    let n = check(&mut g, "spanning", origin, &[t]);
+    assert!(n > 100_000, "{n}");
+}
+
+#[test]
+fn empty_and_degenerate_input() {
+    let mut g = gpu();
+    assert!(g.voxelize_chunk([0, 0, 0], &[]).unwrap().is_empty());
+    let degenerate = Triangle::new([[1.0, 1.0, 1.0], [2.0, 2.0, 2.0], [3.0, 3.0, 3.0]]);
+    let nan = Triangle::new([[f32::NAN, 1.0, 1.0], [2.0, 2.0, 2.0], [3.0, 1.0, 3.0]]);
+    let outside = Triangle::new([[1000.0, 1.0, 1.0], [1002.0, 2.0, 2.0], [1003.0, 1.0, 3.0]]);
+    assert!(g
+        .voxelize_chunk([0, 0, 0], &[degenerate, nan, outside])
+        .unwrap()
+        .is_empty());
+    assert_eq!(g.last_split(), (0, 0));
+    assert!(matches!(
+        g.voxelize_chunk([1, 0, 0], &[]),
+        Err(voxlod_gpu::GpuError::Origin(_))
+    ));
+}
+
+fn mesh_test(name: &str, tris: Vec<[[f32; 3]; 3]>, res: u32) {
+    let grid = to_grid(&tris, res);
+    let mut g = gpu();
+    let mut rng = Rng(99);
+    let grid: Vec<Triangle> = grid
+        .into_iter()
+        .enumerate()
+        .map(|(i, mut t)| {
+            decorate(&mut t, &mut rng, i % 2 == 0);
+            t
+        })
+        .collect();
+    let chunks = res / 256;
+    let mut n = 0;
+    for cz in 0..chunks {
+        for cy in 0..chunks {
+            for cx in 0..chunks {
+                n += check(&mut g, name, [cx * 256, cy * 256, cz * 256], &grid);
+            }
+        }
+    }
+    assert!(n > 10_000, "{name}: only {n} voxels");
+}
+
+#[test]
+fn npm_bunny_two_resolutions() {
+    let Some(dir) = meshes_dir() else { return };
+    let tris = load_ply(&dir.join("npm-bunny/bunny.ply"));
+    assert_eq!(tris.len(), 3674);
+    mesh_test("npm-bunny@256", tris.clone(), 256);
+    mesh_test("npm-bunny@512", tris, 512);
+}
+
+#[test]
+fn stanford_bunny() {
+    let Some(dir) = meshes_dir() else { return };
+    let tris = load_ply(&dir.join("stanford-bunny/bun_zipper.ply"));
+    assert_eq!(tris.len(), 69451);
+    mesh_test("bun_zipper@256", tris, 256);
+}

@@ -1,0 +1,479 @@
+// Shared routines of the GPU hybrid voxelizer: Rauwendaal & Bailey, "Hybrid Computational
+// Voxelization Using the Graphics Pipeline", JCGT 2(1) 2013, sections 3.1-3.6 and the Appendix
+// (Figures 17 and 18).
+//
+// This file is appended to classify.wgsl (compute) and raster.wgsl (render); those declare the
+// bindings used here: params, tris, occ, base, accum. `real` is f64 when the adapter has
+// SHADER_F64 (bit-for-bit the CPU reference voxlod-voxelize, which computes in f64) and f32
+// otherwise; the host prepends the alias.
+//
+// Every formula mirrors crates/voxelize (overlap.rs, clip.rs, chunk.rs) operation by operation,
+// so that the CPU and GPU voxel sets agree up to FMA contraction at exact ties.
+
+const MODE_CONSERVATIVE: u32 = 0u;
+const MODE_THIN: u32 = 1u;
+const PHASE_MARK: u32 = 0u;
+const PHASE_ACCUMULATE: u32 = 1u;
+const TRI_HAS_NORMALS: u32 = 1u;
+const CHUNK: i32 = 256;
+// accumulator words per voxel slot: 16 fixed-point sums of three u32 words each
+const SLOT_WORDS: u32 = 48u;
+// word offset of fixed-point sum k in a slot
+fn sum_at(off: u32, k: u32) -> u32 {
+    return off + 3u * k;
+}
+
+struct Params {
+    // chunk origin, grid voxels
+    origin: vec3<i32>,
+    mode: u32,
+    tri_count: u32,
+    // triangles whose dominant 2D projected area (voxels²) is below this are voxelized in the
+    // classification pass; the others are deferred to the fragment pass
+    cutoff: f32,
+    phase: u32,
+    slot_lo: u32,
+    slot_hi: u32,
+    groups_x: u32,
+    _pad0: u32,
+    _pad1: u32,
+};
+
+// voxlod_geom::Triangle, 88 bytes
+struct Tri {
+    v: array<f32, 9>,
+    n: array<f32, 9>,
+    c: array<u32, 3>,
+    flags: u32,
+};
+
+// A deferred (large) triangle: its dilated dominant projection in chunk-local voxel units.
+struct Deferred {
+    a: vec2<f32>,
+    b: vec2<f32>,
+    c: vec2<f32>,
+    tri: u32,
+    _pad: u32,
+};
+
+// Per-triangle setup (paper 3.1.2), swizzled so that the dominant axis is z.
+struct Setup {
+    ok: bool,
+    axis: u32,
+    v0: vec3<real>,
+    v1: vec3<real>,
+    v2: vec3<real>,
+    // swizzled normal (v1-v0)x(v2-v0), made n.z > 0
+    n: vec3<real>,
+    // |n_z| / 2: the projected area in voxels²
+    area2d: real,
+    // inward edge normals per projection (XY on (x,y), YZ on (y,z), ZX on (z,x)) and distances
+    xy0: vec2<real>, xy1: vec2<real>, xy2: vec2<real>, dxy: vec3<real>,
+    yz0: vec2<real>, yz1: vec2<real>, yz2: vec2<real>, dyz: vec3<real>,
+    zx0: vec2<real>, zx1: vec2<real>, zx2: vec2<real>, dzx: vec3<real>,
+    d_lo: real,
+    d_hi: real,
+    // swizzled voxel range: closed bounding box clamped to the chunk
+    lo: vec3<i32>,
+    hi: vec3<i32>,
+};
+
+fn sgn(x: real) -> real {
+    if x > real(0.0) { return real(1.0); }
+    if x < real(0.0) { return real(-1.0); }
+    return real(0.0);
+}
+
+fn swizzle_r(p: vec3<real>, axis: u32) -> vec3<real> {
+    if axis == 0u { return p.yzx; }
+    if axis == 1u { return p.zxy; }
+    return p;
+}
+
+fn swizzle_i(p: vec3<i32>, axis: u32) -> vec3<i32> {
+    if axis == 0u { return p.yzx; }
+    if axis == 1u { return p.zxy; }
+    return p;
+}
+
+fn unswizzle_i(p: vec3<i32>, axis: u32) -> vec3<i32> {
+    if axis == 0u { return p.zxy; }
+    if axis == 1u { return p.yzx; }
+    return p;
+}
+
+fn unswizzle_r(p: vec3<real>, axis: u32) -> vec3<real> {
+    if axis == 0u { return p.zxy; }
+    if axis == 1u { return p.yzx; }
+    return p;
+}
+
+fn vertex(ti: u32, i: u32) -> vec3<real> {
+    let b = 3u * i;
+    return vec3<real>(real(tris[ti].v[b]), real(tris[ti].v[b + 1u]), real(tris[ti].v[b + 2u]));
+}
+
+fn cross_r(a: vec3<real>, b: vec3<real>) -> vec3<real> {
+    return vec3<real>(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+
+fn dot_r(a: vec3<real>, b: vec3<real>) -> real {
+    return a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+// (edge normal, edge distance) of one edge in one projection; `a` = projected start vertex.
+fn edge_d(nk: vec2<real>, a: vec2<real>, mode: u32) -> real {
+    let base = -(nk.x * a.x + nk.y * a.y);
+    if mode == MODE_CONSERVATIVE {
+        // most interior corner of the unit square
+        return base + max(nk.x, real(0.0)) + max(nk.y, real(0.0));
+    }
+    // most interior vertex of the diamond inscribed in the unit square
+    return base + real(0.5) * (nk.x + nk.y) + real(0.5) * max(abs(nk.x), abs(nk.y));
+}
+
+fn clamp_i32(x: real) -> i32 {
+    return i32(clamp(x, real(-2147483648.0), real(2147483520.0)));
+}
+
+// The setup of triangle `ti` in chunk `params.origin` (TriSetup::new plus the chunk clamp).
+fn setup(ti: u32) -> Setup {
+    var s: Setup;
+    s.ok = false;
+    let o0 = vertex(ti, 0u);
+    let o1 = vertex(ti, 1u);
+    let o2 = vertex(ti, 2u);
+    let no = cross_r(o1 - o0, o2 - o0);
+    if no.x == real(0.0) && no.y == real(0.0) && no.z == real(0.0) {
+        return s;
+    }
+    let an = abs(no);
+    var axis = 2u;
+    if an.z >= an.x && an.z >= an.y {
+        axis = 2u;
+    } else if an.x >= an.y {
+        axis = 0u;
+    } else {
+        axis = 1u;
+    }
+    s.axis = axis;
+    let v0 = swizzle_r(o0, axis);
+    let v1 = swizzle_r(o1, axis);
+    let v2 = swizzle_r(o2, axis);
+    s.v0 = v0;
+    s.v1 = v1;
+    s.v2 = v2;
+    var n = swizzle_r(no, axis);
+    let sx = sgn(n.x);
+    let sy = sgn(n.y);
+    let sz = sgn(n.z);
+    let mode = params.mode;
+    let e0 = v1 - v0;
+    let e1 = v2 - v1;
+    let e2 = v0 - v2;
+    s.xy0 = vec2<real>(sz * -e0.y, sz * e0.x);
+    s.xy1 = vec2<real>(sz * -e1.y, sz * e1.x);
+    s.xy2 = vec2<real>(sz * -e2.y, sz * e2.x);
+    s.yz0 = vec2<real>(sx * -e0.z, sx * e0.y);
+    s.yz1 = vec2<real>(sx * -e1.z, sx * e1.y);
+    s.yz2 = vec2<real>(sx * -e2.z, sx * e2.y);
+    s.zx0 = vec2<real>(sy * -e0.x, sy * e0.z);
+    s.zx1 = vec2<real>(sy * -e1.x, sy * e1.z);
+    s.zx2 = vec2<real>(sy * -e2.x, sy * e2.z);
+    s.dxy = vec3<real>(edge_d(s.xy0, v0.xy, mode), edge_d(s.xy1, v1.xy, mode), edge_d(s.xy2, v2.xy, mode));
+    s.dyz = vec3<real>(edge_d(s.yz0, v0.yz, mode), edge_d(s.yz1, v1.yz, mode), edge_d(s.yz2, v2.yz, mode));
+    s.dzx = vec3<real>(edge_d(s.zx0, v0.zx, mode), edge_d(s.zx1, v1.zx, mode), edge_d(s.zx2, v2.zx, mode));
+    if n.z < real(0.0) {
+        n = -n;
+    }
+    s.n = n;
+    s.area2d = real(0.5) * n.z;
+    let dp = n.x * v0.x + n.y * v0.y + n.z * v0.z;
+    if mode == MODE_CONSERVATIVE {
+        s.d_lo = dp - max(n.x, real(0.0)) - max(n.y, real(0.0));
+        s.d_hi = dp - min(n.x, real(0.0)) - min(n.y, real(0.0));
+    } else {
+        let c = dp - real(0.5) * n.x - real(0.5) * n.y;
+        s.d_lo = c;
+        s.d_hi = c;
+    }
+    let mn = min(min(v0, v1), v2);
+    let mx = max(max(v0, v1), v2);
+    let bmin = vec3<i32>(clamp_i32(ceil(mn.x) - real(1.0)), clamp_i32(ceil(mn.y) - real(1.0)), clamp_i32(ceil(mn.z) - real(1.0)));
+    let bmax = vec3<i32>(clamp_i32(floor(mx.x)), clamp_i32(floor(mx.y)), clamp_i32(floor(mx.z)));
+    let clo = swizzle_i(params.origin, axis);
+    let chi = clo + vec3<i32>(CHUNK - 1);
+    s.lo = max(bmin, clo);
+    s.hi = min(bmax, chi);
+    s.ok = all(s.lo <= s.hi);
+    return s;
+}
+
+// One (x, y) column of the dominant projection (Figure 17/18 lines 15-20, with the corrected
+// depth range of overlap.rs): emits every overlapped voxel of the column.
+fn column(s: Setup, ti: u32, px: i32, py: i32) {
+    let x = real(px);
+    let y = real(py);
+    if !(s.xy0.x * x + s.xy0.y * y + s.dxy.x >= real(0.0)
+        && s.xy1.x * x + s.xy1.y * y + s.dxy.y >= real(0.0)
+        && s.xy2.x * x + s.xy2.y * y + s.dxy.z >= real(0.0)) {
+        return;
+    }
+    let n = s.n;
+    let inv_nz = real(1.0) / n.z;
+    let a = -(n.x * x + n.y * y);
+    let lo_rhs = a + s.d_lo;
+    let hi_rhs = a + s.d_hi;
+    let zl = real(s.lo.z);
+    let zh = real(s.hi.z);
+    var z0 = clamp(ceil(lo_rhs * inv_nz) - real(1.0), zl - real(1.0), zh + real(1.0));
+    while z0 > zl - real(1.0) && n.z * z0 >= lo_rhs {
+        z0 -= real(1.0);
+    }
+    while z0 <= zh && n.z * (z0 + real(1.0)) < lo_rhs {
+        z0 += real(1.0);
+    }
+    var z1 = clamp(floor(hi_rhs * inv_nz), zl - real(1.0), zh + real(1.0));
+    while z1 < zh + real(1.0) && n.z * (z1 + real(1.0)) <= hi_rhs {
+        z1 += real(1.0);
+    }
+    while z1 >= zl && n.z * z1 > hi_rhs {
+        z1 -= real(1.0);
+    }
+    let iz0 = i32(max(z0, zl));
+    let iz1 = i32(min(z1, zh));
+    let czx = vec3<real>(s.zx0.y * x + s.dzx.x, s.zx1.y * x + s.dzx.y, s.zx2.y * x + s.dzx.z);
+    let cyz = vec3<real>(s.yz0.x * y + s.dyz.x, s.yz1.x * y + s.dyz.y, s.yz2.x * y + s.dyz.z);
+    for (var pz = iz0; pz <= iz1; pz++) {
+        let z = real(pz);
+        if s.yz0.y * z + cyz.x >= real(0.0)
+            && s.yz1.y * z + cyz.y >= real(0.0)
+            && s.yz2.y * z + cyz.z >= real(0.0)
+            && s.zx0.x * z + czx.x >= real(0.0)
+            && s.zx1.x * z + czx.y >= real(0.0)
+            && s.zx2.x * z + czx.z >= real(0.0) {
+            emit(s, ti, vec3<i32>(px, py, pz));
+        }
+    }
+}
+
+// The triangle-parallel routine: every column of the triangle's range in the chunk.
+fn voxelize_triangle(s: Setup, ti: u32) {
+    for (var px = s.lo.x; px <= s.hi.x; px++) {
+        for (var py = s.lo.y; py <= s.hi.y; py++) {
+            column(s, ti, px, py);
+        }
+    }
+}
+
+// A voxel (swizzled, grid coordinates) the triangle overlaps: mark it, or add its attributes.
+fn emit(s: Setup, ti: u32, p: vec3<i32>) {
+    let local = unswizzle_i(p, s.axis) - params.origin;
+    let idx = (u32(local.z) * 256u + u32(local.y)) * 256u + u32(local.x);
+    let word = idx >> 5u;
+    let bit = 1u << (idx & 31u);
+    if params.phase == PHASE_MARK {
+        atomicOr(&occ[word], bit);
+        return;
+    }
+    let bits = atomicLoad(&occ[word]);
+    if (bits & bit) == 0u {
+        return;
+    }
+    let slot = base[word] + countOneBits(bits & (bit - 1u));
+    if slot < params.slot_lo || slot >= params.slot_hi {
+        return;
+    }
+    accumulate(s, ti, p, (slot - params.slot_lo) * SLOT_WORDS);
+}
+
+// ---- clipped area and centroid (clip.rs) ----
+
+var<private> poly: array<vec3<real>, 9>;
+var<private> poly_len: u32;
+
+// Keeps the part of `poly` with x[k] >= b (upper false) or x[k] <= b (upper true).
+fn clip_plane(k: u32, b: real, upper: bool) {
+    var all_in = true;
+    for (var i = 0u; i < poly_len; i++) {
+        let d = select(poly[i][k] - b, b - poly[i][k], upper);
+        if d < real(0.0) {
+            all_in = false;
+        }
+    }
+    if all_in {
+        return;
+    }
+    var out: array<vec3<real>, 9>;
+    var m = 0u;
+    for (var i = 0u; i < poly_len; i++) {
+        let a = poly[i];
+        let c = poly[select(i + 1u, 0u, i + 1u == poly_len)];
+        let da = select(a[k] - b, b - a[k], upper);
+        let dc = select(c[k] - b, b - c[k], upper);
+        if da >= real(0.0) && m < 9u {
+            out[m] = a;
+            m++;
+        }
+        if ((da > real(0.0) && dc < real(0.0)) || (da < real(0.0) && dc > real(0.0))) && m < 9u {
+            var pin = a;
+            var pout = c;
+            var din = da;
+            var dout = dc;
+            if !(da > real(0.0)) {
+                pin = c;
+                pout = a;
+                din = dc;
+                dout = da;
+            }
+            let t = din / (din - dout);
+            var q = vec3<real>(pin.x + t * (pout.x - pin.x), pin.y + t * (pout.y - pin.y), pin.z + t * (pout.z - pin.z));
+            q[k] = b;
+            out[m] = q;
+            m++;
+        }
+    }
+    poly = out;
+    poly_len = m;
+}
+
+// ---- attributes (chunk.rs) ----
+
+// atomicAdd with the carry out of that addition
+fn add_word(i: u32, v: u32) -> u32 {
+    let old = atomicAdd(&accum[i], v);
+    return select(0u, 1u, old + v < old);
+}
+
+// Adds value · 2^64 as a 96-bit two's-complement integer (three u32 words, least significant
+// first) with carries between the words: exact integer arithmetic, hence independent of the
+// order of the atomics. 2^64 keeps the relative precision of tiny clipped areas; 96 bits hold
+// more than 2^20 contributions of 255 · 2 voxels².
+fn add_fixed(off: u32, value: real) {
+    let x = value * real(18446744073709551616.0);
+    let w2 = floor(x * real(5.421010862427522e-20));
+    let r = x - w2 * real(18446744073709551616.0);
+    let w1 = floor(r * real(2.3283064365386963e-10));
+    let w0 = r - w1 * real(4294967296.0);
+    let u0 = u32(w0);
+    let u1 = u32(w1);
+    let u2 = bitcast<u32>(i32(w2));
+    var c0 = 0u;
+    if u0 != 0u {
+        c0 = add_word(off, u0);
+    }
+    let s1 = u1 + c0;
+    var c1 = select(0u, 1u, s1 < u1);
+    if s1 != 0u {
+        c1 += add_word(off + 1u, s1);
+    }
+    let s2 = u2 + c1;
+    if s2 != 0u {
+        atomicAdd(&accum[off + 2u], s2);
+    }
+}
+
+fn accumulate(s: Setup, ti: u32, p: vec3<i32>, off: u32) {
+    // clipped polygon of the swizzled triangle in the voxel, planes x-, x+, y-, y+, z-, z+
+    poly[0] = s.v0;
+    poly[1] = s.v1;
+    poly[2] = s.v2;
+    poly_len = 3u;
+    let pf = vec3<real>(p);
+    clip_plane(0u, pf.x, false);
+    clip_plane(0u, pf.x + real(1.0), true);
+    clip_plane(1u, pf.y, false);
+    clip_plane(1u, pf.y + real(1.0), true);
+    clip_plane(2u, pf.z, false);
+    clip_plane(2u, pf.z + real(1.0), true);
+
+    let o0 = vertex(ti, 0u);
+    let o1 = vertex(ti, 1u);
+    let o2 = vertex(ti, 2u);
+    var w = real(0.0);
+    var q = (o0 + o1 + o2) / real(3.0);
+    if poly_len > 0u {
+        let p0 = poly[0];
+        var a2 = real(0.0);
+        var c = vec3<real>(real(0.0));
+        for (var i = 1u; i + 1u < poly_len; i++) {
+            let u = vec2<real>(poly[i].x - p0.x, poly[i].y - p0.y);
+            let v = vec2<real>(poly[i + 1u].x - p0.x, poly[i + 1u].y - p0.y);
+            let ai = u.x * v.y - u.y * v.x;
+            a2 += ai;
+            c += vec3<real>(ai * (p0.x + poly[i].x + poly[i + 1u].x), ai * (p0.y + poly[i].y + poly[i + 1u].y), ai * (p0.z + poly[i].z + poly[i + 1u].z));
+        }
+        if a2 != real(0.0) {
+            let nn = s.n;
+            let scale = sqrt(nn.x * nn.x + nn.y * nn.y + nn.z * nn.z) / abs(nn.z);
+            let inv = real(1.0) / (real(3.0) * a2);
+            w = real(0.5) * abs(a2) * scale;
+            q = unswizzle_r(c * inv, s.axis);
+        } else {
+            let inv = real(1.0) / real(poly_len);
+            var m = vec3<real>(real(0.0));
+            for (var i = 0u; i < poly_len; i++) {
+                m += poly[i] * inv;
+            }
+            q = unswizzle_r(m, s.axis);
+        }
+    }
+
+    // barycentrics at q on the unswizzled triangle
+    let e1 = o1 - o0;
+    let e2 = o2 - o0;
+    let n = cross_r(e1, e2);
+    let nn = dot_r(n, n);
+    let inv_nn = real(1.0) / nn;
+    let d = q - o0;
+    let l1 = dot_r(cross_r(d, e2), n) * inv_nn;
+    let l2 = dot_r(cross_r(e1, d), n) * inv_nn;
+    let l0 = real(1.0) - l1 - l2;
+    let len_f = sqrt(nn);
+    var normal = vec3<real>(n.x / len_f, n.y / len_f, n.z / len_f);
+    if (tris[ti].flags & TRI_HAS_NORMALS) != 0u {
+        var vn: array<vec3<real>, 3>;
+        for (var k = 0u; k < 3u; k++) {
+            let b = 3u * k;
+            vn[k] = vec3<real>(real(tris[ti].n[b]), real(tris[ti].n[b + 1u]), real(tris[ti].n[b + 2u]));
+        }
+        let m = vec3<real>(
+            l0 * vn[0].x + l1 * vn[1].x + l2 * vn[2].x,
+            l0 * vn[0].y + l1 * vn[1].y + l2 * vn[2].y,
+            l0 * vn[0].z + l1 * vn[1].z + l2 * vn[2].z);
+        let len = sqrt(dot_r(m, m));
+        // `len == len` is false for NaN; the upper bound excludes infinity
+        if len > real(0.0) && len < real(3.0e38) {
+            normal = vec3<real>(m.x / len, m.y / len, m.z / len);
+        }
+    }
+    var colour: array<real, 4>;
+    for (var k = 0u; k < 4u; k++) {
+        let sh = 8u * k;
+        let c0 = real((tris[ti].c[0] >> sh) & 255u);
+        let c1 = real((tris[ti].c[1] >> sh) & 255u);
+        let c2 = real((tris[ti].c[2] >> sh) & 255u);
+        colour[k] = l0 * c0 + l1 * c1 + l2 * c2;
+    }
+
+    // weighted sums when w·2^64 rounds to a nonzero integer, unweighted sums otherwise: a voxel
+    // whose total weight is zero (touched only on its boundary) falls back to the unweighted
+    // mean, as on the CPU
+    if floor(w * real(18446744073709551616.0)) > real(0.0) {
+        add_fixed(sum_at(off, 0u), w);
+        add_fixed(sum_at(off, 1u), w * normal.x);
+        add_fixed(sum_at(off, 2u), w * normal.y);
+        add_fixed(sum_at(off, 3u), w * normal.z);
+        for (var k = 0u; k < 4u; k++) {
+            add_fixed(sum_at(off, 4u + k), w * colour[k]);
+        }
+    } else {
+        add_fixed(sum_at(off, 8u), real(1.0));
+        add_fixed(sum_at(off, 9u), normal.x);
+        add_fixed(sum_at(off, 10u), normal.y);
+        add_fixed(sum_at(off, 11u), normal.z);
+        for (var k = 0u; k < 4u; k++) {
+            add_fixed(sum_at(off, 12u + k), colour[k]);
+        }
+    }
+}
