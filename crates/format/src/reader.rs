@@ -36,9 +36,11 @@ impl Reader {
     /// Opens and validates `path`: the header (magic, version, size, checksum, fields), that
     /// the index and manifest lie inside the file and the file ends with the manifest, the
     /// index and manifest checksums, and every entry (level and position inside the grid,
-    /// voxel count in 1..=256³, payload range inside the payload region and after the previous
-    /// payload, bounds, reserved fields, index order, child masks exactly the stored children,
-    /// every node below the root with its parent, total voxel count).
+    /// voxel count in 1..=256³, payload range inside the payload region and right after the
+    /// previous payload, bounds, reserved fields, index order, child masks exactly the stored
+    /// children, every node below the root with its parent, total voxel count) and that the
+    /// padding before the index is 0–7 zero bytes — so every byte of the file is checked by
+    /// `open` or by the checksums [`read_node_into`](Self::read_node_into) verifies.
     ///
     /// The file must not be modified while the reader is alive (it is memory-mapped).
     pub fn open(path: &Path) -> Result<Reader, FormatError> {
@@ -154,12 +156,13 @@ impl Reader {
                     e.child_mask, e.level
                 ));
             }
+            // payloads are back to back in index order, so every byte of the file is checked
             let end = e.payload_offset.checked_add(e.payload_size);
             match end {
-                Some(end) if e.payload_size > 0 && e.payload_offset >= prev_end && end <= h.index_offset => prev_end = end,
+                Some(end) if e.payload_size > 0 && e.payload_offset == prev_end && end <= h.index_offset => prev_end = end,
                 _ => {
                     return bad(format!(
-                        "payload at {} of {} bytes is not inside the payload region [{prev_end}, {}) after the previous payload",
+                        "payload at {} of {} bytes is not inside the payload region [{HEADER_SIZE}, {}) right after the previous payload (at {prev_end})",
                         e.payload_offset, e.payload_size, h.index_offset
                     ))
                 }
@@ -180,6 +183,13 @@ impl Reader {
             }
             prev_key = Some(key);
             total += e.voxel_count as u64;
+        }
+        let pad = &self.map[prev_end as usize..h.index_offset as usize];
+        if pad.len() >= 8 || pad.iter().any(|&b| b != 0) {
+            return Err(FormatError::Index {
+                path: self.path.clone(),
+                what: format!("the {} bytes between the last payload and the index are not 0–7 zero bytes of padding", pad.len()),
+            });
         }
         if total != h.total_voxels {
             return Err(FormatError::Index {
