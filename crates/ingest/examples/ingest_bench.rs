@@ -45,7 +45,12 @@ fn write_binary_ply(tris: &[Triangle], out: &Path) -> std::io::Result<()> {
         }
     }
     w.flush()?;
-    eprintln!("wrote {} ({} vertices, {} faces)", out.display(), verts.len(), faces.len());
+    eprintln!(
+        "wrote {} ({} vertices, {} faces)",
+        out.display(),
+        verts.len(),
+        faces.len()
+    );
     Ok(())
 }
 
@@ -56,7 +61,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
-            "--write-binary" => write_to = Some(PathBuf::from(args.next().ok_or("--write-binary needs a path")?)),
+            "--write-binary" => {
+                write_to = Some(PathBuf::from(
+                    args.next().ok_or("--write-binary needs a path")?,
+                ))
+            }
             "--reps" => reps = args.next().ok_or("--reps needs a number")?.parse()?,
             _ => paths.push(a.into()),
         }

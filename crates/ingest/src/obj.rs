@@ -94,8 +94,8 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
             }
             Some("vn") => s.normals += 1,
             Some("f") => {
-                let mut corner = 0u64;
-                for c in t {
+                for (corner, c) in t.enumerate() {
+                    let corner = corner as u64;
                     let mut parts = c.split('/');
                     let v = parts.next().unwrap_or("");
                     let has_normal = parts.nth(1).is_some_and(|n| !n.is_empty());
@@ -125,7 +125,6 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                     if !has_normal {
                         s.corners_without_normal += 1;
                     }
-                    corner += 1;
                 }
                 s.faces += 1;
             }
@@ -195,6 +194,8 @@ impl ObjSource {
 
     pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
         let path = &self.path;
+        // `..Default::default()` covers fields that tobj features enabled elsewhere may add
+        #[allow(clippy::needless_update)]
         let opts = tobj::LoadOptions {
             triangulate: true,
             single_index: false,
@@ -242,14 +243,14 @@ impl ObjSource {
                 };
                 let mut out = Triangle::new([[0.0; 3]; 3]);
                 out.flags = flags;
-                for k in 0..3 {
-                    out.v[k] = get3(&mesh.positions, tri[k]).ok_or_else(bad)?;
+                for (k, &vi) in tri.iter().enumerate() {
+                    out.v[k] = get3(&mesh.positions, vi).ok_or_else(bad)?;
                     if normals {
                         out.n[k] = get3(&mesh.normals, mesh.normal_indices[3 * t + k] as usize)
                             .ok_or_else(bad)?;
                     }
                     out.c[k] = if vcol {
-                        rgba8(get3(&mesh.vertex_color, tri[k]).ok_or_else(bad)?)
+                        rgba8(get3(&mesh.vertex_color, vi).ok_or_else(bad)?)
                     } else {
                         mat_color
                     };

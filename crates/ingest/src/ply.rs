@@ -293,7 +293,7 @@ fn element_offsets<const BE: bool>(
         match el.fixed_size() {
             Some(size) => {
                 let left = (data.len() - off) as u64;
-                let need = el.count.checked_mul(size as u64).unwrap_or(u64::MAX);
+                let need = el.count.saturating_mul(size as u64);
                 if need > left {
                     return Err(IngestError::Truncated {
                         path: path.to_path_buf(),

@@ -301,6 +301,14 @@ pub(crate) struct StreamRecords<'a, R, const BE: bool> {
 }
 
 impl<'a, R: BufRead, const BE: bool> StreamRecords<'a, R, BE> {
+    fn location_at(&self, offset: u64) -> Location {
+        Location::Record {
+            element: self.el.clone(),
+            index: self.index,
+            offset,
+        }
+    }
+
     /// `r` positioned at decompressed byte `pos`.
     pub fn new(path: &'a Path, r: R, counter: Counter, pos: u64) -> Self {
         StreamRecords {
@@ -317,20 +325,21 @@ impl<'a, R: BufRead, const BE: bool> StreamRecords<'a, R, BE> {
     #[inline]
     fn fill(&mut self, ty: Scalar) -> Result<(), IngestError> {
         let n = ty.size();
-        let avail = self
-            .r
-            .fill_buf()
-            .map_err(|e| IngestError::io(self.path, e))?;
+        let at = self.pos;
+        let avail = match self.r.fill_buf() {
+            Ok(a) => a,
+            Err(e) => return Err(read_failed(self.path, self.location_at(at), e)),
+        };
         if avail.len() >= n {
             self.buf[..n].copy_from_slice(&avail[..n]);
             self.r.consume(n);
         } else {
             let mut got = 0;
             while got < n {
-                let k = self
-                    .r
-                    .read(&mut self.buf[got..n])
-                    .map_err(|e| IngestError::io(self.path, e))?;
+                let k = match self.r.read(&mut self.buf[got..n]) {
+                    Ok(k) => k,
+                    Err(e) => return Err(read_failed(self.path, self.location(), e)),
+                };
                 if k == 0 {
                     return Err(IngestError::Truncated {
                         path: self.path.to_path_buf(),
@@ -501,10 +510,10 @@ impl<R: BufRead> Records for AsciiRecords<'_, R> {
         loop {
             self.line.clear();
             self.cur = 0;
-            let n = self
-                .r
-                .read_until(b'\n', &mut self.line)
-                .map_err(|e| IngestError::io(self.path, e))?;
+            let n = match self.r.read_until(b'\n', &mut self.line) {
+                Ok(n) => n,
+                Err(e) => return Err(read_failed(self.path, Location::Line(self.line_no + 1), e)),
+            };
             if n == 0 {
                 return Err(IngestError::malformed(
                     self.path,

@@ -195,3 +195,21 @@ pub(crate) fn non_finite(path: &Path, at: Location, vertex: u64, p: [f32; 3]) ->
         coords: p.map(|x| x as f64),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::color_byte;
+    use crate::ply_header::Scalar;
+
+    #[test]
+    fn colour_channels_to_bytes() {
+        assert_eq!(color_byte(200.0, Scalar::U8), 200);
+        assert_eq!(color_byte(1.0, Scalar::F32), 255);
+        assert_eq!(color_byte(0.5, Scalar::F32), 128);
+        assert_eq!(color_byte(2.0, Scalar::F64), 255);
+        assert_eq!(color_byte(-0.1, Scalar::F32), 0);
+        assert_eq!(color_byte(f64::NAN, Scalar::F32), 0);
+        assert_eq!(color_byte(65535.0, Scalar::U16), 255);
+        assert_eq!(color_byte(-5.0, Scalar::I8), 0);
+    }
+}

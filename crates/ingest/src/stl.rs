@@ -261,3 +261,27 @@ impl StlSource {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::is_ascii_stl;
+
+    fn binary_head(text: &[u8], n: u32) -> Vec<u8> {
+        let mut h = vec![b' '; 80];
+        h[..text.len()].copy_from_slice(text);
+        h.extend_from_slice(&n.to_le_bytes());
+        h
+    }
+
+    #[test]
+    fn ascii_or_binary() {
+        let ascii = b"solid cube\n  facet normal 0 0 1\n    outer loop\n      vertex 0 0 0\n      vertex 1 0 0\n      vertex 0 1 0\n    endloop\n  endfacet\nendsolid\n";
+        assert!(is_ascii_stl(ascii, ascii.len() as u64));
+        // binary whose header says "solid": its size is 84 + 50·n and no keyword follows
+        let h = binary_head(b"solid by some exporter", 2);
+        assert!(!is_ascii_stl(&h, 84 + 100));
+        // same header but the size does not fit binary: ASCII
+        assert!(is_ascii_stl(&h, 84 + 99));
+        assert!(!is_ascii_stl(&binary_head(b"exported", 2), 184));
+    }
+}

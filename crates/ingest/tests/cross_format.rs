@@ -8,9 +8,21 @@ use voxlod_geom::{DEFAULT_COLOR, TRI_HAS_COLORS, TRI_HAS_NORMALS};
 use voxlod_ingest::MeshSource;
 
 /// A square pyramid: a quad base (fanned 0-1-2, 0-2-3) and four sides.
-const P: [[f32; 3]; 5] = [[0.0, 0.0, 0.0], [1.5, 0.0, 0.0], [1.5, 1.25, 0.0], [0.0, 1.25, 0.0], [0.75, 0.625, -2.0]];
+const P: [[f32; 3]; 5] = [
+    [0.0, 0.0, 0.0],
+    [1.5, 0.0, 0.0],
+    [1.5, 1.25, 0.0],
+    [0.0, 1.25, 0.0],
+    [0.75, 0.625, -2.0],
+];
 fn polys() -> Vec<Vec<usize>> {
-    vec![vec![0, 3, 2, 1], vec![0, 1, 4], vec![1, 2, 4], vec![2, 3, 4], vec![3, 0, 4]]
+    vec![
+        vec![0, 3, 2, 1],
+        vec![0, 1, 4],
+        vec![1, 2, 4],
+        vec![2, 3, 4],
+        vec![3, 0, 4],
+    ]
 }
 fn tris() -> Vec<[[f32; 3]; 3]> {
     let mut t = Vec::new();
@@ -43,12 +55,18 @@ fn all_formats_yield_the_same_positions() {
     let vertex = || El {
         name: "vertex",
         props: vec!["float x", "float y", "float z"],
-        rows: P.iter().map(|p| p.iter().map(|&x| V::S(x as f64)).collect()).collect(),
+        rows: P
+            .iter()
+            .map(|p| p.iter().map(|&x| V::S(x as f64)).collect())
+            .collect(),
     };
     let face = || El {
         name: "face",
         props: vec!["list uchar int vertex_indices"],
-        rows: polys().into_iter().map(|f| vec![V::L(f.iter().map(|&i| i as f64).collect())]).collect(),
+        rows: polys()
+            .into_iter()
+            .map(|f| vec![V::L(f.iter().map(|&i| i as f64).collect())])
+            .collect(),
     };
     let want = tris();
     let mut files = vec![
@@ -56,17 +74,26 @@ fn all_formats_yield_the_same_positions() {
         dir.write("p-le.ply", ply("binary_little_endian", &[vertex(), face()])),
         dir.write("p-be.ply", ply("binary_big_endian", &[vertex(), face()])),
         dir.write("p-ascii.ply.gz", gzip(&ply("ascii", &[vertex(), face()]))),
-        dir.write("p-le.ply.gz", gzip(&ply("binary_little_endian", &[vertex(), face()]))),
+        dir.write(
+            "p-le.ply.gz",
+            gzip(&ply("binary_little_endian", &[vertex(), face()])),
+        ),
         dir.write("p.obj", obj_text("p.mtl")),
         dir.write("p-bin.stl", stl_binary(&want, b"binary stl")),
         // a binary STL whose header starts with "solid", as some exporters write
-        dir.write("p-bin-solid.stl", stl_binary(&want, b"solid exported by a binary writer")),
+        dir.write(
+            "p-bin-solid.stl",
+            stl_binary(&want, b"solid exported by a binary writer"),
+        ),
         dir.write("p-ascii.stl", stl_ascii(&want)),
     ];
     dir.write("p.mtl", "newmtl red\nKd 1 0 0\nnewmtl green\nKd 0 0.5 0\n");
     // no extension: recognised by content
     files.push(dir.write("p-noext", ply("binary_big_endian", &[vertex(), face()])));
-    let formats: Vec<String> = files.iter().map(|f| MeshSource::open(f).unwrap().info().format.clone()).collect();
+    let formats: Vec<String> = files
+        .iter()
+        .map(|f| MeshSource::open(f).unwrap().info().format.clone())
+        .collect();
     assert_eq!(
         formats,
         [
@@ -102,7 +129,11 @@ fn obj_material_colours_and_normals() {
     assert_eq!((st.triangles, st.polygons), (6, 5));
     for (i, t) in got.iter().enumerate() {
         assert_eq!(t.flags, TRI_HAS_NORMALS | TRI_HAS_COLORS);
-        let (c, n) = if i < 2 { ([255, 0, 0, 255], [0.0, 0.0, -1.0]) } else { ([0, 128, 0, 255], [0.0, 0.0, 1.0]) };
+        let (c, n) = if i < 2 {
+            ([255, 0, 0, 255], [0.0, 0.0, -1.0])
+        } else {
+            ([0, 128, 0, 255], [0.0, 0.0, 1.0])
+        };
         assert_eq!(t.c, [c; 3], "triangle {i}");
         assert_eq!(t.n, [n; 3], "triangle {i}");
     }
@@ -118,7 +149,9 @@ fn obj_missing_mtl_warns_and_uses_the_default_colour() {
     assert!(w[0].contains("missing.mtl"), "{w:?}");
     assert!(!src.info().has_colors);
     let (got, _) = read(&path).unwrap();
-    assert!(got.iter().all(|t| t.c == [DEFAULT_COLOR; 3] && t.flags == TRI_HAS_NORMALS));
+    assert!(got
+        .iter()
+        .all(|t| t.c == [DEFAULT_COLOR; 3] && t.flags == TRI_HAS_NORMALS));
 }
 
 #[test]
@@ -131,7 +164,12 @@ fn obj_vertex_colours_and_partial_normals() {
     assert_eq!(src.info().warnings.len(), 1, "{:?}", src.info().warnings);
     let (got, _) = read(&path).unwrap();
     assert_eq!(got.len(), 2);
-    assert_eq!(got[0].c, [[255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255]]);
+    assert_eq!(
+        got[0].c,
+        [[255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255]]
+    );
     assert_eq!(got[1].c[1], [255, 255, 255, 255]);
-    assert!(got.iter().all(|t| t.flags == TRI_HAS_COLORS && t.n == [[0.0; 3]; 3]));
+    assert!(got
+        .iter()
+        .all(|t| t.flags == TRI_HAS_COLORS && t.n == [[0.0; 3]; 3]));
 }

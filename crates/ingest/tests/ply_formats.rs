@@ -36,18 +36,40 @@ const C: [[u8; 4]; 7] = [
 
 /// quad, triangle, pentagon, repeated index, collinear, a 2-gon (no triangle)
 fn faces() -> Vec<Vec<usize>> {
-    vec![vec![0, 1, 2, 3], vec![0, 1, 4], vec![1, 2, 4, 3, 0], vec![2, 2, 3], vec![1, 5, 6], vec![3, 4]]
+    vec![
+        vec![0, 1, 2, 3],
+        vec![0, 1, 4],
+        vec![1, 2, 4, 3, 0],
+        vec![2, 2, 3],
+        vec![1, 5, 6],
+        vec![3, 4],
+    ]
 }
 
 fn zero_area(t: &[[f32; 3]; 3]) -> bool {
-    let d = |a: [f32; 3], b: [f32; 3]| [b[0] as f64 - a[0] as f64, b[1] as f64 - a[1] as f64, b[2] as f64 - a[2] as f64];
+    let d = |a: [f32; 3], b: [f32; 3]| {
+        [
+            b[0] as f64 - a[0] as f64,
+            b[1] as f64 - a[1] as f64,
+            b[2] as f64 - a[2] as f64,
+        ]
+    };
     let (u, v) = (d(t[0], t[1]), d(t[0], t[2]));
-    let c = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+    let c = [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ];
     c == [0.0; 3]
 }
 
 /// Independent fan triangulation of `faces` (and strips), attributes attached.
-fn expected(tris_idx: &[[usize; 3]], normals: bool, colors: bool, colors_of: &[[u8; 4]]) -> (Vec<Triangle>, u64, u64) {
+fn expected(
+    tris_idx: &[[usize; 3]],
+    normals: bool,
+    colors: bool,
+    colors_of: &[[u8; 4]],
+) -> (Vec<Triangle>, u64, u64) {
     let mut out = Vec::new();
     let (mut repeated, mut degenerate) = (0, 0);
     for t in tris_idx {
@@ -62,9 +84,18 @@ fn expected(tris_idx: &[[usize; 3]], normals: bool, colors: bool, colors_of: &[[
         }
         out.push(Triangle {
             v,
-            n: if normals { [N[t[0]], N[t[1]], N[t[2]]] } else { [[0.0; 3]; 3] },
-            c: if colors { [colors_of[t[0]], colors_of[t[1]], colors_of[t[2]]] } else { [DEFAULT_COLOR; 3] },
-            flags: if normals { TRI_HAS_NORMALS } else { 0 } | if colors { TRI_HAS_COLORS } else { 0 },
+            n: if normals {
+                [N[t[0]], N[t[1]], N[t[2]]]
+            } else {
+                [[0.0; 3]; 3]
+            },
+            c: if colors {
+                [colors_of[t[0]], colors_of[t[1]], colors_of[t[2]]]
+            } else {
+                [DEFAULT_COLOR; 3]
+            },
+            flags: if normals { TRI_HAS_NORMALS } else { 0 }
+                | if colors { TRI_HAS_COLORS } else { 0 },
         });
     }
     (out, repeated, degenerate)
@@ -96,12 +127,25 @@ fn face_rows(with_extra: bool) -> Vec<Vec<V>> {
 
 /// Variant A: camera element first, uchar colours, extra vertex and face properties.
 fn variant_a() -> Vec<El> {
-    let camera = El { name: "camera", props: vec!["float view_px", "int viewportx", "double k1"], rows: vec![vec![V::S(1.5), V::S(640.0), V::S(0.125)]] };
+    let camera = El {
+        name: "camera",
+        props: vec!["float view_px", "int viewportx", "double k1"],
+        rows: vec![vec![V::S(1.5), V::S(640.0), V::S(0.125)]],
+    };
     let vertex = El {
         name: "vertex",
         props: vec![
-            "float x", "float y", "float z", "float confidence", "float nx", "float ny", "float nz", "uchar red", "uchar green",
-            "uchar blue", "int flags",
+            "float x",
+            "float y",
+            "float z",
+            "float confidence",
+            "float nx",
+            "float ny",
+            "float nz",
+            "uchar red",
+            "uchar green",
+            "uchar blue",
+            "int flags",
         ],
         rows: (0..7)
             .map(|i| {
@@ -114,7 +158,16 @@ fn variant_a() -> Vec<El> {
             })
             .collect(),
     };
-    let face = El { name: "face", props: vec!["list uchar int vertex_indices", "int flags", "float quality", "uchar material"], rows: face_rows(true) };
+    let face = El {
+        name: "face",
+        props: vec![
+            "list uchar int vertex_indices",
+            "int flags",
+            "float quality",
+            "uchar material",
+        ],
+        rows: face_rows(true),
+    };
     vec![camera, vertex, face]
 }
 
@@ -125,8 +178,15 @@ fn variant_b(colors: &[[u8; 4]]) -> Vec<El> {
     let vertex = El {
         name: "vertex",
         props: vec![
-            "float64 x", "list uint8 int16 extra", "float64 y", "float64 z", "float32 red", "float32 green", "float32 blue",
-            "float32 alpha", "int8 tag",
+            "float64 x",
+            "list uint8 int16 extra",
+            "float64 y",
+            "float64 z",
+            "float32 red",
+            "float32 green",
+            "float32 blue",
+            "float32 alpha",
+            "int8 tag",
         ],
         rows: (0..7)
             .map(|i| {
@@ -145,7 +205,11 @@ fn variant_b(colors: &[[u8; 4]]) -> Vec<El> {
             })
             .collect(),
     };
-    let face = El { name: "face", props: vec!["list int uint vertex_index"], rows: face_rows(false) };
+    let face = El {
+        name: "face",
+        props: vec!["list int uint vertex_index"],
+        rows: face_rows(false),
+    };
     vec![face, vertex]
 }
 
@@ -176,11 +240,20 @@ fn variant_a_every_encoding() {
         let path = write_ply(&dir, "a", enc, gz, &variant_a());
         let src = MeshSource::open(&path).unwrap();
         let info = src.info();
-        assert_eq!(info.format, format!("ply {enc}{}", if gz { " (gzip)" } else { "" }));
-        assert_eq!((info.vertices, info.faces, info.has_normals, info.has_colors), (7, 6, true, true));
+        assert_eq!(
+            info.format,
+            format!("ply {enc}{}", if gz { " (gzip)" } else { "" })
+        );
+        assert_eq!(
+            (info.vertices, info.faces, info.has_normals, info.has_colors),
+            (7, 6, true, true)
+        );
         let (got, st) = read(&path).unwrap();
         assert_eq!(got, want, "{enc} gz={gz}");
-        assert_eq!((st.triangles, st.polygons, st.repeated_index), (6, 6, repeated));
+        assert_eq!(
+            (st.triangles, st.polygons, st.repeated_index),
+            (6, 6, repeated)
+        );
         assert_eq!(st.degenerate_skipped, repeated + degenerate);
     }
 }
@@ -207,14 +280,32 @@ fn triangle_strips_with_restarts() {
     let vertex = El {
         name: "vertex",
         props: vec!["float x", "float y", "float z"],
-        rows: P.iter().map(|p| p.iter().map(|&x| V::S(x as f64)).collect()).collect(),
+        rows: P
+            .iter()
+            .map(|p| p.iter().map(|&x| V::S(x as f64)).collect())
+            .collect(),
     };
     // strip 0 1 2 3 gives (0,1,2), (2,1,3); restart; 4 0 1 2 gives (4,0,1), (1,0,2)
-    let strips = El { name: "tristrips", props: vec!["list int int vertex_indices"], rows: vec![vec![V::L(vec![0., 1., 2., 3., -1., 4., 0., 1., 2.])]] };
-    let (want, _, _) = expected(&[[0, 1, 2], [2, 1, 3], [4, 0, 1], [1, 0, 2]], false, false, &C);
+    let strips = El {
+        name: "tristrips",
+        props: vec!["list int int vertex_indices"],
+        rows: vec![vec![V::L(vec![0., 1., 2., 3., -1., 4., 0., 1., 2.])]],
+    };
+    let (want, _, _) = expected(
+        &[[0, 1, 2], [2, 1, 3], [4, 0, 1], [1, 0, 2]],
+        false,
+        false,
+        &C,
+    );
     assert_eq!(want.len(), 4);
     for (enc, gz) in ENCODINGS {
-        let path = write_ply(&dir, "s", enc, gz, &[vertex_clone(&vertex), strips_clone(&strips)]);
+        let path = write_ply(
+            &dir,
+            "s",
+            enc,
+            gz,
+            &[vertex_clone(&vertex), strips_clone(&strips)],
+        );
         let (got, st) = read(&path).unwrap();
         assert_eq!(got, want, "{enc} gz={gz}");
         assert_eq!(st.polygons, 0);
@@ -222,7 +313,11 @@ fn triangle_strips_with_restarts() {
 }
 
 fn vertex_clone(e: &El) -> El {
-    El { name: e.name, props: e.props.clone(), rows: e.rows.clone() }
+    El {
+        name: e.name,
+        props: e.props.clone(),
+        rows: e.rows.clone(),
+    }
 }
 fn strips_clone(e: &El) -> El {
     vertex_clone(e)
@@ -233,19 +328,36 @@ fn grid(n: usize) -> Vec<El> {
     let mut vrows = Vec::new();
     for y in 0..=n {
         for x in 0..=n {
-            vrows.push(vec![V::S(x as f64), V::S(y as f64), V::S(((x * 7 + y * 3) % 5) as f64)]);
+            vrows.push(vec![
+                V::S(x as f64),
+                V::S(y as f64),
+                V::S(((x * 7 + y * 3) % 5) as f64),
+            ]);
         }
     }
     let mut frows = Vec::new();
     for y in 0..n {
         for x in 0..n {
             let i = (y * (n + 1) + x) as f64;
-            frows.push(vec![V::L(vec![i, i + 1.0, i + n as f64 + 2.0, i + n as f64 + 1.0])]);
+            frows.push(vec![V::L(vec![
+                i,
+                i + 1.0,
+                i + n as f64 + 2.0,
+                i + n as f64 + 1.0,
+            ])]);
         }
     }
     vec![
-        El { name: "vertex", props: vec!["float x", "float y", "float z"], rows: vrows },
-        El { name: "face", props: vec!["list uchar uint vertex_indices"], rows: frows },
+        El {
+            name: "vertex",
+            props: vec!["float x", "float y", "float z"],
+            rows: vrows,
+        },
+        El {
+            name: "face",
+            props: vec!["list uchar uint vertex_indices"],
+            rows: frows,
+        },
     ]
 }
 
@@ -255,7 +367,15 @@ fn batches_and_callback_errors() {
     let path = dir.write("grid.ply", ply("binary_little_endian", &grid(200)));
     let src = MeshSource::open(&path).unwrap();
     let mut sizes = Vec::new();
-    let st = src.stream(&mut |b| { sizes.push(b.len()); Ok(()) }, &mut |_, _| {}).unwrap();
+    let st = src
+        .stream(
+            &mut |b| {
+                sizes.push(b.len());
+                Ok(())
+            },
+            &mut |_, _| {},
+        )
+        .unwrap();
     assert_eq!(st.triangles, 80_000);
     assert_eq!(sizes, vec![BATCH, 80_000 - BATCH]);
     // the consumer's error stops the stream

@@ -50,7 +50,11 @@ fn text(ty: &str, v: f64) -> String {
 /// Encodes a PLY file; `enc` is "ascii", "binary_little_endian" or "binary_big_endian".
 pub fn ply(enc: &str, els: &[El]) -> Vec<u8> {
     let mut out = Vec::new();
-    write!(out, "ply\nformat {enc} 1.0\ncomment written by the voxlod-ingest tests\n").unwrap();
+    write!(
+        out,
+        "ply\nformat {enc} 1.0\ncomment written by the voxlod-ingest tests\n"
+    )
+    .unwrap();
     for e in els {
         writeln!(out, "element {} {}", e.name, e.rows.len()).unwrap();
         for p in &e.props {
@@ -132,7 +136,12 @@ pub fn stl_ascii(tris: &[[[f32; 3]; 3]]) -> String {
 pub struct TempDir(pub tempfile::TempDir);
 impl TempDir {
     pub fn new(tag: &str) -> Self {
-        TempDir(tempfile::Builder::new().prefix(&format!("voxlod-ingest-{tag}-")).tempdir().unwrap())
+        TempDir(
+            tempfile::Builder::new()
+                .prefix(&format!("voxlod-ingest-{tag}-"))
+                .tempdir()
+                .unwrap(),
+        )
     }
     pub fn path(&self, name: &str) -> PathBuf {
         self.0.path().join(name)
@@ -160,7 +169,11 @@ pub fn read(path: &Path) -> Result<(Vec<Triangle>, IngestStats), IngestError> {
 /// Opens and streams, expecting an error; returns its message.
 pub fn read_err(path: &Path) -> String {
     match read(path) {
-        Ok((t, _)) => panic!("{} read fine ({} triangles) but should fail", path.display(), t.len()),
+        Ok((t, _)) => panic!(
+            "{} read fine ({} triangles) but should fail",
+            path.display(),
+            t.len()
+        ),
         Err(e) => e.to_string(),
     }
 }
