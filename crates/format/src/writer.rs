@@ -31,6 +31,16 @@ pub struct Writer {
     failed: bool,
 }
 
+impl std::fmt::Debug for Writer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Writer")
+            .field("path", &self.path)
+            .field("nodes", &self.entries.len())
+            .field("bytes_written", &self.offset)
+            .finish_non_exhaustive()
+    }
+}
+
 /// The temporary file a [`Writer`] for `path` builds: `path` with `.tmp` appended to its file
 /// name (`out.voxlod` → `out.voxlod.tmp`), in the same directory so the final rename is atomic.
 pub fn temp_path(path: &Path) -> PathBuf {

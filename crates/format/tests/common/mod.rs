@@ -254,11 +254,11 @@ pub fn assemble(
 pub fn fix_crcs(f: &mut [u8]) {
     let rd = |f: &[u8], at: usize| u64::from_le_bytes(f[at..at + 8].try_into().unwrap()) as usize;
     let (io, is, mo, ms) = (rd(f, 72), rd(f, 80), rd(f, 88), rd(f, 96));
-    if io + is <= f.len() {
+    if io.checked_add(is).is_some_and(|e| e <= f.len()) {
         let c = crc32fast::hash(&f[io..io + is]);
         put(f, 112, &c.to_le_bytes());
     }
-    if mo + ms <= f.len() {
+    if mo.checked_add(ms).is_some_and(|e| e <= f.len()) {
         let c = crc32fast::hash(&f[mo..mo + ms]);
         put(f, 116, &c.to_le_bytes());
     }
