@@ -9,7 +9,7 @@ use crate::ply_records::Records;
 use crate::ply_vertices::{non_finite, VertexSource};
 use crate::IngestError;
 use std::path::Path;
-use voxlod_geom::{Triangle, TRI_HAS_COLORS, TRI_HAS_NORMALS};
+use voxlod_geom::{Triangle, DEFAULT_COLOR, TRI_HAS_COLORS, TRI_HAS_NORMALS};
 
 /// Streams all records of element `el` (a `face` or `tristrips` element whose vertex index
 /// list is property `list`) into `em`. `flags` are the triangle flags the vertices support.
@@ -96,19 +96,21 @@ fn emit<R: Records, V: VertexSource>(
         em.repeated_index();
         return Ok(());
     }
-    let c = tri.map(|i| verts.corner(i));
-    let t = Triangle {
-        v: [c[0].p, c[1].p, c[2].p],
-        n: [c[0].n, c[1].n, c[2].n],
-        c: [c[0].c, c[1].c, c[2].c],
+    // filled corner by corner: `array::map` here compiled to slow copies
+    let mut t = Triangle {
+        v: [[0.0; 3]; 3],
+        n: [[0.0; 3]; 3],
+        c: [DEFAULT_COLOR; 3],
         flags,
     };
-    if !t.is_finite() {
-        for k in 0..3 {
-            if !c[k].p.iter().all(|x| x.is_finite()) {
-                return Err(non_finite(path, src.location(), tri[k] as u64, c[k].p));
-            }
+    for (k, &vi) in tri.iter().enumerate() {
+        let c = verts.corner(vi);
+        if !(c.p[0].is_finite() && c.p[1].is_finite() && c.p[2].is_finite()) {
+            return Err(non_finite(path, src.location(), vi as u64, c.p));
         }
+        t.v[k] = c.p;
+        t.n[k] = c.n;
+        t.c[k] = c.c;
     }
     em.push(t)
 }
