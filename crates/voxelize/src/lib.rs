@@ -19,7 +19,9 @@
 //! For every triangle `T` (in `add` order) and every voxel `p` that the overlap test marks:
 //! * weight `w` = area of `T ∩ [p, p+1]³` in voxel² ([`clipped_area`]: Sutherland–Hodgman in f64,
 //!   swizzled to `T`'s dominant axis, planes in the order x−, x+, y−, y+, z−, z+; area from the
-//!   xy shoelace of the fan from the first vertex times `|n|/|n_z|`);
+//!   xy shoelace of the fan from the first vertex times `|n|/|n_z|`). The boxes are closed, so a
+//!   triangle lying exactly in a voxel face plane gives its full area to both voxels sharing
+//!   that face (the weights only serve averaging);
 //! * interpolation point `q` = centroid of that clipped polygon (mean of its vertices if its area
 //!   is zero, the triangle's centroid if it is empty);
 //! * barycentrics at `q`: with `e1 = v1−v0`, `e2 = v2−v0`, `n = e1×e2`, `d = q−v0`:
