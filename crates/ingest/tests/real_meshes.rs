@@ -136,6 +136,12 @@ fn every_shared_mesh_matches_stats_json() {
             st.repeated_index, want_degen,
             "{rel}: repeated-index degenerates"
         );
+        let zero_area = ZERO_AREA.iter().find(|z| z.0 == rel).map_or(0, |z| z.1);
+        assert_eq!(
+            st.degenerate_skipped - st.repeated_index,
+            zero_area,
+            "{rel}: zero-area triangles"
+        );
         assert_eq!(
             st.polygons,
             e["polygons"].as_u64().unwrap(),
