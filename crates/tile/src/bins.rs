@@ -22,7 +22,10 @@ impl ChunkCounts {
         if total > u32::MAX as u64 {
             return Err(TileError::TooManyChunks(total));
         }
-        Ok(ChunkCounts { n, counts: vec![0; total as usize] })
+        Ok(ChunkCounts {
+            n,
+            counts: vec![0; total as usize],
+        })
     }
 
     #[inline]
@@ -61,7 +64,12 @@ impl ChunkCounts {
                 for x in 0..self.n {
                     let count = self.get([x, y, z]);
                     if count > 0 {
-                        chunks.push(ChunkBin { coord: [x, y, z], morton: morton3(x, y, z), start: 0, count });
+                        chunks.push(ChunkBin {
+                            coord: [x, y, z],
+                            morton: morton3(x, y, z),
+                            start: 0,
+                            count,
+                        });
                     }
                 }
             }
@@ -92,7 +100,11 @@ pub struct ChunkBin {
 impl ChunkBin {
     /// Minimum voxel corner of the chunk in grid coordinates.
     pub fn origin(&self) -> [u32; 3] {
-        [self.coord[0] * 256, self.coord[1] * 256, self.coord[2] * 256]
+        [
+            self.coord[0] * 256,
+            self.coord[1] * 256,
+            self.coord[2] * 256,
+        ]
     }
 }
 
@@ -113,7 +125,12 @@ pub(crate) struct Scatter<'g> {
 }
 
 impl<'g> Scatter<'g> {
-    pub(crate) fn create(grid: &'g Grid, counts: &ChunkCounts, path: &Path, buffer_bytes: u64) -> Result<Scatter<'g>, TileError> {
+    pub(crate) fn create(
+        grid: &'g Grid,
+        counts: &ChunkCounts,
+        path: &Path,
+        buffer_bytes: u64,
+    ) -> Result<Scatter<'g>, TileError> {
         let chunks = counts.layout();
         let mut slot = vec![u32::MAX; counts.counts.len()];
         for (i, c) in chunks.iter().enumerate() {
@@ -127,7 +144,8 @@ impl<'g> Scatter<'g> {
             .truncate(true)
             .open(path)
             .map_err(TileError::io("create", path))?;
-        file.set_len(total * TRIANGLE_BYTES).map_err(TileError::io("resize", path))?;
+        file.set_len(total * TRIANGLE_BYTES)
+            .map_err(TileError::io("resize", path))?;
         let k = chunks.len();
         Ok(Scatter {
             grid,
@@ -146,11 +164,14 @@ impl<'g> Scatter<'g> {
     /// Bins a batch of grid-space triangles.
     pub(crate) fn push(&mut self, tris: &[Triangle]) -> Result<(), TileError> {
         for t in tris {
-            let Some((lo, hi)) = self.grid.chunk_range(t) else { continue };
+            let Some((lo, hi)) = self.grid.chunk_range(t) else {
+                continue;
+            };
             for z in lo[2]..=hi[2] {
                 for y in lo[1]..=hi[1] {
                     for x in lo[0]..=hi[0] {
-                        let li = ((z as usize * self.n as usize) + y as usize) * self.n as usize + x as usize;
+                        let li = ((z as usize * self.n as usize) + y as usize) * self.n as usize
+                            + x as usize;
                         let s = self.slot[li];
                         debug_assert!(s != u32::MAX, "count and scatter passes disagree");
                         self.buffers[s as usize].push(*t);
@@ -181,7 +202,9 @@ impl<'g> Scatter<'g> {
                 )));
             }
             let off = (c.start + self.written[i]) * TRIANGLE_BYTES;
-            self.file.write_all_at(bytemuck::cast_slice(buf), off).map_err(TileError::io("write", &self.path))?;
+            self.file
+                .write_all_at(bytemuck::cast_slice(buf), off)
+                .map_err(TileError::io("write", &self.path))?;
             self.written[i] += buf.len() as u64;
             *buf = Vec::new();
         }
@@ -199,8 +222,14 @@ impl<'g> Scatter<'g> {
                 )));
             }
         }
-        self.file.sync_data().map_err(TileError::io("sync", &self.path))?;
-        Ok(Bins { path: self.path, file: self.file, chunks: self.chunks })
+        self.file
+            .sync_data()
+            .map_err(TileError::io("sync", &self.path))?;
+        Ok(Bins {
+            path: self.path,
+            file: self.file,
+            chunks: self.chunks,
+        })
     }
 }
 
@@ -228,7 +257,12 @@ impl Bins {
 
     /// Hands chunk `i`'s triangles to `f` in input order, `batch` at a time, through a buffer of
     /// that size (memory is bounded whatever the chunk holds).
-    pub fn read_chunk(&self, i: usize, batch: usize, f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>) -> Result<(), TileError> {
+    pub fn read_chunk(
+        &self,
+        i: usize,
+        batch: usize,
+        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+    ) -> Result<(), TileError> {
         assert!(batch > 0);
         let c = self.chunks[i];
         let mut buf = vec![Triangle::new([[0.0; 3]; 3]); batch.min(c.count as usize).max(1)];
@@ -236,7 +270,9 @@ impl Bins {
         while done < c.count {
             let n = (c.count - done).min(buf.len() as u64) as usize;
             let off = (c.start + done) * TRIANGLE_BYTES;
-            self.file.read_exact_at(bytemuck::cast_slice_mut(&mut buf[..n]), off).map_err(TileError::io("read", &self.path))?;
+            self.file
+                .read_exact_at(bytemuck::cast_slice_mut(&mut buf[..n]), off)
+                .map_err(TileError::io("read", &self.path))?;
             f(&buf[..n])?;
             done += n as u64;
         }
@@ -256,7 +292,9 @@ mod tests {
     use voxlod_geom::{demorton3, Bounds};
 
     fn lcg(s: &mut u64) -> f32 {
-        *s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        *s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((*s >> 40) as f32) / (1u64 << 24) as f32
     }
 
@@ -270,7 +308,11 @@ mod tests {
         for i in 0..3000 {
             let c = [lcg(&mut s) * 10.0, lcg(&mut s) * 10.0, lcg(&mut s) * 10.0];
             let r = if i % 50 == 0 { 6.0 } else { 0.3 };
-            let mut t = Triangle::new([c, [c[0] + r * lcg(&mut s), c[1], c[2] + r], [c[0], c[1] + r * lcg(&mut s), c[2]]]);
+            let mut t = Triangle::new([
+                c,
+                [c[0] + r * lcg(&mut s), c[1], c[2] + r],
+                [c[0], c[1] + r * lcg(&mut s), c[2]],
+            ]);
             t.c[0] = [(i % 256) as u8, (i / 256) as u8, 0, 255];
             tris.push(t);
         }
@@ -286,11 +328,22 @@ mod tests {
         let counts = spool.count(&grid, &mut |_, _| {}).unwrap();
         let mut previous: Option<Vec<Vec<Triangle>>> = None;
         for budget in [TRIANGLE_BYTES * 1024, 1 << 30] {
-            let bins = spool.scatter(&grid, &counts, &dir.path().join(format!("bins{budget}")), budget, &mut |_, _| {}).unwrap();
+            let bins = spool
+                .scatter(
+                    &grid,
+                    &counts,
+                    &dir.path().join(format!("bins{budget}")),
+                    budget,
+                    &mut |_, _| {},
+                )
+                .unwrap();
             let mut all = Vec::new();
             let mut last = None;
             for (i, c) in bins.chunks().iter().enumerate() {
-                assert!(last.map_or(true, |m| m < c.morton), "chunks not in Morton order");
+                assert!(
+                    last.map_or(true, |m| m < c.morton),
+                    "chunks not in Morton order"
+                );
                 last = Some(c.morton);
                 assert_eq!(demorton3(c.morton), c.coord);
                 let mut got = Vec::new();

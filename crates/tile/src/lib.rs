@@ -35,7 +35,7 @@ mod bins;
 mod spool;
 
 pub use bins::{Bins, ChunkBin, ChunkCounts};
-pub use spool::{Spool, Spooler};
+pub use spool::{to_grid, Spool, Spooler};
 
 use std::path::PathBuf;
 
@@ -64,7 +64,10 @@ pub enum TileError {
 }
 
 impl TileError {
-    pub(crate) fn io(op: &'static str, path: &std::path::Path) -> impl FnOnce(std::io::Error) -> TileError {
+    pub(crate) fn io(
+        op: &'static str,
+        path: &std::path::Path,
+    ) -> impl FnOnce(std::io::Error) -> TileError {
         let path = path.to_path_buf();
         move |source| TileError::Io { op, path, source }
     }

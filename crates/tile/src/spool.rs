@@ -21,7 +21,12 @@ pub struct Spooler {
 impl Spooler {
     pub fn create(path: &Path) -> Result<Spooler, TileError> {
         let f = File::create(path).map_err(TileError::io("create", path))?;
-        Ok(Spooler { path: path.to_path_buf(), out: Some(BufWriter::with_capacity(4 << 20, f)), count: 0, bounds: Bounds::default() })
+        Ok(Spooler {
+            path: path.to_path_buf(),
+            out: Some(BufWriter::with_capacity(4 << 20, f)),
+            count: 0,
+            bounds: Bounds::default(),
+        })
     }
 
     /// Appends a batch. Triangles must be finite (ingest guarantees it).
@@ -32,15 +37,24 @@ impl Spooler {
         }
         self.count += tris.len() as u64;
         let out = self.out.as_mut().expect("spooler used after finish");
-        out.write_all(bytemuck::cast_slice(tris)).map_err(TileError::io("write", &self.path))
+        out.write_all(bytemuck::cast_slice(tris))
+            .map_err(TileError::io("write", &self.path))
     }
 
     /// Flushes the file and returns the spool.
     pub fn finish(mut self) -> Result<Spool, TileError> {
         let out = self.out.take().expect("spooler finished twice");
-        let f = out.into_inner().map_err(|e| TileError::Io { op: "write", path: self.path.clone(), source: e.into_error() })?;
+        let f = out.into_inner().map_err(|e| TileError::Io {
+            op: "write",
+            path: self.path.clone(),
+            source: e.into_error(),
+        })?;
         f.sync_data().map_err(TileError::io("sync", &self.path))?;
-        Ok(Spool { path: std::mem::take(&mut self.path), count: self.count, bounds: self.bounds })
+        Ok(Spool {
+            path: std::mem::take(&mut self.path),
+            count: self.count,
+            bounds: self.bounds,
+        })
     }
 }
 
@@ -64,10 +78,19 @@ pub struct Spool {
 impl Spool {
     /// Reopens an existing spool (e.g. to resume), recomputing its count and bounds.
     pub fn open(path: &Path) -> Result<Spool, TileError> {
-        let mut s = Spool { path: path.to_path_buf(), count: 0, bounds: Bounds::default() };
-        let len = std::fs::metadata(path).map_err(TileError::io("stat", path))?.len();
+        let mut s = Spool {
+            path: path.to_path_buf(),
+            count: 0,
+            bounds: Bounds::default(),
+        };
+        let len = std::fs::metadata(path)
+            .map_err(TileError::io("stat", path))?
+            .len();
         if len % TRIANGLE_BYTES != 0 {
-            return Err(TileError::Truncated { path: path.to_path_buf(), len });
+            return Err(TileError::Truncated {
+                path: path.to_path_buf(),
+                len,
+            });
         }
         let mut bounds = Bounds::default();
         s.for_each_batch(&mut |tris| {
@@ -82,17 +105,27 @@ impl Spool {
     }
 
     /// Reads the spool sequentially through a fixed buffer of [`READ_BATCH`] triangles.
-    pub fn for_each_batch(&self, f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>) -> Result<(), TileError> {
+    pub fn for_each_batch(
+        &self,
+        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+    ) -> Result<(), TileError> {
         let mut file = File::open(&self.path).map_err(TileError::io("open", &self.path))?;
-        let len = file.metadata().map_err(TileError::io("stat", &self.path))?.len();
+        let len = file
+            .metadata()
+            .map_err(TileError::io("stat", &self.path))?
+            .len();
         if len % TRIANGLE_BYTES != 0 || len / TRIANGLE_BYTES != self.count && self.count != 0 {
-            return Err(TileError::Truncated { path: self.path.clone(), len });
+            return Err(TileError::Truncated {
+                path: self.path.clone(),
+                len,
+            });
         }
         let mut buf = vec![Triangle::new([[0.0; 3]; 3]); READ_BATCH];
         let mut left = len / TRIANGLE_BYTES;
         while left > 0 {
             let n = left.min(READ_BATCH as u64) as usize;
-            file.read_exact(bytemuck::cast_slice_mut(&mut buf[..n])).map_err(TileError::io("read", &self.path))?;
+            file.read_exact(bytemuck::cast_slice_mut(&mut buf[..n]))
+                .map_err(TileError::io("read", &self.path))?;
             f(&buf[..n])?;
             left -= n as u64;
         }
@@ -101,7 +134,11 @@ impl Spool {
 
     /// Pass 2: counts, per leaf chunk, the triangles whose chunk range (see
     /// [`Grid::chunk_range`]) includes it. `progress(done, total)` is in triangles.
-    pub fn count(&self, grid: &Grid, progress: &mut dyn FnMut(u64, u64)) -> Result<ChunkCounts, TileError> {
+    pub fn count(
+        &self,
+        grid: &Grid,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<ChunkCounts, TileError> {
         let mut counts = ChunkCounts::new(grid)?;
         let mut done = 0u64;
         self.for_each_batch(&mut |tris| {

@@ -1,0 +1,89 @@
+//! The memory plan: how the `--memory` budget is split between the stages, stated before the
+//! build starts, and refused early when it cannot work.
+
+use anyhow::{bail, Result};
+use serde::Serialize;
+
+use crate::size::format_size;
+
+/// Bytes one chunk voxelizer needs: its dense 256³ u32 slot index (64 MiB) plus accumulators
+/// for the occupied voxels of one chunk (a dense surface of a 256³ chunk has a few hundred
+/// thousand voxels; 64 MiB holds well over a million accumulators).
+pub const VOXELIZER_BYTES: u64 = 128 << 20;
+/// Held by the LOD stage: up to eight children per level on the current Morton path, plus
+/// compressed payloads in flight.
+pub const LOD_BYTES: u64 = 128 << 20;
+/// Fixed overhead: code, the thread pool, read buffers of the tile passes.
+pub const BASE_BYTES: u64 = 64 << 20;
+
+/// How the budget is spent.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct MemoryPlan {
+    pub budget: u64,
+    /// Triangles buffered by the scatter pass between flushes.
+    pub scatter_buffer: u64,
+    /// Chunk voxelizers running at once (≤ threads).
+    pub voxelizers: usize,
+    /// Bytes planned in total.
+    pub planned: u64,
+}
+
+impl MemoryPlan {
+    pub fn new(budget: u64, threads: usize) -> Result<MemoryPlan> {
+        let minimum = BASE_BYTES + LOD_BYTES + VOXELIZER_BYTES + (16 << 20);
+        if budget < minimum {
+            bail!(
+                "memory budget {} is too small: a build needs at least {} (one chunk voxelizer {}, LOD {}, base {}, scatter buffer 16 MiB)",
+                format_size(budget),
+                format_size(minimum),
+                format_size(VOXELIZER_BYTES),
+                format_size(LOD_BYTES),
+                format_size(BASE_BYTES)
+            );
+        }
+        let free = budget - BASE_BYTES - LOD_BYTES;
+        let voxelizers = (threads.max(1) as u64)
+            .min((free - (16 << 20)) / VOXELIZER_BYTES)
+            .max(1) as usize;
+        // The scatter pass runs before the voxelizers exist, so it may use what they will need.
+        let scatter_buffer = (free / 2).min(1 << 30);
+        let planned =
+            BASE_BYTES + LOD_BYTES + (voxelizers as u64 * VOXELIZER_BYTES).max(scatter_buffer);
+        Ok(MemoryPlan {
+            budget,
+            scatter_buffer,
+            voxelizers,
+            planned,
+        })
+    }
+
+    pub fn describe(&self) -> String {
+        format!(
+            "memory plan: {} of {} budget ({} chunk voxelizer(s) × {}, scatter buffer {}, LOD {}, base {})",
+            format_size(self.planned),
+            format_size(self.budget),
+            self.voxelizers,
+            format_size(VOXELIZER_BYTES),
+            format_size(self.scatter_buffer),
+            format_size(LOD_BYTES),
+            format_size(BASE_BYTES)
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plan_fits_budget_or_refuses() {
+        assert!(MemoryPlan::new(100 << 20, 2).is_err());
+        for budget in [512u64 << 20, 1 << 30, 2 << 30, 24 << 30] {
+            for threads in [1, 2, 16] {
+                let p = MemoryPlan::new(budget, threads).unwrap();
+                assert!(p.planned <= budget, "{p:?}");
+                assert!(p.voxelizers >= 1 && p.voxelizers <= threads);
+            }
+        }
+    }
+}

@@ -1,0 +1,124 @@
+//! `voxlod inspect`: what an octree file holds, as text or JSON.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+use voxlod_format::Reader;
+use voxlod_pipeline::format_size;
+
+#[derive(Serialize)]
+struct LevelInfo {
+    level: u32,
+    nodes: u64,
+    voxels: u64,
+    payload_bytes: u64,
+}
+
+#[derive(Serialize)]
+struct FileInfo {
+    file: String,
+    format_version: u32,
+    resolution: u32,
+    levels: u32,
+    mode: String,
+    origin: [f64; 3],
+    voxel_size: f64,
+    nodes: u64,
+    voxels: u64,
+    bytes: u64,
+    bytes_per_voxel: f64,
+    per_level: Vec<LevelInfo>,
+    manifest: serde_json::Value,
+}
+
+fn gather(path: &Path) -> Result<FileInfo> {
+    let r = Reader::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let h = r.header();
+    let mut per_level: Vec<LevelInfo> = (0..h.levels)
+        .map(|level| LevelInfo {
+            level,
+            nodes: 0,
+            voxels: 0,
+            payload_bytes: 0,
+        })
+        .collect();
+    for n in r.nodes() {
+        let l = &mut per_level[n.level as usize];
+        l.nodes += 1;
+        l.voxels += n.voxel_count as u64;
+        l.payload_bytes += n.payload_size;
+    }
+    let voxels: u64 = per_level.iter().map(|l| l.voxels).sum();
+    let bytes = std::fs::metadata(path)
+        .with_context(|| format!("reading the size of {}", path.display()))?
+        .len();
+    let mode = match h.mode {
+        0 => "conservative".to_string(),
+        1 => "thin".to_string(),
+        m => format!("unknown ({m})"),
+    };
+    Ok(FileInfo {
+        file: path.display().to_string(),
+        format_version: h.version,
+        resolution: h.resolution,
+        levels: h.levels,
+        mode,
+        origin: h.origin,
+        voxel_size: h.voxel_size,
+        nodes: r.nodes().len() as u64,
+        voxels,
+        bytes,
+        bytes_per_voxel: if voxels > 0 {
+            bytes as f64 / voxels as f64
+        } else {
+            0.0
+        },
+        per_level,
+        manifest: r
+            .manifest()
+            .with_context(|| format!("reading the manifest of {}", path.display()))?,
+    })
+}
+
+pub fn run(path: &Path, json: bool) -> Result<()> {
+    let info = gather(path)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&info)?);
+        return Ok(());
+    }
+    println!("{}", info.file);
+    println!("  format       voxlod v{}", info.format_version);
+    println!(
+        "  grid         {}³ voxels, {} levels, {} mode",
+        info.resolution, info.levels, info.mode
+    );
+    println!(
+        "  world        origin {:?}, voxel size {}",
+        info.origin, info.voxel_size
+    );
+    println!("  level  nodes      voxels     payload");
+    for l in &info.per_level {
+        println!(
+            "  {:>5}  {:>5}  {:>10}  {:>10}",
+            l.level,
+            l.nodes,
+            l.voxels,
+            format_size(l.payload_bytes)
+        );
+    }
+    println!("  nodes        {}", info.nodes);
+    println!("  voxels       {} in all levels", info.voxels);
+    println!(
+        "  size         {} ({:.2} bytes per voxel)",
+        format_size(info.bytes),
+        info.bytes_per_voxel
+    );
+    if let Some(s) = info.manifest.get("settings") {
+        println!("  built with   {s}");
+    }
+    if let Some(i) = info.manifest.get("input") {
+        println!("  input        {i}");
+    }
+    Ok(())
+}

