@@ -300,3 +300,35 @@ fn sphere_compresses_below_six_bytes_per_voxel() {
     let plain = zstd::bulk::compress(bytemuck::cast_slice(&v), DEFAULT_ZSTD_LEVEL).unwrap();
     assert!((plain.len() as f64) > 2.0 * e.payload().len() as f64);
 }
+
+#[test]
+fn sphere_generator_matches_brute_force() {
+    // the column-restricted generator (test helper) against testing every cube of the chunk
+    let (c, r) = ([100.3, 131.7, 90.2], 61.0);
+    let fast = sphere::sphere(c, r, sphere::Colour::White);
+    let mut brute = 0;
+    for z in 0..256 {
+        for y in 0..256 {
+            for x in 0..256 {
+                let p = [x as f64, y as f64, z as f64];
+                let (mut near, mut far) = (0.0, 0.0);
+                for a in 0..3 {
+                    let (lo, hi) = (p[a] - c[a], p[a] + 1.0 - c[a]);
+                    let n: f64 = if lo > 0.0 {
+                        lo
+                    } else if hi < 0.0 {
+                        hi
+                    } else {
+                        0.0
+                    };
+                    near += n * n;
+                    far += lo.abs().max(hi.abs()).powi(2);
+                }
+                if near <= r * r && far >= r * r {
+                    brute += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(fast.len(), brute);
+}

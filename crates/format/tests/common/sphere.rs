@@ -22,36 +22,79 @@ pub enum Colour {
 /// (in chunk voxel units), sorted by Morton code.
 #[allow(dead_code)]
 pub fn sphere(centre: [f64; 3], radius: f64, colour: Colour) -> Vec<Voxel> {
+    let mut out: Vec<Voxel> = sphere_grid(256, centre, radius, colour)
+        .into_iter()
+        .map(|(p, v)| Voxel {
+            pos_mask: v.pos_mask | p[0] | p[1] << 8 | p[2] << 16,
+            ..v
+        })
+        .collect();
+    out.sort_by_key(|v| morton8(v.pos()[0], v.pos()[1], v.pos()[2]));
+    out
+}
+
+/// The same over a `resolution`³ grid: (grid position, voxel) pairs in no particular order,
+/// the voxel's position bits zero but its face mask already with the caps of its chunk.
+/// Only columns near the surface are visited, so large grids are cheap.
+#[allow(dead_code)]
+pub fn sphere_grid(
+    resolution: u32,
+    centre: [f64; 3],
+    radius: f64,
+    colour: Colour,
+) -> Vec<([u32; 3], Voxel)> {
     let mut out = Vec::new();
-    for z in 0..256u32 {
-        for y in 0..256u32 {
-            for x in 0..256u32 {
-                let p = [x as f64, y as f64, z as f64];
-                // nearest and farthest squared distance from the centre to the cube [p, p+1]
-                let (mut near, mut far) = (0.0f64, 0.0f64);
-                for a in 0..3 {
-                    let lo = p[a] - centre[a];
-                    let hi = lo + 1.0;
-                    let n = if lo > 0.0 {
-                        lo
-                    } else if hi < 0.0 {
-                        hi
-                    } else {
-                        0.0
-                    };
-                    near += n * n;
-                    far += lo.abs().max(hi.abs()).powi(2);
+    let r2 = radius * radius;
+    // squared distance range from c to the interval [lo, lo+1] along one axis
+    let range = |lo: f64, c: f64| {
+        let (a, b) = (lo - c, lo + 1.0 - c);
+        let near = if a > 0.0 {
+            a
+        } else if b < 0.0 {
+            b
+        } else {
+            0.0
+        };
+        (near * near, a.abs().max(b.abs()).powi(2))
+    };
+    for y in 0..resolution {
+        for x in 0..resolution {
+            let (nx, fx) = range(x as f64, centre[0]);
+            let (ny, fy) = range(y as f64, centre[1]);
+            if nx + ny > r2 {
+                continue;
+            }
+            // |z − c| must lie in [sqrt(r² − far_xy) − 1, sqrt(r² − near_xy) + 1]
+            let inner = (r2 - fx - fy).max(0.0).sqrt() - 1.0;
+            let outer = (r2 - nx - ny).sqrt() + 1.0;
+            let mut zs = Vec::new();
+            for sign in [-1.0, 1.0] {
+                let (a, b) = (centre[2] + sign * inner, centre[2] + sign * outer);
+                let (lo, hi) = (
+                    a.min(b).floor().max(0.0),
+                    a.max(b).ceil().min(resolution as f64 - 1.0),
+                );
+                let mut z = lo;
+                while z <= hi {
+                    zs.push(z as u32);
+                    z += 1.0;
                 }
-                if near > radius * radius || far < radius * radius {
+            }
+            zs.sort_unstable();
+            zs.dedup();
+            for z in zs {
+                let (nz, fz) = range(z as f64, centre[2]);
+                if nx + ny + nz > r2 || fx + fy + fz < r2 {
                     continue;
                 }
+                let p = [x as f64, y as f64, z as f64];
                 let d = [
                     p[0] + 0.5 - centre[0],
                     p[1] + 0.5 - centre[1],
                     p[2] + 0.5 - centre[2],
                 ];
                 let normal = pack_normal([d[0] as f32, d[1] as f32, d[2] as f32]);
-                let pos = [x as u8, y as u8, z as u8];
+                let local = [(x & 255) as u8, (y & 255) as u8, (z & 255) as u8];
                 let rgba = match colour {
                     Colour::White => [255, 255, 255, 255],
                     Colour::Smooth => gradient(p),
@@ -67,16 +110,14 @@ pub fn sphere(centre: [f64; 3], radius: f64, colour: Colour) -> Vec<Voxel> {
                         c
                     }
                 };
-                out.push(Voxel::new(
-                    pos,
-                    face_mask(normal) | border_caps(pos),
-                    normal,
-                    pack_color(rgba),
+                let mask = face_mask(normal) | border_caps(local);
+                out.push((
+                    [x, y, z],
+                    Voxel::new([0; 3], mask, normal, pack_color(rgba)),
                 ));
             }
         }
     }
-    out.sort_by_key(|v| morton8(v.pos()[0], v.pos()[1], v.pos()[2]));
     out
 }
 
