@@ -117,7 +117,7 @@ fn large_triangles() {
     let mut rng = Rng(0x9e37_79b9);
     let origin = [0, 256, 0];
     let mut tris = Vec::new();
-    for i in 0..24 {
+    for i in 0..16 {
         let v = [0, 1, 2].map(|_| random_point(&mut rng, origin, -80.0, 336.0));
         let mut t = Triangle::new(v);
         decorate(&mut t, &mut rng, i % 2 == 0);

@@ -30,11 +30,17 @@ pub fn meshes_dir() -> Option<PathBuf> {
 /// `list uchar int|uint` of vertex indices as the only face property.
 pub fn load_ply(path: &Path) -> Vec<[[f32; 3]; 3]> {
     let data = std::fs::read(path).unwrap();
-    let end = data
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .expect("no end_header")
-        + 11;
+    // the header may end its lines with \r\n (bun_zipper.ply does)
+    let at = data
+        .windows(10)
+        .position(|w| w == b"end_header")
+        .expect("no end_header");
+    let end = at
+        + data[at..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .expect("no newline after end_header")
+        + 1;
     let header = std::str::from_utf8(&data[..end]).unwrap();
     let ascii = header.contains("format ascii");
     let mut nv = 0usize;
