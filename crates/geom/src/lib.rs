@@ -52,14 +52,23 @@ pub struct Triangle {
 impl Triangle {
     /// A triangle with face normal and the default colour.
     pub fn new(v: [[f32; 3]; 3]) -> Self {
-        Triangle { v, n: [[0.0; 3]; 3], c: [DEFAULT_COLOR; 3], flags: 0 }
+        Triangle {
+            v,
+            n: [[0.0; 3]; 3],
+            c: [DEFAULT_COLOR; 3],
+            flags: 0,
+        }
     }
 
     /// Twice the area vector `(v1 - v0) × (v2 - v0)` in f64.
     pub fn cross(&self) -> [f64; 3] {
         let a = sub64(self.v[1], self.v[0]);
         let b = sub64(self.v[2], self.v[0]);
-        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
     }
 
     /// True if all nine coordinates are finite.
@@ -76,7 +85,11 @@ impl Triangle {
 }
 
 fn sub64(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
-    [a[0] as f64 - b[0] as f64, a[1] as f64 - b[1] as f64, a[2] as f64 - b[2] as f64]
+    [
+        a[0] as f64 - b[0] as f64,
+        a[1] as f64 - b[1] as f64,
+        a[2] as f64 - b[2] as f64,
+    ]
 }
 
 /// Axis-aligned bounds accumulated in f64.
@@ -88,7 +101,10 @@ pub struct Bounds {
 
 impl Default for Bounds {
     fn default() -> Self {
-        Bounds { min: [f64::INFINITY; 3], max: [f64::NEG_INFINITY; 3] }
+        Bounds {
+            min: [f64::INFINITY; 3],
+            max: [f64::NEG_INFINITY; 3],
+        }
     }
 }
 
@@ -115,7 +131,9 @@ impl Bounds {
     }
     /// Largest extent over the three axes.
     pub fn max_extent(&self) -> f64 {
-        (0..3).map(|a| self.max[a] - self.min[a]).fold(0.0, f64::max)
+        (0..3)
+            .map(|a| self.max[a] - self.min[a])
+            .fold(0.0, f64::max)
     }
 }
 
@@ -132,9 +150,15 @@ impl std::fmt::Display for GridError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             GridError::Resolution(r) => {
-                write!(f, "resolution {r} is not 256·2^k (256, 512, 1024, 2048, 4096, …, 65536)")
+                write!(
+                    f,
+                    "resolution {r} is not 256·2^k (256, 512, 1024, 2048, 4096, …, 65536)"
+                )
             }
-            GridError::Size(s) => write!(f, "the mesh's bounding cube has size {s}; it must be finite and > 0"),
+            GridError::Size(s) => write!(
+                f,
+                "the mesh's bounding cube has size {s}; it must be finite and > 0"
+            ),
         }
     }
 }
@@ -156,13 +180,18 @@ impl Grid {
 
     /// A grid over the cube of edge `size` at `origin`.
     pub fn new(origin: [f64; 3], size: f64, resolution: u32) -> Result<Grid, GridError> {
-        if resolution < CHUNK || !resolution.is_power_of_two() || resolution > Self::MAX_RESOLUTION {
+        if resolution < CHUNK || !resolution.is_power_of_two() || resolution > Self::MAX_RESOLUTION
+        {
             return Err(GridError::Resolution(resolution));
         }
         if !(size.is_finite() && size > 0.0) {
             return Err(GridError::Size(size));
         }
-        Ok(Grid { origin, voxel_size: size / resolution as f64, resolution })
+        Ok(Grid {
+            origin,
+            voxel_size: size / resolution as f64,
+            resolution,
+        })
     }
 
     /// The grid that fits a mesh's bounds: the bounding cube is the bounds' largest extent,
@@ -262,7 +291,13 @@ mod tests {
 
     #[test]
     fn morton_roundtrip_and_order() {
-        for &(x, y, z) in &[(0, 0, 0), (1, 2, 3), (255, 255, 255), (65535, 1, 40000), (12345, 54321, 7)] {
+        for &(x, y, z) in &[
+            (0, 0, 0),
+            (1, 2, 3),
+            (255, 255, 255),
+            (65535, 1, 40000),
+            (12345, 54321, 7),
+        ] {
             assert_eq!(demorton3(morton3(x, y, z)), [x, y, z]);
         }
         // brute-force bit interleave
@@ -294,15 +329,27 @@ mod tests {
     fn chunk_range_covers_touching_voxels() {
         let g = Grid::new([0.0; 3], 512.0, 512).unwrap();
         // a triangle touching the plane x = 256 exactly from below touches voxel 256's face
-        let t = Triangle::new([[250.0, 10.0, 10.0], [256.0, 11.0, 10.0], [250.0, 12.0, 11.0]]);
+        let t = Triangle::new([
+            [250.0, 10.0, 10.0],
+            [256.0, 11.0, 10.0],
+            [250.0, 12.0, 11.0],
+        ]);
         let (lo, hi) = g.chunk_range(&t).unwrap();
         assert_eq!(lo, [0, 0, 0]);
         assert_eq!(hi, [1, 0, 0]);
         // a triangle starting exactly at x = 256 also touches voxel 255
-        let t = Triangle::new([[256.0, 10.0, 10.0], [260.0, 11.0, 10.0], [258.0, 12.0, 11.0]]);
+        let t = Triangle::new([
+            [256.0, 10.0, 10.0],
+            [260.0, 11.0, 10.0],
+            [258.0, 12.0, 11.0],
+        ]);
         assert_eq!(g.chunk_range(&t).unwrap().0, [0, 0, 0]);
         // the far face of the grid is clamped into the last voxel
-        let t = Triangle::new([[512.0, 512.0, 512.0], [511.5, 512.0, 512.0], [512.0, 511.5, 512.0]]);
+        let t = Triangle::new([
+            [512.0, 512.0, 512.0],
+            [511.5, 512.0, 512.0],
+            [512.0, 511.5, 512.0],
+        ]);
         assert_eq!(g.chunk_range(&t).unwrap(), ([1, 1, 1], [1, 1, 1]));
     }
 }

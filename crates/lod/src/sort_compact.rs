@@ -129,7 +129,9 @@ mod tests {
     use voxlod_format::voxel::pack_color;
 
     fn rng(s: &mut u64) -> u32 {
-        *s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        *s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (*s >> 33) as u32
     }
 
@@ -139,9 +141,16 @@ mod tests {
         for (o, c) in children.iter().enumerate() {
             for v in c {
                 let p = v.pos();
-                let abs = [(o & 1) as u32 * 256 + p[0] as u32, (o >> 1 & 1) as u32 * 256 + p[1] as u32, (o >> 2) as u32 * 256 + p[2] as u32];
+                let abs = [
+                    (o & 1) as u32 * 256 + p[0] as u32,
+                    (o >> 1 & 1) as u32 * 256 + p[1] as u32,
+                    (o >> 2) as u32 * 256 + p[2] as u32,
+                ];
                 let pp = [(abs[0] / 2) as u8, (abs[1] / 2) as u8, (abs[2] / 2) as u8];
-                runs.entry(morton8(pp[0], pp[1], pp[2])).or_insert((pp, Vec::new())).1.push(*v);
+                runs.entry(morton8(pp[0], pp[1], pp[2]))
+                    .or_insert((pp, Vec::new()))
+                    .1
+                    .push(*v);
             }
         }
         runs.values()
@@ -159,7 +168,12 @@ mod tests {
                     }
                 }
                 let n = vs.len() as u64;
-                Voxel::new(*pp, mask, pack_normal([ns[0] as f32, ns[1] as f32, ns[2] as f32]), pack_color(cs.map(|c| ((c + n / 2) / n) as u8)))
+                Voxel::new(
+                    *pp,
+                    mask,
+                    pack_normal([ns[0] as f32, ns[1] as f32, ns[2] as f32]),
+                    pack_color(cs.map(|c| ((c + n / 2) / n) as u8)),
+                )
             })
             .collect()
     }
@@ -168,9 +182,17 @@ mod tests {
         let mut m: BTreeMap<u32, Voxel> = BTreeMap::new();
         for _ in 0..n {
             // clustered positions so runs of several voxels occur
-            let p = [(rng(s) % 40) as u8 * 6 % 255, (rng(s) % 40) as u8, (rng(s) % 256) as u8];
+            let p = [
+                (rng(s) % 40) as u8 * 6 % 255,
+                (rng(s) % 40) as u8,
+                (rng(s) % 256) as u8,
+            ];
             let p = if rng(s) % 4 == 0 { [255, p[1], 0] } else { p };
-            let nrm = pack_normal([rng(s) as f32 - 2e9, rng(s) as f32 - 2e9, rng(s) as f32 - 2e9]);
+            let nrm = pack_normal([
+                rng(s) as f32 - 2e9,
+                rng(s) as f32 - 2e9,
+                rng(s) as f32 - 2e9,
+            ]);
             let v = Voxel::new(p, (rng(s) % 64) as u8, nrm, rng(s));
             m.insert(v.morton(), v);
         }
@@ -181,7 +203,13 @@ mod tests {
     fn matches_reference_on_random_children() {
         let mut s = 1u64;
         for trial in 0..20 {
-            let children: [Vec<Voxel>; 8] = std::array::from_fn(|o| if (trial + o) % 3 == 0 { vec![] } else { random_child(&mut s, 2000) });
+            let children: [Vec<Voxel>; 8] = std::array::from_fn(|o| {
+                if (trial + o) % 3 == 0 {
+                    vec![]
+                } else {
+                    random_child(&mut s, 2000)
+                }
+            });
             let refs: [&[Voxel]; 8] = std::array::from_fn(|o| children[o].as_slice());
             let got = merge_children(&refs);
             assert_eq!(got, reference(&children), "trial {trial}");
@@ -214,9 +242,16 @@ mod tests {
         for (o, c) in children.iter().enumerate() {
             for v in c {
                 let (pp, key) = parent_key(o, v.pos());
-                let pv = parent.iter().find(|p| p.morton() == key).expect("parent voxel exists");
+                let pv = parent
+                    .iter()
+                    .find(|p| p.morton() == key)
+                    .expect("parent voxel exists");
                 assert_eq!(pv.pos(), pp);
-                assert_eq!(pv.mask() & v.mask(), v.mask(), "OR must keep every child face");
+                assert_eq!(
+                    pv.mask() & v.mask(),
+                    v.mask(),
+                    "OR must keep every child face"
+                );
             }
         }
     }
