@@ -8,11 +8,9 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use std::collections::BTreeMap;
 use std::time::Instant;
 
 use common::sphere::{sphere, sphere_grid, Colour};
-use voxlod_format::voxel::{border_caps, morton8, pack_normal, unpack_normal, Voxel};
 use voxlod_format::{encode_node, FileSpec, Reader, Writer, MODE_CONSERVATIVE};
 
 fn shuffled(words: impl Iterator<Item = u32>, n: usize) -> Vec<u8> {
@@ -81,44 +79,10 @@ fn main() {
     let res = 2048u32;
     let spec = FileSpec::new(res, MODE_CONSERVATIVE, [0.0; 3], 1.0);
     for colour in [Colour::White, Colour::Smooth, Colour::Noisy] {
-        let mut levels: Vec<BTreeMap<[u32; 3], Vec<Voxel>>> = vec![BTreeMap::new()];
-        for (g, v) in sphere_grid(res, [1024.3, 1023.6, 1024.9], 1000.0, colour) {
-            let local = [g[0] as u8, g[1] as u8, g[2] as u8];
-            let chunk = [g[0] >> 8, g[1] >> 8, g[2] >> 8];
-            levels[0].entry(chunk).or_default().push(Voxel::new(
-                local,
-                v.mask(),
-                v.normal,
-                v.color,
-            ));
-        }
-        for node in levels[0].values_mut() {
-            node.sort_by_key(|v| v.morton());
-        }
-        for l in 1..spec.levels as usize {
-            let mut parents: BTreeMap<[u32; 3], Vec<(u32, Voxel)>> = BTreeMap::new();
-            for (c, vs) in &levels[l - 1] {
-                for v in vs {
-                    // parent position = (octant·256 + child position) >> 1 per axis
-                    let p: [u8; 3] = std::array::from_fn(|a| {
-                        (((c[a] & 1) * 256 + v.pos()[a] as u32) >> 1) as u8
-                    });
-                    parents
-                        .entry([c[0] >> 1, c[1] >> 1, c[2] >> 1])
-                        .or_default()
-                        .push((
-                            morton8(p[0], p[1], p[2]),
-                            Voxel::new(p, v.mask(), v.normal, v.color),
-                        ));
-                }
-            }
-            levels.push(
-                parents
-                    .into_iter()
-                    .map(|(pos, vs)| (pos, compact(vs)))
-                    .collect(),
-            );
-        }
+        let leaves = sphere_grid(res, [1024.3, 1023.6, 1024.9], 1000.0, colour)
+            .into_iter()
+            .map(|(g, v)| (g, v.mask(), v.normal, v.color));
+        let levels = common::build_levels(&spec, leaves);
         let dir = std::env::temp_dir().join(format!("voxlod-measure-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("sphere.voxlod");
@@ -158,33 +122,4 @@ fn main() {
         );
         std::fs::remove_dir_all(&dir).unwrap();
     }
-}
-
-/// Sort-and-compact (docs/FORMAT.md, "Levels of detail"): voxels keyed by parent Morton code,
-/// each run of equal codes becomes one voxel.
-fn compact(mut vs: Vec<(u32, Voxel)>) -> Vec<Voxel> {
-    vs.sort_by_key(|&(m, _)| m);
-    let mut out = Vec::new();
-    for run in vs.chunk_by(|a, b| a.0 == b.0) {
-        let p = run[0].1.pos();
-        let n = run.len() as u32;
-        let mut mask = border_caps(p);
-        let mut s = [0i32; 3];
-        let mut c = [0u32; 4];
-        for (_, v) in run {
-            mask |= v.mask();
-            let q = unpack_normal(v.normal);
-            for a in 0..3 {
-                s[a] += q[a];
-            }
-            for (k, x) in v.rgba().iter().enumerate() {
-                c[k] += *x as u32;
-            }
-        }
-        let d = 511.0 * n as f32;
-        let normal = pack_normal([s[0] as f32 / d, s[1] as f32 / d, s[2] as f32 / d]);
-        let rgba = c.map(|x| ((x + n / 2) / n) as u8);
-        out.push(Voxel::new(p, mask, normal, u32::from_le_bytes(rgba)));
-    }
-    out
 }

@@ -332,3 +332,47 @@ fn sphere_generator_matches_brute_force() {
     }
     assert_eq!(fast.len(), brute);
 }
+
+#[test]
+fn worked_example_of_format_md() {
+    use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, pack_normal};
+    // docs/FORMAT.md section 12
+    let n = pack_normal([0.6, -0.8, 0.0]);
+    assert_eq!(n, 0x0009_9D33);
+    let p = [3u8, 200, 17];
+    let mask = face_mask(n) | border_caps(p);
+    assert_eq!(mask, 0x09);
+    let v = Voxel::new(p, mask, n, pack_color([200, 150, 100, 255]));
+    assert_eq!(
+        bytemuck::bytes_of(&v),
+        &[0x03, 0xC8, 0x11, 0x09, 0x33, 0x9D, 0x09, 0x00, 0xC8, 0x96, 0x64, 0xFF]
+    );
+    assert_eq!(morton8(3, 200, 17), 0x48_440D);
+    let e = encode_node(&[v], 3).unwrap();
+    let block = zstd::bulk::decompress(e.payload(), 12).unwrap();
+    assert_eq!(
+        block,
+        [0x0D, 0x44, 0x48, 0x09, 0x33, 0x9D, 0x09, 0x00, 0xC8, 0x96, 0x64, 0xFF]
+    );
+    let spec = FileSpec::new(1024, MODE_CONSERVATIVE, [-10.0, 0.0, 0.0], 0.5);
+    assert_eq!(
+        spec.voxel_min_corner(0, [2, 0, 5], p),
+        [247.5, 100.0, 648.5]
+    );
+    // the two-voxel block
+    let a = Voxel::new([1, 0, 0], 0x01, 0x0000_01FF, 0x1122_3344);
+    let b = Voxel::new([0, 1, 0], 0x04, 0x0007_FC00, 0x1122_3355);
+    let e = encode_node(&[a, b], 3).unwrap();
+    #[rustfmt::skip]
+    let expected = [
+        0x01, 0x01, 0x00, 0x00, 0x00, 0x00, 0x01, 0x04,
+        0xFF, 0x01, 0x01, 0xFB, 0x00, 0x07, 0x00, 0x00,
+        0x44, 0x11, 0x33, 0x00, 0x22, 0x00, 0x11, 0x00,
+    ];
+    assert_eq!(zstd::bulk::decompress(e.payload(), 24).unwrap(), expected);
+}
+
+#[test]
+fn crc_variant_is_zlib_crc32() {
+    assert_eq!(crc32fast::hash(b"123456789"), 0xCBF4_3926);
+}

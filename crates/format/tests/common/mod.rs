@@ -6,7 +6,10 @@
 
 pub mod sphere;
 
-use voxlod_format::voxel::{morton8, Voxel};
+use std::collections::BTreeMap;
+
+use voxlod_format::voxel::{border_caps, morton8, pack_normal, unpack_normal, Voxel};
+use voxlod_format::FileSpec;
 
 /// xorshift64* — deterministic, no dependency.
 pub struct Rng(pub u64);
@@ -264,4 +267,77 @@ pub fn fix_crcs(f: &mut [u8]) {
     }
     let c = crc32fast::hash(&f[..124]);
     put(f, 124, &c.to_le_bytes());
+}
+
+/// All levels of an octree from leaf voxels given by grid position (mask, normal, colour; at
+/// most one per position), merged upwards by the sort-and-compact rule of docs/FORMAT.md.
+/// `levels[l]` maps node positions to their voxels in Morton order.
+pub fn build_levels(
+    spec: &FileSpec,
+    leaves: impl Iterator<Item = ([u32; 3], u8, u32, u32)>,
+) -> Vec<BTreeMap<[u32; 3], Vec<Voxel>>> {
+    let mut levels: Vec<BTreeMap<[u32; 3], Vec<Voxel>>> = vec![BTreeMap::new()];
+    for (g, mask, normal, color) in leaves {
+        let local = [g[0] as u8, g[1] as u8, g[2] as u8];
+        levels[0]
+            .entry([g[0] >> 8, g[1] >> 8, g[2] >> 8])
+            .or_default()
+            .push(Voxel::new(local, mask, normal, color));
+    }
+    for node in levels[0].values_mut() {
+        node.sort_by_key(|v| v.morton());
+    }
+    for l in 1..spec.levels as usize {
+        let mut parents: BTreeMap<[u32; 3], Vec<(u32, Voxel)>> = BTreeMap::new();
+        for (c, vs) in &levels[l - 1] {
+            for v in vs {
+                // parent position = (octant·256 + child position) >> 1 per axis
+                let p: [u8; 3] =
+                    std::array::from_fn(|a| (((c[a] & 1) * 256 + v.pos()[a] as u32) >> 1) as u8);
+                parents
+                    .entry([c[0] >> 1, c[1] >> 1, c[2] >> 1])
+                    .or_default()
+                    .push((
+                        morton8(p[0], p[1], p[2]),
+                        Voxel::new(p, v.mask(), v.normal, v.color),
+                    ));
+            }
+        }
+        levels.push(
+            parents
+                .into_iter()
+                .map(|(pos, vs)| (pos, compact(vs)))
+                .collect(),
+        );
+    }
+    levels
+}
+
+/// Sort-and-compact (docs/FORMAT.md, "Levels of detail"): voxels keyed by parent Morton code,
+/// each run of equal codes becomes one voxel.
+fn compact(mut vs: Vec<(u32, Voxel)>) -> Vec<Voxel> {
+    vs.sort_by_key(|&(m, _)| m);
+    let mut out = Vec::new();
+    for run in vs.chunk_by(|a, b| a.0 == b.0) {
+        let p = run[0].1.pos();
+        let n = run.len() as u32;
+        let mut mask = border_caps(p);
+        let mut s = [0i32; 3];
+        let mut c = [0u32; 4];
+        for (_, v) in run {
+            mask |= v.mask();
+            let q = unpack_normal(v.normal);
+            for a in 0..3 {
+                s[a] += q[a];
+            }
+            for (k, x) in v.rgba().iter().enumerate() {
+                c[k] += *x as u32;
+            }
+        }
+        let d = 511.0 * n as f32;
+        let normal = pack_normal([s[0] as f32 / d, s[1] as f32 / d, s[2] as f32 / d]);
+        let rgba = c.map(|x| ((x + n / 2) / n) as u8);
+        out.push(Voxel::new(p, mask, normal, u32::from_le_bytes(rgba)));
+    }
+    out
 }
