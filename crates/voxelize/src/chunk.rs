@@ -6,7 +6,7 @@
 //! pages, cleared sparsely after each chunk) and one accumulator per occupied voxel.
 
 use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, pack_normal, Voxel};
-use voxlod_geom::{Triangle, CHUNK, TRI_HAS_NORMALS};
+use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
 
 use crate::clip::{area_scale, Poly};
 use crate::overlap::{to_f64, TriSetup};
@@ -17,7 +17,8 @@ const N: usize = (CHUNK * CHUNK * CHUNK) as usize;
 /// Sums of one voxel's contributions, in f64 and in triangle order.
 #[derive(Clone, Copy, Debug, Default)]
 struct Acc {
-    /// Local index `x + 256 (y + 256 z)`.
+    /// Morton code of the in-chunk position, also the slot index (Z-order keeps the voxels of
+    /// one triangle close together in the 64 MiB index).
     idx: u32,
     /// Σ w, Σ w·n, Σ w·c
     w: f64,
@@ -107,7 +108,7 @@ impl Attrs {
 pub struct ChunkVoxelizer {
     mode: Mode,
     origin: [u32; 3],
-    /// slot + 1 of each local voxel, 0 = empty
+    /// slot + 1 of each local voxel by Morton code, 0 = empty
     slot: Vec<u32>,
     acc: Vec<Acc>,
     skipped: u64,
@@ -169,15 +170,35 @@ impl ChunkVoxelizer {
             let tri = Poly::triangle(&s.v);
             let tri_centroid =
                 [0, 1, 2].map(|k| (t.v[0][k] as f64 + t.v[1][k] as f64 + t.v[2][k] as f64) / 3.0);
+            let (tmin, tmax) = tri.bounds();
             let mut column = tri;
+            let mut column_z = (tmin[2], tmax[2]);
             let slot = &mut self.slot;
             let acc = &mut self.acc;
             s.scan(lo_s, hi_s, |p, first| {
+                let [x, y, z] = p.map(|c| c as f64);
                 if first {
-                    // the four side planes once per column
-                    column = tri.clip_column(p[0] as f64, p[1] as f64);
+                    // the four side planes once per column; skipped (same result) when the
+                    // triangle lies inside the column
+                    column =
+                        if tmin[0] >= x && tmax[0] <= x + 1.0 && tmin[1] >= y && tmax[1] <= y + 1.0
+                        {
+                            column_z = (tmin[2], tmax[2]);
+                            tri
+                        } else {
+                            let c = tri.clip_column(x, y);
+                            column_z = c.bounds_z();
+                            c
+                        };
                 }
-                let (w, c) = column.clip_depth(p[2] as f64).area_centroid(scale);
+                // the two depth planes per voxel; skipped (same result) when the column's part
+                // lies inside the voxel
+                let clipped = if column_z.0 >= z && column_z.1 <= z + 1.0 {
+                    column
+                } else {
+                    column.clip_depth(z)
+                };
+                let (w, c) = clipped.area_centroid(scale);
                 let q = match c {
                     Some(c) => s.unswizzle(c),
                     None => tri_centroid,
@@ -186,7 +207,7 @@ impl ChunkVoxelizer {
                 let g = s.unswizzle(p);
                 let local = [0, 1, 2].map(|k| (g[k] as i64 - o[k]) as u32);
                 debug_assert!(local.iter().all(|&c| c < CHUNK));
-                let idx = local[0] + CHUNK * (local[1] + CHUNK * local[2]);
+                let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
                 let sl = &mut slot[idx as usize];
                 if *sl == 0 {
                     acc.push(Acc {
@@ -213,29 +234,22 @@ impl ChunkVoxelizer {
     /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
     /// with normal, colour and face mask. Resets for the next `begin`.
     pub fn finish(&mut self) -> Vec<Voxel> {
-        let mut out: Vec<(u32, Voxel)> = self
+        // the slot key is the Morton code: sort the accumulators by it
+        self.acc.sort_unstable_by_key(|a| a.idx);
+        let out = self
             .acc
             .iter()
             .map(|a| {
-                let pos = [
-                    a.idx % CHUNK,
-                    (a.idx / CHUNK) % CHUNK,
-                    a.idx / (CHUNK * CHUNK),
-                ]
-                .map(|c| c as u8);
+                let pos = demorton3(a.idx as u64).map(|c| c as u8);
                 let (n, c) = average(a);
                 let normal = pack_normal(n);
                 let mask = face_mask(normal) | border_caps(pos);
                 let rgba = c.map(|x| x.round().clamp(0.0, 255.0) as u8);
-                (
-                    morton8(pos[0], pos[1], pos[2]),
-                    Voxel::new(pos, mask, normal, pack_color(rgba)),
-                )
+                Voxel::new(pos, mask, normal, pack_color(rgba))
             })
             .collect();
-        out.sort_unstable_by_key(|&(m, _)| m);
         self.reset();
-        out.into_iter().map(|(_, v)| v).collect()
+        out
     }
 
     /// Triangles skipped (zero area or non-finite) since this voxelizer was made.

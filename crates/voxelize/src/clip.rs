@@ -35,12 +35,31 @@ impl Poly {
 
     /// Keeps the part with `x[k] ≥ b` (`upper == false`) or `x[k] ≤ b` (`upper == true`).
     /// Points on the plane are inside; an intersection point is made only where an edge strictly
-    /// crosses the plane, as `in + t·(out − in)` from the inside end, with coordinate `k` set to
-    /// `b` exactly. When every vertex is inside the polygon is returned unchanged.
+    /// crosses the plane, as `in + t·(out − in)` from the inside end (`t = d_in / (d_in − d_out)`,
+    /// `d` the signed distance, positive inside), with coordinate `k` set to `b` exactly. When
+    /// every vertex is inside the polygon is returned unchanged.
     #[inline]
     pub fn clip(&self, k: usize, b: f64, upper: bool) -> Poly {
-        let dist = |q: &[f64; 3]| if upper { b - q[k] } else { q[k] - b };
-        if self.vertices().iter().all(|q| dist(q) >= 0.0) {
+        if upper {
+            self.clip_side::<true>(k, b)
+        } else {
+            self.clip_side::<false>(k, b)
+        }
+    }
+
+    #[inline(always)]
+    fn clip_side<const UPPER: bool>(&self, k: usize, b: f64) -> Poly {
+        let mut d = [0.0f64; MAX_POLY];
+        let mut all_in = true;
+        for i in 0..self.len {
+            d[i] = if UPPER {
+                b - self.p[i][k]
+            } else {
+                self.p[i][k] - b
+            };
+            all_in &= d[i] >= 0.0;
+        }
+        if all_in {
             return *self;
         }
         let mut out = Poly {
@@ -48,18 +67,16 @@ impl Poly {
             p: [[0.0; 3]; MAX_POLY],
         };
         for i in 0..self.len {
-            let a = self.p[i];
-            let c = self.p[(i + 1) % self.len];
-            let da = dist(&a);
-            let dc = dist(&c);
+            let j = if i + 1 == self.len { 0 } else { i + 1 };
+            let (da, dc) = (d[i], d[j]);
             if da >= 0.0 {
-                out.push(a);
+                out.push(self.p[i]);
             }
             if (da > 0.0 && dc < 0.0) || (da < 0.0 && dc > 0.0) {
                 let (pin, pout, din, dout) = if da > 0.0 {
-                    (a, c, da, dc)
+                    (self.p[i], self.p[j], da, dc)
                 } else {
-                    (c, a, dc, da)
+                    (self.p[j], self.p[i], dc, da)
                 };
                 let t = din / (din - dout);
                 let mut q = [
@@ -81,6 +98,27 @@ impl Poly {
             self.p[self.len] = q;
             self.len += 1;
         }
+    }
+
+    /// Per-axis minimum and maximum over the vertices.
+    #[inline]
+    pub fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for q in self.vertices() {
+            for k in 0..3 {
+                lo[k] = lo[k].min(q[k]);
+                hi[k] = hi[k].max(q[k]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Minimum and maximum z over the vertices.
+    #[inline]
+    pub fn bounds_z(&self) -> (f64, f64) {
+        let (lo, hi) = self.bounds();
+        (lo[2], hi[2])
     }
 
     /// Clips to the column `[x, x+1] × [y, y+1]` (axes 0 and 1).

@@ -19,7 +19,11 @@ fn triangles(seed: u64) -> (Vec<Triangle>, u64) {
         let mut t = t.map(|p| p.map(|x| (x + 236.0).clamp(0.0, 511.9)));
         if i % 8 == 6 {
             // large: across the whole grid
-            t = [rng.point(0.0, 511.9), rng.point(0.0, 511.9), rng.point(0.0, 511.9)];
+            t = [
+                rng.point(0.0, 511.9),
+                rng.point(0.0, 511.9),
+                rng.point(0.0, 511.9),
+            ];
         }
         let mut tri = Triangle::new(f32tri(t));
         if i % 3 == 0 {
@@ -36,23 +40,50 @@ fn triangles(seed: u64) -> (Vec<Triangle>, u64) {
     let mut large = 0;
     out.retain(|t| {
         let big = (0..3).any(|k| {
-            let (a, b) = (t.v[0][k].min(t.v[1][k]).min(t.v[2][k]), t.v[0][k].max(t.v[1][k]).max(t.v[2][k]));
+            let (a, b) = (
+                t.v[0][k].min(t.v[1][k]).min(t.v[2][k]),
+                t.v[0][k].max(t.v[1][k]).max(t.v[2][k]),
+            );
             b - a > 100.0
         });
         large += big as usize;
         !big || large <= 6
     });
     // exactly on the chunk boundary planes
-    out.push(Triangle::new([[256.0, 250.0, 250.0], [256.0, 262.0, 251.0], [256.0, 251.0, 263.0]]));
-    out.push(Triangle::new([[250.0, 256.0, 256.0], [262.0, 256.0, 256.0], [251.0, 263.0, 256.0]]));
+    out.push(Triangle::new([
+        [256.0, 250.0, 250.0],
+        [256.0, 262.0, 251.0],
+        [256.0, 251.0, 263.0],
+    ]));
+    out.push(Triangle::new([
+        [250.0, 256.0, 256.0],
+        [262.0, 256.0, 256.0],
+        [251.0, 263.0, 256.0],
+    ]));
     // skipped: zero area, non-finite
-    out.push(Triangle::new([[1.0, 1.0, 1.0], [2.0, 2.0, 2.0], [3.0, 3.0, 3.0]]));
-    out.push(Triangle::new([[1.0, 1.0, 1.0], [1.0, 1.0, 1.0], [3.0, 1.0, 3.0]]));
-    out.push(Triangle::new([[1.0, f32::NAN, 1.0], [2.0, 2.0, 2.0], [3.0, 1.0, 3.0]]));
+    out.push(Triangle::new([
+        [1.0, 1.0, 1.0],
+        [2.0, 2.0, 2.0],
+        [3.0, 3.0, 3.0],
+    ]));
+    out.push(Triangle::new([
+        [1.0, 1.0, 1.0],
+        [1.0, 1.0, 1.0],
+        [3.0, 1.0, 3.0],
+    ]));
+    out.push(Triangle::new([
+        [1.0, f32::NAN, 1.0],
+        [2.0, 2.0, 2.0],
+        [3.0, 1.0, 3.0],
+    ]));
     (out, 3)
 }
 
-fn chunk_pass(cv: &mut ChunkVoxelizer, tris: &[Triangle], batches: &[usize]) -> BTreeMap<[u32; 3], Vec<Voxel>> {
+fn chunk_pass(
+    cv: &mut ChunkVoxelizer,
+    tris: &[Triangle],
+    batches: &[usize],
+) -> BTreeMap<[u32; 3], Vec<Voxel>> {
     let mut out = BTreeMap::new();
     let cpa = RES / 256;
     for z in 0..cpa {
@@ -108,7 +139,9 @@ fn chunks_match_whole_grid_and_brute_force_attributes() {
         // reference voxel sets: every triangle over the full grid, in order
         let mut reference: BTreeMap<[i32; 3], Vec<usize>> = BTreeMap::new();
         for (i, t) in tris.iter().enumerate() {
-            voxelize_triangle(&t.v, [0; 3], [RES as i32 - 1; 3], mode, &mut |p| reference.entry(p).or_default().push(i));
+            voxelize_triangle(&t.v, [0; 3], [RES as i32 - 1; 3], mode, &mut |p| {
+                reference.entry(p).or_default().push(i)
+            });
         }
         let mut got: BTreeMap<[i32; 3], Voxel> = BTreeMap::new();
         for (c, vs) in &chunks {
@@ -132,11 +165,13 @@ fn chunks_match_whole_grid_and_brute_force_attributes() {
                 let l = bary(&t64, q);
                 let face = normalize(cross(sub(t64[1], t64[0]), sub(t64[2], t64[0]))).unwrap();
                 let n = if t.flags & TRI_HAS_NORMALS != 0 {
-                    normalize([0, 1, 2].map(|k| (0..3).map(|j| l[j] * t.n[j][k] as f64).sum())).unwrap_or(face)
+                    normalize([0, 1, 2].map(|k| (0..3).map(|j| l[j] * t.n[j][k] as f64).sum()))
+                        .unwrap_or(face)
                 } else {
                     face
                 };
-                let c: [f64; 4] = [0, 1, 2, 3].map(|k| (0..3).map(|j| l[j] * t.c[j][k] as f64).sum());
+                let c: [f64; 4] =
+                    [0, 1, 2, 3].map(|k| (0..3).map(|j| l[j] * t.c[j][k] as f64).sum());
                 w += a;
                 for k in 0..3 {
                     wn[k] += a * n[k];
@@ -151,7 +186,10 @@ fn chunks_match_whole_grid_and_brute_force_attributes() {
                 (wn.map(|x| x / w), wc.map(|x| x / w))
             } else {
                 zero_w += 1;
-                (un.map(|x| x / ids.len() as f64), uc.map(|x| x / ids.len() as f64))
+                (
+                    un.map(|x| x / ids.len() as f64),
+                    uc.map(|x| x / ids.len() as f64),
+                )
             };
             let v = got[p];
             let q = unpack_normal(v.normal);
@@ -167,7 +205,10 @@ fn chunks_match_whole_grid_and_brute_force_attributes() {
             let rgba = v.rgba();
             let e = c.map(|x| x.round().clamp(0.0, 255.0) as i32);
             let d = (0..4).map(|k| (rgba[k] as i32 - e[k]).abs()).max().unwrap();
-            assert!(d <= 1, "{mode} voxel {p:?}: colour {rgba:?} vs expected {e:?}");
+            assert!(
+                d <= 1,
+                "{mode} voxel {p:?}: colour {rgba:?} vs expected {e:?}"
+            );
             exact_c += (d == 0) as usize;
             assert_eq!(v.mask(), face_mask(v.normal) | border_caps(v.pos()));
         }
@@ -181,17 +222,30 @@ fn chunks_match_whole_grid_and_brute_force_attributes() {
 
         // batch independence and determinism (same voxelizer reused, fresh voxelizer)
         for batches in [&[1usize][..], &[7, 1, 30], &[100, 3]] {
-            assert_eq!(chunk_pass(&mut cv, &tris, batches), chunks, "{mode}: depends on batching {batches:?}");
+            assert_eq!(
+                chunk_pass(&mut cv, &tris, batches),
+                chunks,
+                "{mode}: depends on batching {batches:?}"
+            );
         }
-        assert_eq!(chunk_pass(&mut ChunkVoxelizer::new(mode), &tris, &[50]), chunks);
+        assert_eq!(
+            chunk_pass(&mut ChunkVoxelizer::new(mode), &tris, &[50]),
+            chunks
+        );
 
         // the parallel grid driver gives the same bytes on 1 and 2 threads
         for threads in [1, 2] {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
             let g = pool.install(|| voxelize_grid(&tris, RES, mode)).unwrap();
             assert_eq!(g.skipped, nskip);
             let gm: BTreeMap<[u32; 3], Vec<Voxel>> = g.chunks.into_iter().collect();
-            assert_eq!(gm, chunks, "{mode}: voxelize_grid on {threads} threads differs");
+            assert_eq!(
+                gm, chunks,
+                "{mode}: voxelize_grid on {threads} threads differs"
+            );
         }
     }
 }

@@ -10,7 +10,12 @@ fn analytic_cases() {
     // right triangle with legs 2 in the plane z = 0.5
     let t = [[0.0, 0.0, 0.5], [2.0, 0.0, 0.5], [0.0, 2.0, 0.5]];
     let (a, c) = clipped_area(&t, [0, 0, 0]);
-    assert!((a - 1.0).abs() < 1e-12 && (c[0] - 0.5).abs() < 1e-12 && (c[1] - 0.5).abs() < 1e-12 && c[2] == 0.5);
+    assert!(
+        (a - 1.0).abs() < 1e-12
+            && (c[0] - 0.5).abs() < 1e-12
+            && (c[1] - 0.5).abs() < 1e-12
+            && c[2] == 0.5
+    );
     let (a, c) = clipped_area(&t, [1, 0, 0]);
     assert!((a - 0.5).abs() < 1e-12);
     assert!((c[0] - 4.0 / 3.0).abs() < 1e-12 && (c[1] - 1.0 / 3.0).abs() < 1e-12);
@@ -28,8 +33,18 @@ fn analytic_cases() {
     // the same plane misses voxel (1, 1, 0) except for its edge x = 1, z = 1 (area 0)
     assert_eq!(clipped_area(&t, [1, 1, 0]).0, 0.0);
     // degenerate and non-finite: zero
-    assert_eq!(clipped_area(&[[0.0; 3], [1.0; 3], [2.0; 3]], [0, 0, 0]).0, 0.0);
-    assert_eq!(clipped_area(&[[0.0; 3], [1.0, 0.0, 0.0], [0.0, f32::NAN, 0.0]], [0, 0, 0]).0, 0.0);
+    assert_eq!(
+        clipped_area(&[[0.0; 3], [1.0; 3], [2.0; 3]], [0, 0, 0]).0,
+        0.0
+    );
+    assert_eq!(
+        clipped_area(
+            &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, f32::NAN, 0.0]],
+            [0, 0, 0]
+        )
+        .0,
+        0.0
+    );
 }
 
 #[test]
@@ -61,9 +76,16 @@ fn areas_sum_to_triangle_area_and_centroids_to_its_centroid() {
                     let (a, c) = clipped_area(&t, [x, y, z]);
                     assert!(a >= 0.0);
                     if a > 0.0 {
-                        assert!(cons.contains(&[x, y, z]), "positive area {a} in unmarked voxel {:?} of {t:?}", [x, y, z]);
+                        assert!(
+                            cons.contains(&[x, y, z]),
+                            "positive area {a} in unmarked voxel {:?} of {t:?}",
+                            [x, y, z]
+                        );
                         for k in 0..3 {
-                            assert!(c[k] >= [x, y, z][k] as f64 - 1e-9 && c[k] <= [x, y, z][k] as f64 + 1.0 + 1e-9);
+                            assert!(
+                                c[k] >= [x, y, z][k] as f64 - 1e-9
+                                    && c[k] <= [x, y, z][k] as f64 + 1.0 + 1e-9
+                            );
                         }
                     }
                     sum += a;
@@ -76,7 +98,9 @@ fn areas_sum_to_triangle_area_and_centroids_to_its_centroid() {
         if t64.iter().flatten().all(|c| c.abs() < 99.0) {
             // a triangle lying in a voxel face plane is inside both closed boxes sharing that
             // face, so it is counted twice (the weights are for averaging, this is by design)
-            let on_face = (0..3).any(|k| t64[0][k] == t64[1][k] && t64[1][k] == t64[2][k] && t64[0][k].fract() == 0.0);
+            let on_face = (0..3).any(|k| {
+                t64[0][k] == t64[1][k] && t64[1][k] == t64[2][k] && t64[0][k].fract() == 0.0
+            });
             if on_face {
                 sum *= 0.5;
                 mom = mom.map(|m| 0.5 * m);
@@ -86,7 +110,10 @@ fn areas_sum_to_triangle_area_and_centroids_to_its_centroid() {
             assert!(rel < 1e-6, "sum {sum} vs area {area} for {t:?}");
             let cen = [0, 1, 2].map(|k| (t64[0][k] + t64[1][k] + t64[2][k]) / 3.0);
             for k in 0..3 {
-                assert!((mom[k] / sum - cen[k]).abs() < 1e-6 * (1.0 + cen[k].abs()), "centroid {t:?}");
+                assert!(
+                    (mom[k] / sum - cen[k]).abs() < 1e-6 * (1.0 + cen[k].abs()),
+                    "centroid {t:?}"
+                );
             }
         }
     }
@@ -115,6 +142,9 @@ fn monte_carlo_area_fractions() {
         let frac = h as f64 / samples as f64;
         let expect = clipped_area(&t32, v).0 / area;
         let sigma = (expect * (1.0 - expect) / samples as f64).sqrt();
-        assert!((frac - expect).abs() < 5.0 * sigma + 1e-4, "voxel {v:?}: MC {frac} vs {expect}");
+        assert!(
+            (frac - expect).abs() < 5.0 * sigma + 1e-4,
+            "voxel {v:?}: MC {frac} vs {expect}"
+        );
     }
 }

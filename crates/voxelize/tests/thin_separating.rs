@@ -17,7 +17,10 @@ impl Dense {
 }
 
 fn voxelize_mesh(v: &[[f64; 3]], f: &[[u32; 3]], n: i32, mode: Mode) -> Dense {
-    let mut d = Dense { n, set: vec![false; (n * n * n) as usize] };
+    let mut d = Dense {
+        n,
+        set: vec![false; (n * n * n) as usize],
+    };
     for tri in f {
         let t = f32tri(tri.map(|i| v[i as usize]));
         voxelize_triangle(&t, [0; 3], [n - 1; 3], mode, &mut |p| {
@@ -56,7 +59,11 @@ fn flood_outside(d: &Dense) -> Vec<bool> {
 
 /// Checks that no voxel with `inside(centre)` is reached from outside; returns
 /// (inside unmarked voxels, thin voxel count).
-fn check_no_leak(d: &Dense, inside: impl Fn([f64; 3]) -> Option<bool>, what: &str) -> (usize, usize) {
+fn check_no_leak(
+    d: &Dense,
+    inside: impl Fn([f64; 3]) -> Option<bool>,
+    what: &str,
+) -> (usize, usize) {
     let reached = flood_outside(d);
     let n = d.n;
     let mut inner = 0;
@@ -67,7 +74,11 @@ fn check_no_leak(d: &Dense, inside: impl Fn([f64; 3]) -> Option<bool>, what: &st
                 let i = d.idx([x, y, z]);
                 if inside(c) == Some(true) && !d.set[i] {
                     inner += 1;
-                    assert!(!reached[i], "{what}: 6-connected leak reaches inside voxel {:?}", [x, y, z]);
+                    assert!(
+                        !reached[i],
+                        "{what}: 6-connected leak reaches inside voxel {:?}",
+                        [x, y, z]
+                    );
                 }
             }
         }
@@ -86,9 +97,18 @@ fn convex_inside(v: &[[f64; 3]], f: &[[u32; 3]]) -> impl Fn([f64; 3]) -> Option<
         .collect();
     // radii of the inscribed and circumscribed spheres about the vertex mean: only points
     // between them need the per-plane test
-    let m = v.iter().fold([0.0; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]]).map(|x| x / v.len() as f64);
-    let r_out = v.iter().map(|p| dot(sub(*p, m), sub(*p, m)).sqrt()).fold(0.0, f64::max);
-    let r_in = planes.iter().map(|(a, n)| -dot(*n, sub(m, *a)) / dot(*n, *n).sqrt()).fold(f64::INFINITY, f64::min);
+    let m = v
+        .iter()
+        .fold([0.0; 3], |a, p| [a[0] + p[0], a[1] + p[1], a[2] + p[2]])
+        .map(|x| x / v.len() as f64);
+    let r_out = v
+        .iter()
+        .map(|p| dot(sub(*p, m), sub(*p, m)).sqrt())
+        .fold(0.0, f64::max);
+    let r_in = planes
+        .iter()
+        .map(|(a, n)| -dot(*n, sub(m, *a)) / dot(*n, *n).sqrt())
+        .fold(f64::INFINITY, f64::min);
     assert!(r_in > 0.0);
     move |c| {
         let r = dot(sub(c, m), sub(c, m)).sqrt();
@@ -126,8 +146,16 @@ fn thin_closed_convex_meshes_do_not_leak() {
     for &(name, sub, radius, n) in cases {
         for rot in 0..3 {
             let (v, f) = if sub == 99 { cube() } else { icosphere(sub) };
-            let r = if rot == 0 && name == "cube" { [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] } else { rng.rotation() };
-            let c = [0.5 * n as f64 + rng.range(-0.5, 0.5), 0.5 * n as f64 + rng.range(-0.5, 0.5), 0.5 * n as f64];
+            let r = if rot == 0 && name == "cube" {
+                [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+            } else {
+                rng.rotation()
+            };
+            let c = [
+                0.5 * n as f64 + rng.range(-0.5, 0.5),
+                0.5 * n as f64 + rng.range(-0.5, 0.5),
+                0.5 * n as f64,
+            ];
             let v = transform(&v, r, radius, c);
             // f32 vertices, as the voxelizer sees them
             let v: Vec<[f64; 3]> = v.iter().map(|p| p.map(|x| x as f32 as f64)).collect();
@@ -153,7 +181,12 @@ fn thin_integer_aligned_cube_does_not_leak() {
     // faces exactly on voxel boundaries: ties everywhere
     let (v, f) = cube();
     for (s, t) in [(5.0, 8.0), (6.0, 8.0), (7.5, 10.0), (4.25, 9.0)] {
-        let v = transform(&v, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]], s, [t; 3]);
+        let v = transform(
+            &v,
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            s,
+            [t; 3],
+        );
         let thin = voxelize_mesh(&v, &f, 20, Mode::Thin);
         let (inner, _) = check_no_leak(&thin, convex_inside(&v, &f), "aligned cube");
         assert!(inner > 0);
@@ -171,12 +204,22 @@ impl RayInside {
     fn new(tris: &[[[f64; 3]; 3]], n: i32) -> RayInside {
         let mut columns = vec![Some(Vec::new()); (n * n) as usize];
         for t in tris {
-            let (mnx, mxx) = (t[0][0].min(t[1][0]).min(t[2][0]), t[0][0].max(t[1][0]).max(t[2][0]));
-            let (mny, mxy) = (t[0][1].min(t[1][1]).min(t[2][1]), t[0][1].max(t[1][1]).max(t[2][1]));
+            let (mnx, mxx) = (
+                t[0][0].min(t[1][0]).min(t[2][0]),
+                t[0][0].max(t[1][0]).max(t[2][0]),
+            );
+            let (mny, mxy) = (
+                t[0][1].min(t[1][1]).min(t[2][1]),
+                t[0][1].max(t[1][1]).max(t[2][1]),
+            );
             for y in (mny - 0.5).floor().max(0.0) as i32..=((mxy - 0.5).ceil() as i32).min(n - 1) {
-                for x in (mnx - 0.5).floor().max(0.0) as i32..=((mxx - 0.5).ceil() as i32).min(n - 1) {
+                for x in
+                    (mnx - 0.5).floor().max(0.0) as i32..=((mxx - 0.5).ceil() as i32).min(n - 1)
+                {
                     let c = [x as f64 + 0.5, y as f64 + 0.5];
-                    let e = |a: [f64; 3], b: [f64; 3]| (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+                    let e = |a: [f64; 3], b: [f64; 3]| {
+                        (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+                    };
                     let w = [e(t[1], t[2]), e(t[2], t[0]), e(t[0], t[1])];
                     let area = w[0] + w[1] + w[2];
                     let col = &mut columns[(x + n * y) as usize];
@@ -213,19 +256,38 @@ fn thin_bunny_does_not_leak() {
     let mut edges = HashSet::new();
     for t in &f {
         for i in 0..3 {
-            assert!(edges.insert((t[i], t[(i + 1) % 3])), "edge used twice in the same direction");
+            assert!(
+                edges.insert((t[i], t[(i + 1) % 3])),
+                "edge used twice in the same direction"
+            );
         }
     }
     for &(a, b) in &edges {
-        assert!(edges.contains(&(b, a)), "open edge: the bunny is not closed");
+        assert!(
+            edges.contains(&(b, a)),
+            "open edge: the bunny is not closed"
+        );
     }
     let mut rng = Rng(11);
     for (n, rot) in [(48, 0), (96, 1), (150, 2)] {
-        let r = if rot == 0 { [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] } else { rng.rotation() };
+        let r = if rot == 0 {
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+        } else {
+            rng.rotation()
+        };
         // centre the bunny (extent < 16) and scale it to fill ~80% of the grid
         let centred: Vec<[f64; 3]> = v0.iter().map(|p| [p[0], p[1] - 4.8, p[2]]).collect();
         let s = 0.8 * n as f64 / 16.0;
-        let v = transform(&centred, r, s, [0.5 * n as f64 + 0.17, 0.5 * n as f64 - 0.31, 0.5 * n as f64 + 0.05]);
+        let v = transform(
+            &centred,
+            r,
+            s,
+            [
+                0.5 * n as f64 + 0.17,
+                0.5 * n as f64 - 0.31,
+                0.5 * n as f64 + 0.05,
+            ],
+        );
         let v: Vec<[f64; 3]> = v.iter().map(|p| p.map(|x| x as f32 as f64)).collect();
         let thin = voxelize_mesh(&v, &f, n, Mode::Thin);
         let tris: Vec<[[f64; 3]; 3]> = f.iter().map(|t| t.map(|i| v[i as usize])).collect();

@@ -1,0 +1,176 @@
+//! Voxelization throughput on a made-up mesh: an icosphere filling a grid.
+//!
+//! `cargo run --release -p voxlod-voxelize --example voxelize_bench -- [subdiv=6] [resolution=1024]`
+//!
+//! Reports, per mode: the bare overlap test (`voxelize_triangle`, counting voxels), the full
+//! chunk voxelizer on one thread (overlap + clipping + attributes + encoding), and
+//! `voxelize_grid` on all rayon threads.
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use voxlod_geom::{Grid, Triangle, CHUNK};
+use voxlod_voxelize::{voxelize_grid, voxelize_triangle, ChunkVoxelizer, Mode};
+
+fn icosphere(subdiv: u32) -> Vec<[[f64; 3]; 3]> {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let norm = |p: [f64; 3]| {
+        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        [p[0] / l, p[1] / l, p[2] / l]
+    };
+    let mut v: Vec<[f64; 3]> = [
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
+    ]
+    .map(norm)
+    .to_vec();
+    let mut f: Vec<[usize; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdiv {
+        let mut mid = HashMap::new();
+        let mut nf = Vec::with_capacity(f.len() * 4);
+        for tri in &f {
+            let mut m = [0usize; 3];
+            for i in 0..3 {
+                let (a, b) = (tri[i], tri[(i + 1) % 3]);
+                m[i] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    let (pa, pb) = (v[a], v[b]);
+                    v.push(norm([pa[0] + pb[0], pa[1] + pb[1], pa[2] + pb[2]]));
+                    v.len() - 1
+                });
+            }
+            nf.extend([
+                [tri[0], m[0], m[2]],
+                [tri[1], m[1], m[0]],
+                [tri[2], m[2], m[1]],
+                [m[0], m[1], m[2]],
+            ]);
+        }
+        f = nf;
+    }
+    f.iter().map(|t| t.map(|i| v[i])).collect()
+}
+
+/// CPU time of this thread in seconds (Linux schedstat), so that the one-thread numbers are
+/// meaningful on a shared machine; `None` elsewhere.
+fn thread_cpu() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    Some(s.split_whitespace().next()?.parse::<f64>().ok()? * 1e-9)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let subdiv: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
+    let res: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1024);
+    let r = 0.45 * res as f64;
+    let c = 0.5 * res as f64 + 0.123;
+    let tris: Vec<Triangle> = icosphere(subdiv)
+        .iter()
+        .map(|t| {
+            let mut tri = Triangle::new(t.map(|p| p.map(|x| (c + r * x) as f32)));
+            tri.c = [[200, 30, 30, 255], [30, 200, 30, 255], [30, 30, 200, 255]];
+            tri
+        })
+        .collect();
+    println!(
+        "icosphere subdiv {subdiv}: {} triangles, radius {r:.0} in a {res}³ grid, {} rayon threads",
+        tris.len(),
+        rayon::current_num_threads()
+    );
+
+    for mode in [Mode::Conservative, Mode::Thin] {
+        // bare overlap test
+        let c0 = thread_cpu();
+        let t0 = Instant::now();
+        let mut n = 0u64;
+        for t in &tris {
+            voxelize_triangle(&t.v, [0; 3], [res as i32 - 1; 3], mode, &mut |_| n += 1);
+        }
+        let dt = cpu_or_wall(c0, t0);
+        println!(
+            "{mode:>12} overlap only (cpu)  : {n:>10} voxel hits  {dt:7.3} s  {:7.2} M voxels/s",
+            n as f64 / dt / 1e6
+        );
+
+        // full chunk voxelizer, one thread: bin, then chunk by chunk
+        let grid = Grid::new([0.0; 3], res as f64, res).expect("grid");
+        let c0 = thread_cpu();
+        let t0 = Instant::now();
+        let mut bins: HashMap<[u32; 3], Vec<Triangle>> = HashMap::new();
+        for t in &tris {
+            if let Some((lo, hi)) = grid.chunk_range(t) {
+                for z in lo[2]..=hi[2] {
+                    for y in lo[1]..=hi[1] {
+                        for x in lo[0]..=hi[0] {
+                            bins.entry([x, y, z]).or_default().push(*t);
+                        }
+                    }
+                }
+            }
+        }
+        let mut keys: Vec<[u32; 3]> = bins.keys().copied().collect();
+        keys.sort();
+        let mut cv = ChunkVoxelizer::new(mode);
+        let mut count = 0usize;
+        for k in &keys {
+            cv.begin(k.map(|x| x * CHUNK));
+            cv.add(&bins[k]);
+            count += cv.finish().len();
+        }
+        let dt = cpu_or_wall(c0, t0);
+        println!(
+            "{mode:>12} chunk, 1 thread (cpu): {count:>10} voxels      {dt:7.3} s  {:7.2} M voxels/s  ({} chunks)",
+            count as f64 / dt / 1e6,
+            keys.len()
+        );
+
+        // parallel grid driver
+        let t0 = Instant::now();
+        let g = voxelize_grid(&tris, res, mode).expect("grid");
+        let dt = t0.elapsed().as_secs_f64();
+        assert_eq!(g.len(), count);
+        println!(
+            "{mode:>12} voxelize_grid (wall): {:>10} voxels      {dt:7.3} s  {:7.2} M voxels/s",
+            g.len(),
+            g.len() as f64 / dt / 1e6
+        );
+    }
+}
+
+/// Thread CPU seconds since `c0` if available, else wall seconds since `t0`.
+fn cpu_or_wall(c0: Option<f64>, t0: Instant) -> f64 {
+    match (c0, thread_cpu()) {
+        (Some(a), Some(b)) => b - a,
+        _ => t0.elapsed().as_secs_f64(),
+    }
+}
