@@ -334,8 +334,7 @@ fn compact(mut vs: Vec<(u32, Voxel)>) -> Vec<Voxel> {
                 c[k] += *x as u32;
             }
         }
-        let d = 511.0 * n as f32;
-        let normal = pack_normal([s[0] as f32 / d, s[1] as f32 / d, s[2] as f32 / d]);
+        let normal = pack_normal([s[0] as f32, s[1] as f32, s[2] as f32]); // direction of the sum = of the mean
         let rgba = c.map(|x| ((x + n / 2) / n) as u8);
         out.push(Voxel::new(p, mask, normal, u32::from_le_bytes(rgba)));
     }
