@@ -50,6 +50,48 @@ impl EncodedNode {
     }
 }
 
+impl EncodedNode {
+    /// Rebuilds an encoded node from a payload that [`encode_node`] made earlier and that was
+    /// kept elsewhere (for example in a resumable intermediate file) with its
+    /// [`payload_crc32`](Self::payload_crc32), decoding it into `out` and checking it
+    /// completely: checksum, size, Morton order, reserved bits. The block checksum and bounds
+    /// are recomputed, so the result equals what `encode_node` returned for those voxels.
+    pub fn from_payload(
+        payload: Vec<u8>,
+        voxel_count: u32,
+        payload_crc32: u32,
+        out: &mut Vec<Voxel>,
+    ) -> Result<EncodedNode, FormatError> {
+        let bad = |what: String| FormatError::Voxels { what };
+        if crc32fast::hash(&payload) != payload_crc32 {
+            return Err(bad("stored payload: checksum mismatch".into()));
+        }
+        let n = voxel_count as usize;
+        if n == 0 || voxel_count > MAX_NODE_VOXELS {
+            return Err(bad(format!("stored payload claims {voxel_count} voxels")));
+        }
+        let mut block = Vec::with_capacity(12 * n);
+        let got = zstd::bulk::Decompressor::new()
+            .and_then(|mut d| d.decompress_to_buffer(&payload, &mut block))
+            .map_err(|e| bad(format!("stored payload: zstd decompression failed: {e}")))?;
+        if got != 12 * n {
+            return Err(bad(format!(
+                "stored payload decompressed to {got} bytes, expected 12·{n}"
+            )));
+        }
+        let (bounds_min, bounds_max) =
+            unshuffle(&block, n, out).map_err(|w| bad(format!("stored payload: {w}")))?;
+        Ok(EncodedNode {
+            payload_crc32,
+            payload,
+            voxel_count,
+            block_crc32: crc32fast::hash(&block),
+            bounds_min,
+            bounds_max,
+        })
+    }
+}
+
 /// Compresses one node's voxels at zstd level `zstd_level` (see
 /// [`DEFAULT_ZSTD_LEVEL`](crate::DEFAULT_ZSTD_LEVEL)). The voxels must be non-empty, sorted by
 /// strictly increasing Morton code of their position (no two at one position), with bits
@@ -259,6 +301,50 @@ pub(crate) fn unmorton8(m: u32) -> [u8; 3] {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn from_payload_rebuilds_the_same_node() {
+        use crate::voxel::{pack_color, pack_normal};
+        let voxels: Vec<Voxel> = (0..500u32)
+            .map(|i| {
+                let p = crate::block::unmorton8(i * 7);
+                Voxel::new(
+                    p,
+                    (i % 64) as u8,
+                    pack_normal([1.0, i as f32, 0.5]),
+                    pack_color([i as u8, 2, 3, 255]),
+                )
+            })
+            .collect();
+        let enc = super::encode_node(&voxels, 3).unwrap();
+        let mut out = Vec::new();
+        let again = super::EncodedNode::from_payload(
+            enc.payload().to_vec(),
+            enc.voxel_count(),
+            enc.payload_crc32(),
+            &mut out,
+        )
+        .unwrap();
+        assert_eq!(again, enc);
+        assert_eq!(out, voxels);
+        let mut bad = enc.payload().to_vec();
+        let k = bad.len() / 2;
+        bad[k] ^= 0x40;
+        assert!(super::EncodedNode::from_payload(
+            bad,
+            enc.voxel_count(),
+            enc.payload_crc32(),
+            &mut out
+        )
+        .is_err());
+        assert!(super::EncodedNode::from_payload(
+            enc.payload().to_vec(),
+            enc.voxel_count() + 1,
+            enc.payload_crc32(),
+            &mut out
+        )
+        .is_err());
+    }
+
     use super::*;
 
     #[test]
