@@ -1,0 +1,415 @@
+#!/usr/bin/env python3
+"""A second, independent reader for voxlod files, written from docs/FORMAT.md alone.
+
+It exists to prove the format document is complete: nothing here was taken from the Rust
+code. It memory-maps a file, checks the header, index and manifest (section 11 of FORMAT.md),
+lists the nodes and decodes a node's voxels (section 5.2) into numpy arrays.
+
+Needs numpy and zstandard (`pip install numpy zstandard`); CRC-32 comes from zlib.
+
+Usage:
+    voxlod_read.py FILE                      # header and a table of the nodes
+    voxlod_read.py FILE --json               # the same as JSON
+    voxlod_read.py FILE --node L X Y Z       # decode one node, print its first voxels
+    voxlod_read.py FILE --node L X Y Z --raw OUT
+        # write the node's voxels as plain 12-byte records (pos_mask, normal, color; u32 LE)
+    voxlod_read.py FILE --check              # decode every node (all checks of 5.2)
+
+As a library:
+    f = VoxlodFile("bunny.voxlod")
+    f.header["resolution"], len(f.nodes)
+    v = f.decode(f.nodes[-1])                # the root: dict of numpy arrays
+    v["pos"], v["mask"], v["normal"], v["color"]
+"""
+
+import argparse
+import json
+import mmap
+import struct
+import sys
+import zlib
+
+import numpy as np
+import zstandard
+
+MAGIC = b"VOXLOD\x00\x01"
+HEADER_SIZE = 128
+ENTRY_SIZE = 64
+MAX_VOXELS = 256**3
+
+# Section 3: the header, little-endian.
+HEADER_STRUCT = struct.Struct("<8sIIIIII3ddQQQQQQIIII")
+assert HEADER_STRUCT.size == HEADER_SIZE
+
+# Section 4: one index entry.
+ENTRY_DTYPE = np.dtype(
+    [
+        ("level", "<u4"),
+        ("x", "<u4"),
+        ("y", "<u4"),
+        ("z", "<u4"),
+        ("voxel_count", "<u4"),
+        ("child_mask", "<u4"),
+        ("payload_offset", "<u8"),
+        ("payload_size", "<u8"),
+        ("payload_crc32", "<u4"),
+        ("block_crc32", "<u4"),
+        ("bounds_min", "u1", (4,)),
+        ("bounds_max", "u1", (4,)),
+        ("reserved", "<u4", (2,)),
+    ]
+)
+assert ENTRY_DTYPE.itemsize == ENTRY_SIZE
+
+
+class FormatError(Exception):
+    """The file is not a valid voxlod v1 file; the message says where."""
+
+
+def crc32(data):
+    return zlib.crc32(data) & 0xFFFFFFFF
+
+
+def morton_key(x, y, z):
+    """Interleave bits: bit b of x -> 3b, of y -> 3b+1, of z -> 3b+2 (any width)."""
+    code = 0
+    b = 0
+    while (x | y | z) >> b:
+        code |= ((x >> b) & 1) << (3 * b)
+        code |= ((y >> b) & 1) << (3 * b + 1)
+        code |= ((z >> b) & 1) << (3 * b + 2)
+        b += 1
+    return code
+
+
+def order_key(level, x, y, z):
+    """Section 4: entries are sorted by ((morton + 1) << 3*level, level)."""
+    return ((morton_key(x, y, z) + 1) << (3 * level), level)
+
+
+def _spread8(v):
+    """Spread the 8 bits of each element to every third bit (vectorised morton8 part)."""
+    v = v.astype(np.uint32)
+    out = np.zeros_like(v)
+    for b in range(8):
+        out |= ((v >> b) & 1) << (3 * b)
+    return out
+
+
+def _compact8(m):
+    """Inverse of _spread8: collect every third bit starting at bit 0."""
+    out = np.zeros_like(m)
+    for b in range(8):
+        out |= ((m >> (3 * b)) & 1) << b
+    return out
+
+
+def morton8(x, y, z):
+    return _spread8(x) | (_spread8(y) << 1) | (_spread8(z) << 2)
+
+
+def _sign_extend10(v):
+    v = v.astype(np.int32)
+    return np.where(v >= 512, v - 1024, v)
+
+
+class VoxlodFile:
+    """A validated, memory-mapped voxlod file. `header` is a dict, `nodes` a numpy
+    structured array of index entries (ENTRY_DTYPE), `manifest` the parsed JSON."""
+
+    def __init__(self, path):
+        with open(path, "rb") as fh:
+            size = fh.seek(0, 2)
+            if size == 0:
+                raise FormatError("file is empty (shorter than the 128-byte header)")
+            self._map = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        self.size = size
+        self.header = self._read_header()
+        self.nodes = self._read_index()
+        self.manifest = self._read_manifest()
+        self._check_nodes()
+        self._dctx = zstandard.ZstdDecompressor()
+
+    # -- section 3 -------------------------------------------------------------------------
+    def _read_header(self):
+        m = self._map
+        if self.size < HEADER_SIZE:
+            raise FormatError(f"file is {self.size} bytes, shorter than the 128-byte header")
+        f = HEADER_STRUCT.unpack_from(m, 0)
+        (magic, version, header_size, resolution, levels, mode, flags, ox, oy, oz, voxel_size,
+         node_count, index_offset, index_size, manifest_offset, manifest_size, total_voxels,
+         index_crc, manifest_crc, reserved, header_crc) = f
+        if magic != MAGIC:
+            raise FormatError(f"bad magic {magic!r} (an unfinished file has a zero header)")
+        if version != 1:
+            raise FormatError(f"unsupported version {version}")
+        if header_size != HEADER_SIZE:
+            raise FormatError(f"header_size {header_size} != 128")
+        if crc32(m[0:124]) != header_crc:
+            raise FormatError("header CRC mismatch")
+        if resolution < 256 or resolution > 2**31 or resolution & (resolution - 1):
+            raise FormatError(f"resolution {resolution} is not a power of two in [256, 2^31]")
+        if levels != resolution.bit_length() - 1 - 7:
+            raise FormatError(f"levels {levels} != log2({resolution}) - 7")
+        if mode not in (0, 1):
+            raise FormatError(f"unknown mode {mode}")
+        if flags != 0 or reserved != 0:
+            raise FormatError("reserved header fields are not zero")
+        origin = (ox, oy, oz)
+        if not all(np.isfinite(origin)):
+            raise FormatError("origin is not finite")
+        if not (np.isfinite(voxel_size) and voxel_size > 0):
+            raise FormatError(f"voxel_size {voxel_size} is not finite and > 0")
+        if index_offset < HEADER_SIZE or index_offset % 8:
+            raise FormatError(f"index_offset {index_offset} is < 128 or not a multiple of 8")
+        if index_size != node_count * ENTRY_SIZE:
+            raise FormatError(f"index_size {index_size} != node_count {node_count} * 64")
+        if manifest_offset != index_offset + index_size:
+            raise FormatError("manifest does not directly follow the index")
+        if manifest_offset + manifest_size != self.size:
+            raise FormatError(
+                f"file is {self.size} bytes but the manifest ends at "
+                f"{manifest_offset + manifest_size} (truncated or extended)"
+            )
+        return {
+            "version": version,
+            "resolution": resolution,
+            "levels": levels,
+            "mode": mode,
+            "mode_name": ("conservative", "thin")[mode],
+            "origin": origin,
+            "voxel_size": voxel_size,
+            "node_count": node_count,
+            "index_offset": index_offset,
+            "index_size": index_size,
+            "manifest_offset": manifest_offset,
+            "manifest_size": manifest_size,
+            "total_voxels": total_voxels,
+            "index_crc32": index_crc,
+            "manifest_crc32": manifest_crc,
+        }
+
+    # -- section 4 -------------------------------------------------------------------------
+    def _read_index(self):
+        h = self.header
+        raw = self._map[h["index_offset"]:h["index_offset"] + h["index_size"]]
+        if crc32(raw) != h["index_crc32"]:
+            raise FormatError("index CRC mismatch")
+        return np.frombuffer(raw, dtype=ENTRY_DTYPE, count=h["node_count"])
+
+    def _read_manifest(self):
+        h = self.header
+        raw = self._map[h["manifest_offset"]:h["manifest_offset"] + h["manifest_size"]]
+        if crc32(raw) != h["manifest_crc32"]:
+            raise FormatError("manifest CRC mismatch")
+        try:
+            return json.loads(raw.decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise FormatError(f"manifest is not UTF-8 JSON: {e}") from None
+
+    def _check_nodes(self):
+        h = self.header
+        chunks0 = h["resolution"] // 256
+        expected_offset = HEADER_SIZE
+        prev_key = None
+        present = set()
+        total = 0
+        for i, e in enumerate(self.nodes):
+            lvl, x, y, z = int(e["level"]), int(e["x"]), int(e["y"]), int(e["z"])
+            name = f"node {i} (level {lvl}, {x},{y},{z})"
+            if lvl >= h["levels"]:
+                raise FormatError(f"{name}: level >= levels {h['levels']}")
+            per_axis = chunks0 >> lvl
+            if max(x, y, z) >= per_axis:
+                raise FormatError(f"{name}: position outside the {per_axis}^3 chunk grid")
+            n = int(e["voxel_count"])
+            if not 1 <= n <= MAX_VOXELS:
+                raise FormatError(f"{name}: voxel_count {n} outside [1, 256^3]")
+            cm = int(e["child_mask"])
+            if cm >> 8 or (lvl == 0 and cm):
+                raise FormatError(f"{name}: bad child_mask {cm:#x}")
+            off, sz = int(e["payload_offset"]), int(e["payload_size"])
+            if off != expected_offset or sz < 1 or off + sz > h["index_offset"]:
+                raise FormatError(f"{name}: payload [{off}, +{sz}) not contiguous/inside")
+            expected_offset = off + sz
+            bmin, bmax = e["bounds_min"], e["bounds_max"]
+            if bmin[3] or bmax[3] or any(bmin[a] > bmax[a] for a in range(3)):
+                raise FormatError(f"{name}: bad bounds")
+            if e["reserved"].any():
+                raise FormatError(f"{name}: reserved fields not zero")
+            key = order_key(lvl, x, y, z)
+            if prev_key is not None and key <= prev_key:
+                raise FormatError(f"{name}: out of order")
+            prev_key = key
+            present.add((lvl, x, y, z))
+            total += n
+        if total != h["total_voxels"]:
+            raise FormatError(f"sum of voxel counts {total} != total_voxels {h['total_voxels']}")
+        pad = self._map[expected_offset:h["index_offset"]]
+        if len(pad) >= 8 or any(pad):
+            raise FormatError("padding before the index is not 0-7 zero bytes")
+        root_level = h["levels"] - 1
+        for e in self.nodes:
+            lvl, x, y, z = int(e["level"]), int(e["x"]), int(e["y"]), int(e["z"])
+            mask = 0
+            if lvl > 0:
+                for c in range(8):
+                    child = (lvl - 1, 2 * x + (c & 1), 2 * y + (c >> 1 & 1), 2 * z + (c >> 2))
+                    if child in present:
+                        mask |= 1 << c
+            if mask != int(e["child_mask"]):
+                raise FormatError(f"node (level {lvl}, {x},{y},{z}): child_mask mismatch")
+            if lvl < root_level and (lvl + 1, x >> 1, y >> 1, z >> 1) not in present:
+                raise FormatError(f"node (level {lvl}, {x},{y},{z}): parent missing")
+
+    # -- lookup ----------------------------------------------------------------------------
+    def find(self, level, x, y, z):
+        """Index of node (level, x, y, z), or None. A linear search is enough here."""
+        hits = np.nonzero(
+            (self.nodes["level"] == level)
+            & (self.nodes["x"] == x)
+            & (self.nodes["y"] == y)
+            & (self.nodes["z"] == z)
+        )[0]
+        return int(hits[0]) if len(hits) else None
+
+    # -- section 5 -------------------------------------------------------------------------
+    def decode(self, entry):
+        """Decode one node's voxels. Returns a dict of numpy arrays (n = voxel_count):
+        pos (n,3) u8 chunk positions, mask (n,) u8 face masks, normal (n,3) i16 quantized
+        components in [-511, 511], color (n,4) u8 RGBA, and the plain 12-byte records
+        `records` (n,3) u32 = (pos_mask, normal, color) as in section 6."""
+        n = int(entry["voxel_count"])
+        off, sz = int(entry["payload_offset"]), int(entry["payload_size"])
+        name = f"node (level {int(entry['level'])}, {int(entry['x'])},{int(entry['y'])},{int(entry['z'])})"
+        payload = self._map[off:off + sz]
+        if crc32(payload) != int(entry["payload_crc32"]):
+            raise FormatError(f"{name}: payload CRC mismatch")
+        try:
+            block = self._dctx.decompress(payload, max_output_size=12 * n)
+        except zstandard.ZstdError as e:
+            raise FormatError(f"{name}: zstd: {e}") from None
+        if len(block) != 12 * n:
+            raise FormatError(f"{name}: block is {len(block)} bytes, expected {12 * n}")
+        if crc32(block) != int(entry["block_crc32"]):
+            raise FormatError(f"{name}: block CRC mismatch")
+
+        planes = np.frombuffer(block, dtype=np.uint8).reshape(3, 4, n)
+        # Undo the plane delta (normals and colours only): prefix sums modulo 256.
+        nc = np.cumsum(planes[1:].astype(np.uint64), axis=2) % 256
+        words = np.empty((3, n), dtype=np.uint32)
+        for a in range(3):
+            src = planes[a].astype(np.uint32) if a == 0 else nc[a - 1].astype(np.uint32)
+            words[a] = src[0] | (src[1] << 8) | (src[2] << 16) | (src[3] << 24)
+        p = words[0]
+        if (p >> 30).any():
+            raise FormatError(f"{name}: position word bits 30-31 set")
+        if (words[1] >> 30).any():
+            raise FormatError(f"{name}: normal word bits 30-31 set")
+        delta = (p & 0xFFFFFF).astype(np.uint64)
+        if n > 1 and (delta[1:] == 0).any():
+            raise FormatError(f"{name}: zero Morton delta (voxels not strictly increasing)")
+        m = np.cumsum(delta)
+        if m[-1] >= 1 << 24:
+            raise FormatError(f"{name}: running Morton code reaches 2^24")
+        m = m.astype(np.uint32)
+        pos = np.stack([_compact8(m), _compact8(m >> 1), _compact8(m >> 2)], axis=1).astype(np.uint8)
+        mask = ((p >> 24) & 0x3F).astype(np.uint8)
+        if not (np.array_equal(pos.min(axis=0), entry["bounds_min"][:3])
+                and np.array_equal(pos.max(axis=0), entry["bounds_max"][:3])):
+            raise FormatError(f"{name}: decoded bounds differ from the index entry")
+        nw = words[1]
+        normal = np.stack(
+            [_sign_extend10(nw & 0x3FF), _sign_extend10((nw >> 10) & 0x3FF),
+             _sign_extend10((nw >> 20) & 0x3FF)], axis=1).astype(np.int16)
+        color = np.stack([(words[2] >> (8 * c)) & 0xFF for c in range(4)], axis=1).astype(np.uint8)
+        pos_mask = (pos[:, 0].astype(np.uint32) | (pos[:, 1].astype(np.uint32) << 8)
+                    | (pos[:, 2].astype(np.uint32) << 16) | (mask.astype(np.uint32) << 24))
+        records = np.stack([pos_mask, nw, words[2]], axis=1)
+        return {"pos": pos, "mask": mask, "normal": normal, "color": color, "records": records}
+
+    def world_min_corner(self, entry, pos):
+        """Section 7: world coordinates of the voxels' minimum corners (n,3) f64."""
+        lvl = int(entry["level"])
+        edge = self.header["voxel_size"] * (1 << lvl)
+        p = np.array([int(entry["x"]), int(entry["y"]), int(entry["z"])], dtype=np.float64)
+        return np.asarray(self.header["origin"]) + edge * (256.0 * p + pos.astype(np.float64))
+
+
+def node_dict(e):
+    return {
+        "level": int(e["level"]),
+        "x": int(e["x"]),
+        "y": int(e["y"]),
+        "z": int(e["z"]),
+        "voxel_count": int(e["voxel_count"]),
+        "child_mask": int(e["child_mask"]),
+        "payload_offset": int(e["payload_offset"]),
+        "payload_size": int(e["payload_size"]),
+        "bounds_min": [int(v) for v in e["bounds_min"][:3]],
+        "bounds_max": [int(v) for v in e["bounds_max"][:3]],
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("file")
+    ap.add_argument("--json", action="store_true", help="print JSON")
+    ap.add_argument("--node", nargs=4, type=int, metavar=("L", "X", "Y", "Z"))
+    ap.add_argument("--raw", metavar="OUT", help="with --node: write the 12-byte records here")
+    ap.add_argument("--check", action="store_true", help="decode every node")
+    args = ap.parse_args(argv)
+    try:
+        f = VoxlodFile(args.file)
+        if args.node:
+            i = f.find(*args.node)
+            if i is None:
+                print(f"no node {tuple(args.node)}", file=sys.stderr)
+                return 1
+            v = f.decode(f.nodes[i])
+            if args.raw:
+                with open(args.raw, "wb") as out:
+                    out.write(v["records"].astype("<u4").tobytes())
+            if args.json:
+                print(json.dumps({
+                    "node": node_dict(f.nodes[i]),
+                    "pos": v["pos"].tolist(),
+                    "mask": v["mask"].tolist(),
+                    "normal": v["normal"].tolist(),
+                    "color": v["color"].tolist(),
+                }))
+            elif not args.raw:
+                print(f"node {tuple(args.node)}: {len(v['pos'])} voxels")
+                for j in range(min(10, len(v["pos"]))):
+                    print(f"  pos {tuple(v['pos'][j].tolist())} mask {int(v['mask'][j]):#04x} "
+                          f"normal {tuple(v['normal'][j].tolist())} "
+                          f"rgba {tuple(v['color'][j].tolist())}")
+            return 0
+        if args.check:
+            for e in f.nodes:
+                f.decode(e)
+        h = f.header
+        if args.json:
+            out = {k: h[k] for k in ("version", "resolution", "levels", "mode", "mode_name",
+                                     "origin", "voxel_size", "node_count", "total_voxels")}
+            out["nodes"] = [node_dict(e) for e in f.nodes]
+            out["manifest"] = f.manifest
+            print(json.dumps(out))
+        else:
+            print(f"resolution {h['resolution']}, {h['levels']} levels, mode {h['mode_name']}, "
+                  f"origin {h['origin']}, voxel_size {h['voxel_size']}")
+            print(f"{h['node_count']} nodes, {h['total_voxels']} voxels"
+                  + (" (all decoded)" if args.check else ""))
+            for e in f.nodes:
+                d = node_dict(e)
+                print(f"  level {d['level']} ({d['x']},{d['y']},{d['z']}) "
+                      f"{d['voxel_count']} voxels, {d['payload_size']} bytes, "
+                      f"children {d['child_mask']:08b}")
+        return 0
+    except FormatError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
