@@ -234,12 +234,18 @@ impl ChunkVoxelizer {
     /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
     /// with normal, colour and face mask. Resets for the next `begin`.
     pub fn finish(&mut self) -> Vec<Voxel> {
-        // the slot key is the Morton code: sort the accumulators by it
-        self.acc.sort_unstable_by_key(|a| a.idx);
-        let out = self
+        // sort (Morton code, slot) keys rather than the large accumulators
+        let mut keys: Vec<u64> = self
             .acc
             .iter()
-            .map(|a| {
+            .enumerate()
+            .map(|(i, a)| (a.idx as u64) << 32 | i as u64)
+            .collect();
+        keys.sort_unstable();
+        let out = keys
+            .iter()
+            .map(|&k| {
+                let a = &self.acc[(k & 0xffff_ffff) as usize];
                 let pos = demorton3(a.idx as u64).map(|c| c as u8);
                 let (n, c) = average(a);
                 let normal = pack_normal(n);

@@ -226,7 +226,7 @@ impl RayInside {
                     if area == 0.0 {
                         continue; // vertical triangle: the ray grazes it at most
                     }
-                    if w.iter().any(|&x| x == 0.0) {
+                    if w.contains(&0.0) {
                         *col = None;
                     } else if w.iter().all(|&x| x > 0.0) || w.iter().all(|&x| x < 0.0) {
                         if let Some(zs) = col {
