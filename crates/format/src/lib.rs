@@ -10,7 +10,11 @@
 //!
 //! - [`encode_node`] compresses one node (pure; call it from many threads),
 //! - [`Writer`] streams compressed nodes to `<path>.tmp` and renames it to `path` when done,
-//! - [`Reader`] memory-maps a file, validates it, and decodes nodes with checksums checked.
+//! - [`Reader`] memory-maps a file, validates it, and decodes nodes with checksums checked;
+//!   for renderers it walks the tree ([`Reader::depth_first`], [`Reader::level_nodes`]), picks
+//!   the nodes to draw for a [`Camera`] ([`Reader::select_by_error`]) and gives conservative
+//!   world boxes for culling ([`Reader::node_bounds`]); [`Reader::read_node_into`] decodes into
+//!   a caller's buffer, so a streaming loop allocates nothing per node.
 //!
 //! ```
 //! use voxlod_format::voxel::{border_caps, face_mask, pack_color, pack_normal, Voxel};
@@ -45,6 +49,7 @@ mod block;
 mod error;
 mod layout;
 mod reader;
+mod select;
 mod spec;
 pub mod voxel;
 mod writer;
@@ -55,6 +60,7 @@ pub use layout::{
     child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, NODE_ENTRY_SIZE, VERSION,
 };
 pub use reader::Reader;
+pub use select::{Aabb, Camera, DepthFirst};
 pub use spec::{
     levels_for_resolution, FileSpec, CHUNK, MAX_NODE_VOXELS, MODE_CONSERVATIVE, MODE_THIN,
 };
