@@ -419,7 +419,7 @@ fn bad_input_gives_clear_errors_and_no_output() {
                     .unwrap()
                     .file_name()
                     .to_string_lossy()
-                    .starts_with(".voxlod-tmp")
+                    .starts_with(".voxlod-work")
             })
             .count();
         assert_eq!(tmp_left, 0, "{name}: temporary files left behind");
@@ -514,6 +514,129 @@ fn config_file_with_flag_overrides() {
     assert!(
         err.contains("c.toml") && err.contains("resolutoin"),
         "{err}"
+    );
+}
+
+/// An interrupted build resumes from its work folder, and the result is byte-identical to an
+/// uninterrupted build.
+#[test]
+fn interrupted_build_resumes_to_identical_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let fresh = d.join("fresh.voxlod");
+    let out = d.join("resumed.voxlod");
+    let s = sample();
+    let args = |o: &Path| {
+        vec![
+            "build".to_string(),
+            "-q".into(),
+            s.to_str().unwrap().into(),
+            "-o".into(),
+            o.to_str().unwrap().into(),
+            "-r".into(),
+            "2048".into(),
+        ]
+    };
+    let run = |a: Vec<String>| Command::new(BIN).args(&a).current_dir(d).output().unwrap();
+    ok(&run(args(&fresh)));
+    for stop in ["10", "100"] {
+        let mut a = args(&out);
+        a.extend([
+            "--debug-interrupt-after-chunks".to_string(),
+            stop.to_string(),
+        ]);
+        let o = run(a);
+        assert!(!o.status.success(), "an interrupted build must fail");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("interrupted") && err.contains("resume"),
+            "{err}"
+        );
+        assert!(!out.exists(), "an interrupted build left an output file");
+    }
+    let o = Command::new(BIN)
+        .args(args(&out))
+        .arg("--json")
+        .current_dir(d)
+        .output()
+        .unwrap();
+    ok(&o);
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(summary["resumed"], true);
+    assert_eq!(
+        summary["stages"][0]["resumed"], true,
+        "ingest must not run again"
+    );
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        std::fs::read(&fresh).unwrap(),
+        "resumed output differs"
+    );
+    let left = std::fs::read_dir(d)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .starts_with(".voxlod-work")
+        })
+        .count();
+    assert_eq!(left, 0, "the work folder must be removed after success");
+}
+
+/// A build killed with SIGKILL at several points resumes to the same bytes.
+#[test]
+fn killed_build_resumes_to_identical_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let fresh = d.join("fresh.voxlod");
+    let out = d.join("k.voxlod");
+    let s = sample();
+    let args = |o: &Path| {
+        vec![
+            "build".to_string(),
+            "-q".into(),
+            s.to_str().unwrap().into(),
+            "-o".into(),
+            o.to_str().unwrap().into(),
+            "-r".into(),
+            "2048".into(),
+            "-m".into(),
+            "thin".into(),
+        ]
+    };
+    ok(&Command::new(BIN)
+        .args(args(&fresh))
+        .current_dir(d)
+        .output()
+        .unwrap());
+    let mut killed = 0;
+    for ms in [300u64, 900, 1800] {
+        let mut child = Command::new(BIN)
+            .args(args(&out))
+            .current_dir(d)
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(ms));
+        if child.try_wait().unwrap().is_none() {
+            child.kill().unwrap();
+            killed += 1;
+            child.wait().unwrap();
+            assert!(!out.exists(), "a killed run left {}", out.display());
+        } else {
+            break;
+        }
+    }
+    ok(&Command::new(BIN)
+        .args(args(&out))
+        .current_dir(d)
+        .output()
+        .unwrap());
+    assert_eq!(
+        std::fs::read(&out).unwrap(),
+        std::fs::read(&fresh).unwrap(),
+        "output after {killed} kills differs"
     );
 }
 

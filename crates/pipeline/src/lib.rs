@@ -12,14 +12,18 @@
 //! println!("{} voxels at level 0", summary.levels[0].voxels);
 //! ```
 
+mod leaf_log;
 mod memory;
 mod octree_writer;
 mod progress;
 mod size;
+mod system;
+mod work;
 
 pub use memory::MemoryPlan;
 pub use octree_writer::{LevelStats, OctreeWriter};
 pub use size::{format_size, parse_size};
+pub use system::{interrupted, peak_rss, request_interrupt};
 
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -28,13 +32,15 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use voxlod_format::{encode_node, FileSpec, Writer};
-use voxlod_geom::Grid;
+use voxlod_format::{encode_node, EncodedNode, FileSpec, Voxel, Writer};
+use voxlod_geom::{Bounds, Grid};
 use voxlod_ingest::{IngestError, MeshSource};
-use voxlod_tile::{Spooler, TileError};
+use voxlod_tile::{Bins, ChunkBin, Spool, Spooler, TileError};
 use voxlod_voxelize::{ChunkVoxelizer, Mode};
 
+use leaf_log::LeafLog;
 use progress::Stage;
+use work::WorkDir;
 
 /// Everything a build depends on. Only `resolution`, `mode` and `zstd_level` affect the output
 /// bytes; `threads`, `memory`, `tmp_dir` and `progress` do not.
@@ -57,6 +63,10 @@ pub struct BuildSettings {
     /// Show progress bars on stderr.
     #[serde(skip)]
     pub progress: bool,
+    /// For tests of resuming: request an interrupt after this many leaf chunks.
+    #[serde(skip)]
+    #[doc(hidden)]
+    pub interrupt_after_chunks: Option<u64>,
 }
 
 impl Default for BuildSettings {
@@ -69,15 +79,20 @@ impl Default for BuildSettings {
             zstd_level: voxlod_format::DEFAULT_ZSTD_LEVEL,
             tmp_dir: None,
             progress: false,
+            interrupt_after_chunks: None,
         }
     }
 }
 
-/// Wall-clock seconds per stage.
+/// Wall-clock seconds and peak memory per stage.
 #[derive(Clone, Debug, Serialize)]
 pub struct StageTime {
     pub stage: &'static str,
     pub seconds: f64,
+    /// Peak resident memory of the process at the end of the stage (bytes; monotone).
+    pub peak_rss: u64,
+    /// True if the stage's result was taken from an interrupted earlier run.
+    pub resumed: bool,
 }
 
 /// What a build did.
@@ -100,6 +115,11 @@ pub struct BuildSummary {
     pub bytes: u64,
     pub bytes_per_voxel: f64,
     pub memory_plan: MemoryPlan,
+    /// Peak resident memory of the whole process (bytes).
+    pub peak_rss: u64,
+    /// Largest temporary disk use planned (bytes): spool plus bins.
+    pub temp_disk: u64,
+    pub resumed: bool,
     pub stages: Vec<StageTime>,
     pub seconds: f64,
     pub warnings: Vec<String>,
@@ -109,11 +129,43 @@ fn tile_err(e: TileError) -> IngestError {
     IngestError::Callback(e.to_string())
 }
 
-/// Builds the octree file `output` from the mesh `input`.
+/// What the ingest stage leaves for a resumed run (`spool.json`).
+#[derive(Serialize, Deserialize)]
+struct SpoolMarker {
+    count: u64,
+    min: [f64; 3],
+    max: [f64; 3],
+    triangles: u64,
+    degenerate_skipped: u64,
+    warnings: Vec<String>,
+}
+
+/// The bins layout (`bins.json`): `[x, y, z, start, count]` per non-empty chunk.
+#[derive(Serialize, Deserialize)]
+struct BinsMarker {
+    chunks: Vec<[u64; 5]>,
+}
+
+/// The voxelize stage's totals (`leaves.json`).
+#[derive(Serialize, Deserialize)]
+struct LeavesMarker {
+    records: u64,
+    skipped: u64,
+    binned_triangles: u64,
+}
+
+fn interrupted_error(work: &Path) -> anyhow::Error {
+    anyhow::anyhow!(
+        "interrupted; the work done so far is kept in {}: run the same command again to resume",
+        work.display()
+    )
+}
+
+/// Builds the octree file `output` from the mesh `input`. A build that was killed or
+/// interrupted resumes from its work folder when started again with the same arguments.
 pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSummary> {
     let t0 = Instant::now();
-    let grid_check = Grid::new([0.0; 3], 1.0, s.resolution);
-    if let Err(e) = grid_check {
+    if let Err(e) = Grid::new([0.0; 3], 1.0, s.resolution) {
         bail!("--resolution: {e}");
     }
     if !(-7..=22).contains(&s.zstd_level) {
@@ -125,89 +177,184 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
         s.threads
     };
     let plan = MemoryPlan::new(s.memory, threads)?;
-    if s.progress {
-        eprintln!("{}", plan.describe());
-    }
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .context("creating the thread pool")?;
-
     let source = MeshSource::open(input)?;
-    let info = source.info().clone();
     let out_dir = output
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
     let tmp_parent = s.tmp_dir.as_deref().unwrap_or(out_dir);
-    let tmp = tempfile::Builder::new()
-        .prefix(".voxlod-tmp-")
-        .tempdir_in(tmp_parent)
-        .with_context(|| format!("creating a temporary folder in {}", tmp_parent.display()))?;
+    let key = WorkDir::key(input, s)?;
+    let (work, resumed) = WorkDir::open(tmp_parent, output, &key)?;
+    if s.progress {
+        eprintln!("{}", plan.describe());
+        if resumed {
+            eprintln!(
+                "resuming the interrupted build kept in {}",
+                work.path().display()
+            );
+        }
+    }
+    let r = run(&source, input, output, s, threads, plan, &work, resumed, t0);
+    match r {
+        Ok(summary) => {
+            work.remove()?;
+            Ok(summary)
+        }
+        Err(_) if interrupted() => Err(interrupted_error(work.path())),
+        Err(e) => {
+            // A failed build leaves nothing behind (a killed one keeps its folder to resume).
+            let _ = work.remove();
+            Err(e)
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run(
+    source: &MeshSource,
+    input: &Path,
+    output: &Path,
+    s: &BuildSettings,
+    threads: usize,
+    plan: MemoryPlan,
+    work: &WorkDir,
+    resumed: bool,
+    t0: Instant,
+) -> Result<BuildSummary> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("creating the thread pool")?;
+    let info = source.info().clone();
     let mut stages = Vec::new();
-    let mut warnings = Vec::new();
+    let mut warnings: Vec<String> = info
+        .warnings
+        .iter()
+        .map(|w| format!("{}: {w}", input.display()))
+        .collect();
+    let stage_done =
+        |stages: &mut Vec<StageTime>, stage: &'static str, t: Instant, resumed: bool| {
+            stages.push(StageTime {
+                stage,
+                seconds: t.elapsed().as_secs_f64(),
+                peak_rss: system::peak_rss(),
+                resumed,
+            });
+        };
+
+    // Temporary disk: the spool (88 bytes per triangle) and the bins (the spool plus the
+    // triangles that straddle chunk borders) exist together during the scatter pass.
+    let input_len = std::fs::metadata(input).map(|m| m.len()).unwrap_or(0);
+    let est_triangles = if info.faces > 0 {
+        info.faces * 2
+    } else {
+        input_len / 12
+    };
+    let temp_disk = est_triangles * voxlod_tile::TRIANGLE_BYTES * 5 / 2;
+    if let Some(free) = system::free_disk(work.path()) {
+        if s.progress {
+            eprintln!(
+                "temporary disk: up to about {} in {} ({} free)",
+                format_size(temp_disk),
+                work.path().display(),
+                format_size(free)
+            );
+        }
+        if temp_disk > free {
+            bail!(
+                "not enough disk space for the temporary files: about {} needed in {}, {} free (choose another folder with --tmp)",
+                format_size(temp_disk),
+                work.path().display(),
+                format_size(free)
+            );
+        }
+    }
 
     // Ingest: parse the input once, spooling triangles (world coordinates) to disk.
     let t = Instant::now();
-    let bar = Stage::bytes(
-        s.progress,
-        "ingest",
-        std::fs::metadata(input).map(|m| m.len()).unwrap_or(0),
-    );
-    let mut spooler = Spooler::create(&tmp.path().join("spool.tri"))?;
-    let stats = source.stream(
-        &mut |tris| spooler.push(tris).map_err(tile_err),
-        &mut |done, total| bar.set(done, total),
-    )?;
-    let spool = spooler.finish()?;
-    bar.finish();
-    stages.push(StageTime {
-        stage: "ingest",
-        seconds: t.elapsed().as_secs_f64(),
-    });
-    if stats.degenerate_skipped > 0 {
-        warnings.push(format!(
-            "{} degenerate (zero-area) triangles skipped",
-            stats.degenerate_skipped
-        ));
-    }
-    warnings.extend(
-        info.warnings
-            .iter()
-            .map(|w| format!("{}: {w}", input.display())),
-    );
-    if spool.count == 0 {
+    let spool_path = work.file("spool.tri");
+    let leaves_path = work.file("leaves.bin");
+    let leaves_done: Option<LeavesMarker> = work.marker("leaves.json");
+    let bins_marker: Option<BinsMarker> = if leaves_done.is_some() {
+        None
+    } else {
+        work.marker("bins.json")
+    };
+    let marker: SpoolMarker = match work.marker::<SpoolMarker>("spool.json") {
+        Some(m)
+            if leaves_done.is_some()
+                || bins_marker.is_some()
+                || std::fs::metadata(&spool_path)
+                    .is_ok_and(|md| md.len() == m.count * voxlod_tile::TRIANGLE_BYTES) =>
+        {
+            stage_done(&mut stages, "ingest", t, true);
+            m
+        }
+        _ => {
+            let bar = Stage::bytes(s.progress, "ingest", input_len);
+            let mut spooler = Spooler::create(&spool_path)?;
+            let stats = source.stream(
+                &mut |tris| {
+                    if interrupted() {
+                        return Err(IngestError::Callback("interrupted".into()));
+                    }
+                    spooler.push(tris).map_err(tile_err)
+                },
+                &mut |done, total| bar.set(done, total),
+            )?;
+            let spool = spooler.finish()?;
+            bar.finish();
+            let mut w = vec![];
+            if stats.degenerate_skipped > 0 {
+                w.push(format!(
+                    "{}: {} degenerate (zero-area) triangles skipped",
+                    input.display(),
+                    stats.degenerate_skipped
+                ));
+            }
+            let m = SpoolMarker {
+                count: spool.count,
+                min: spool.bounds.min,
+                max: spool.bounds.max,
+                triangles: stats.triangles,
+                degenerate_skipped: stats.degenerate_skipped,
+                warnings: w,
+            };
+            work.set_marker("spool.json", &m)?;
+            stage_done(&mut stages, "ingest", t, false);
+            m
+        }
+    };
+    warnings.extend(marker.warnings.iter().cloned());
+    if marker.count == 0 {
         bail!(
             "{}: the mesh has no (non-degenerate) triangles",
             input.display()
         );
     }
-
-    // Tile: count per chunk, then scatter into pre-sized on-disk bins.
-    let t = Instant::now();
-    let grid = Grid::fit(&spool.bounds, s.resolution)
+    let bounds = Bounds {
+        min: marker.min,
+        max: marker.max,
+    };
+    let grid = Grid::fit(&bounds, s.resolution)
         .with_context(|| format!("{}: fitting the grid", input.display()))?;
-    let bar = Stage::items(s.progress, "count", spool.count);
-    let counts = spool.count(&grid, &mut |d, n| bar.set(d, n))?;
-    bar.finish();
-    let bar = Stage::items(s.progress, "scatter", spool.count);
-    let bins = spool.scatter(
-        &grid,
-        &counts,
-        &tmp.path().join("bins.tri"),
-        plan.scatter_buffer,
-        &mut |d, n| bar.set(d, n),
-    )?;
-    bar.finish();
-    drop(counts);
-    spool.remove()?;
-    stages.push(StageTime {
-        stage: "tile",
-        seconds: t.elapsed().as_secs_f64(),
-    });
 
-    // Voxelize the leaf chunks in parallel batches (Morton order kept), then write them and
-    // their parents in post-order.
+    let leaves_marker = match leaves_done {
+        Some(m) => {
+            stage_done(&mut stages, "tile", Instant::now(), true);
+            stage_done(&mut stages, "voxelize", Instant::now(), true);
+            m
+        }
+        None => tile_and_voxelize(s, &grid, &plan, &pool, work, &marker, bounds, &mut stages)?,
+    };
+    if leaves_marker.skipped > 0 {
+        warnings.push(format!("{} triangle/chunk pairs skipped by the voxelizer (zero area after the move to grid coordinates)", leaves_marker.skipped));
+    }
+    let chunk_bins = leaves_marker.records as usize;
+    let binned_triangles = leaves_marker.binned_triangles;
+
+    // LOD + write: leaves from the log in Morton order; parents by sort-and-compact, written
+    // in post-order as soon as their last child is done.
     let t = Instant::now();
     let spec = FileSpec {
         resolution: grid.resolution,
@@ -218,65 +365,26 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
     };
     let writer = Writer::create(output, spec)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level);
-    let workers: Vec<Mutex<ChunkVoxelizer>> = (0..plan.voxelizers)
-        .map(|_| Mutex::new(ChunkVoxelizer::new(s.mode)))
-        .collect();
-    let chunks = bins.chunks();
-    let bar = Stage::items(s.progress, "voxelize", chunks.len() as u64);
-    let batch = plan.voxelizers * 4;
-    let mut done = 0u64;
-    let mut skipped = 0u64;
-    for first in (0..chunks.len()).step_by(batch) {
-        let last = (first + batch).min(chunks.len());
-        let results: Vec<
-            Result<(
-                Vec<voxlod_format::Voxel>,
-                Option<voxlod_format::EncodedNode>,
-                u64,
-            )>,
-        > = pool.install(|| {
-            (first..last)
-                .into_par_iter()
-                .map(|i| {
-                    let slot = rayon::current_thread_index().unwrap_or(0) % workers.len();
-                    let mut vz = workers[slot].lock().unwrap_or_else(|p| p.into_inner());
-                    let before = vz.skipped();
-                    vz.begin(chunks[i].origin());
-                    bins.read_chunk(i, 64 * 1024, &mut |tris| {
-                        vz.add(tris);
-                        Ok(())
-                    })?;
-                    let voxels = vz.finish();
-                    let skipped = vz.skipped() - before;
-                    drop(vz);
-                    let enc = if voxels.is_empty() {
-                        None
-                    } else {
-                        Some(encode_node(&voxels, s.zstd_level).with_context(|| {
-                            format!("encoding leaf chunk {:?}", chunks[i].coord)
-                        })?)
-                    };
-                    Ok((voxels, enc, skipped))
-                })
-                .collect()
-        });
-        for (i, r) in (first..last).zip(results) {
-            let (voxels, enc, sk) = r?;
-            skipped += sk;
-            octree.push_leaf(chunks[i].coord, voxels, enc.as_ref())?;
+    let bar = Stage::items(s.progress, "lod+write", chunk_bins as u64);
+    let mut n = 0u64;
+    leaf_log::read_log(&leaves_path, &mut |h, payload| {
+        if interrupted() {
+            return Err(interrupted_error(work.path()));
         }
-        done += (last - first) as u64;
-        bar.set(done, chunks.len() as u64);
-    }
+        if h.voxel_count == 0 {
+            octree.push_leaf(h.coord, Vec::new(), None)?;
+        } else {
+            let mut voxels: Vec<Voxel> = Vec::new();
+            let enc =
+                EncodedNode::from_payload(payload, h.voxel_count, h.payload_crc32, &mut voxels)
+                    .with_context(|| format!("leaf log record {}", h.chunk))?;
+            octree.push_leaf(h.coord, voxels, Some(&enc))?;
+        }
+        n += 1;
+        bar.set(n, chunk_bins as u64);
+        Ok(())
+    })?;
     bar.finish();
-    drop(workers);
-    if skipped > 0 {
-        warnings.push(format!("{skipped} triangle/chunk pairs skipped by the voxelizer (zero area after the move to grid coordinates)"));
-    }
-    let chunk_bins = chunks.len();
-    let binned_triangles = bins.total();
-    bins.remove()?;
-
     let manifest_settings = serde_json::json!({
         "resolution": s.resolution,
         "mode": s.mode.to_string(),
@@ -286,31 +394,31 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let bounds = spool_bounds_json(&grid);
     let (bytes, levels) = octree.finish(|levels| {
         serde_json::json!({
             "tool": "voxlod",
             "tool_version": env!("CARGO_PKG_VERSION"),
-            "input": { "file": input_name, "format": info.format, "triangles": stats.triangles,
-                       "degenerate_skipped": stats.degenerate_skipped },
+            "input": { "file": input_name, "format": info.format, "triangles": marker.triangles,
+                       "degenerate_skipped": marker.degenerate_skipped },
             "settings": manifest_settings,
-            "grid": bounds,
+            "grid": {
+                "origin": grid.origin,
+                "voxel_size": grid.voxel_size,
+                "resolution": grid.resolution,
+                "levels": grid.levels(),
+            },
             "levels": levels,
         })
     })?;
-    stages.push(StageTime {
-        stage: "voxelize+lod+write",
-        seconds: t.elapsed().as_secs_f64(),
-    });
-    tmp.close().context("removing the temporary folder")?;
+    stage_done(&mut stages, "lod+write", t, false);
 
     let total_voxels: u64 = levels.iter().map(|l| l.voxels).sum();
     Ok(BuildSummary {
         input: input.to_path_buf(),
         output: output.to_path_buf(),
         input_format: info.format.clone(),
-        triangles: stats.triangles,
-        degenerate_skipped: stats.degenerate_skipped,
+        triangles: marker.triangles,
+        degenerate_skipped: marker.degenerate_skipped,
         resolution: s.resolution,
         mode: s.mode,
         threads,
@@ -325,17 +433,182 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
         bytes,
         levels,
         memory_plan: plan,
+        peak_rss: system::peak_rss(),
+        temp_disk,
+        resumed,
         stages,
         seconds: t0.elapsed().as_secs_f64(),
         warnings,
     })
 }
 
-fn spool_bounds_json(grid: &Grid) -> serde_json::Value {
-    serde_json::json!({
-        "origin": grid.origin,
-        "voxel_size": grid.voxel_size,
-        "resolution": grid.resolution,
-        "levels": grid.levels(),
-    })
+/// The tile and voxelize stages (skipped as a whole when a resumed build has its leaf log).
+#[allow(clippy::too_many_arguments)]
+fn tile_and_voxelize(
+    s: &BuildSettings,
+    grid: &Grid,
+    plan: &MemoryPlan,
+    pool: &rayon::ThreadPool,
+    work: &WorkDir,
+    marker: &SpoolMarker,
+    bounds: Bounds,
+    stages: &mut Vec<StageTime>,
+) -> Result<LeavesMarker> {
+    let stage_done =
+        |stages: &mut Vec<StageTime>, stage: &'static str, t: Instant, resumed: bool| {
+            stages.push(StageTime {
+                stage,
+                seconds: t.elapsed().as_secs_f64(),
+                peak_rss: system::peak_rss(),
+                resumed,
+            });
+        };
+    let spool_path = work.file("spool.tri");
+    let bins_path = work.file("bins.tri");
+    let leaves_path = work.file("leaves.bin");
+    let bins_marker: Option<BinsMarker> = work.marker("bins.json");
+    // Tile: count per chunk, then scatter into pre-sized on-disk bins.
+    let t = Instant::now();
+    let bins = match bins_marker.and_then(|m| {
+        let chunks = m
+            .chunks
+            .iter()
+            .map(|c| ChunkBin {
+                coord: [c[0] as u32, c[1] as u32, c[2] as u32],
+                morton: voxlod_geom::morton3(c[0] as u32, c[1] as u32, c[2] as u32),
+                start: c[3],
+                count: c[4],
+            })
+            .collect();
+        Bins::open(&bins_path, chunks).ok()
+    }) {
+        Some(b) => {
+            stage_done(stages, "tile", t, true);
+            b
+        }
+        None => {
+            let spool = Spool {
+                path: spool_path.clone(),
+                count: marker.count,
+                bounds,
+            };
+            let bar = Stage::items(s.progress, "count", spool.count);
+            let counts = spool.count(grid, &mut |d, n| bar.set(d, n))?;
+            bar.finish();
+            if interrupted() {
+                return Err(interrupted_error(work.path()));
+            }
+            let bar = Stage::items(s.progress, "scatter", spool.count);
+            let bins = spool.scatter(
+                grid,
+                &counts,
+                &bins_path,
+                plan.scatter_buffer,
+                &mut |d, n| bar.set(d, n),
+            )?;
+            bar.finish();
+            drop(counts);
+            let m = BinsMarker {
+                chunks: bins
+                    .chunks()
+                    .iter()
+                    .map(|c| {
+                        [
+                            c.coord[0] as u64,
+                            c.coord[1] as u64,
+                            c.coord[2] as u64,
+                            c.start,
+                            c.count,
+                        ]
+                    })
+                    .collect(),
+            };
+            work.set_marker("bins.json", &m)?;
+            stage_done(stages, "tile", t, false);
+            bins
+        }
+    };
+    if spool_path.exists() {
+        std::fs::remove_file(&spool_path)
+            .with_context(|| format!("removing {}", spool_path.display()))?;
+    }
+
+    // Voxelize the leaf chunks in parallel batches, appending results in Morton order to the
+    // leaf log (resumable at chunk granularity).
+    let t = Instant::now();
+    let chunks = bins.chunks();
+    let leaves_marker = {
+        {
+            let mut log = LeafLog::open(&leaves_path)?;
+            let start = log.records() as usize;
+            let stage_resumed = start > 0;
+            let workers: Vec<Mutex<ChunkVoxelizer>> = (0..plan.voxelizers)
+                .map(|_| Mutex::new(ChunkVoxelizer::new(s.mode)))
+                .collect();
+            let bar = Stage::items(s.progress, "voxelize", chunks.len() as u64);
+            bar.set(start as u64, chunks.len() as u64);
+            let batch = plan.voxelizers * 4;
+            for first in (start..chunks.len()).step_by(batch) {
+                if interrupted() {
+                    log.finish()?;
+                    return Err(interrupted_error(work.path()));
+                }
+                let last = (first + batch).min(chunks.len());
+                let results: Vec<Result<(Option<EncodedNode>, u64)>> = pool.install(|| {
+                    (first..last)
+                        .into_par_iter()
+                        .map(|i| {
+                            let slot = rayon::current_thread_index().unwrap_or(0) % workers.len();
+                            let mut vz = workers[slot].lock().unwrap_or_else(|p| p.into_inner());
+                            let before = vz.skipped();
+                            vz.begin(chunks[i].origin());
+                            bins.read_chunk(i, 64 * 1024, &mut |tris| {
+                                vz.add(tris);
+                                Ok(())
+                            })?;
+                            let voxels = vz.finish();
+                            let skipped = vz.skipped() - before;
+                            drop(vz);
+                            let enc = if voxels.is_empty() {
+                                None
+                            } else {
+                                Some(encode_node(&voxels, s.zstd_level).with_context(|| {
+                                    format!("encoding leaf chunk {:?}", chunks[i].coord)
+                                })?)
+                            };
+                            Ok((enc, skipped))
+                        })
+                        .collect()
+                });
+                for (i, r) in (first..last).zip(results) {
+                    let (enc, skipped) = r?;
+                    log.append(i as u64, chunks[i].coord, enc.as_ref(), skipped)?;
+                }
+                log.flush()?;
+                bar.set(last as u64, chunks.len() as u64);
+                if s.interrupt_after_chunks.is_some_and(|n| last as u64 >= n) {
+                    request_interrupt();
+                }
+            }
+            bar.finish();
+            drop(workers);
+            let records = log.records();
+            log.finish()?;
+            let mut skipped = 0u64;
+            leaf_log::read_log(&leaves_path, &mut |h, _| {
+                skipped += h.skipped as u64;
+                Ok(())
+            })?;
+            let m = LeavesMarker {
+                records,
+                skipped,
+                binned_triangles: bins.total(),
+            };
+            work.set_marker("leaves.json", &m)?;
+            stage_done(stages, "voxelize", t, stage_resumed);
+            m
+        }
+    };
+    bins.remove()?;
+    Ok(leaves_marker)
 }

@@ -242,6 +242,30 @@ pub struct Bins {
 }
 
 impl Bins {
+    /// Reopens a finished bins file with its layout (e.g. to resume a build). The file length
+    /// must match the layout exactly.
+    pub fn open(path: &Path, chunks: Vec<ChunkBin>) -> Result<Bins, TileError> {
+        let file = File::open(path).map_err(TileError::io("open", path))?;
+        let len = file.metadata().map_err(TileError::io("stat", path))?.len();
+        let total: u64 = chunks.iter().map(|c| c.count).sum();
+        let contiguous = chunks.iter().scan(0u64, |next, c| {
+            let ok = c.start == *next;
+            *next += c.count;
+            Some(ok)
+        });
+        if len != total * TRIANGLE_BYTES || !contiguous.into_iter().all(|ok| ok) {
+            return Err(TileError::Truncated {
+                path: path.to_path_buf(),
+                len,
+            });
+        }
+        Ok(Bins {
+            path: path.to_path_buf(),
+            file,
+            chunks,
+        })
+    }
+
     pub fn chunks(&self) -> &[ChunkBin] {
         &self.chunks
     }

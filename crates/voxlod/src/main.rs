@@ -98,6 +98,9 @@ struct BuildArgs {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     json: bool,
+    /// Testing aid: stop as if interrupted after this many leaf chunks.
+    #[arg(long, hide = true)]
+    debug_interrupt_after_chunks: Option<u64>,
 }
 
 #[derive(Args)]
@@ -155,16 +158,25 @@ fn run_build(a: BuildArgs) -> Result<()> {
         s.tmp_dir = a.tmp.clone();
     }
     s.progress = !a.quiet;
+    s.interrupt_after_chunks = a.debug_interrupt_after_chunks;
 
-    // Without an input, build the bundled sample (written to a temporary file).
-    let sample_dir;
+    // Ctrl-C: the first asks the build to stop at the next safe point (its work folder is kept
+    // so the same command resumes); a second one ends the process at once.
+    let _ = ctrlc::set_handler(|| {
+        if voxlod_pipeline::interrupted() {
+            eprintln!("\ninterrupted again: stopping now (run the same command to resume)");
+            std::process::exit(130);
+        }
+        eprintln!("\ninterrupt: stopping at the next safe point (Ctrl-C again to stop at once)");
+        voxlod_pipeline::request_interrupt();
+    });
+
+    // Without an input, build the bundled sample, written once to a fixed place so that an
+    // interrupted sample build resumes like any other.
     let input = match &a.input {
         Some(p) => p.clone(),
         None => {
-            sample_dir =
-                tempfile::tempdir().context("creating a temporary folder for the sample")?;
-            let p = sample_dir.path().join(SAMPLE_NAME);
-            std::fs::write(&p, SAMPLE).context("writing the bundled sample")?;
+            let p = bundled_sample()?;
             if !a.quiet {
                 eprintln!("no input given: building the bundled sample mesh ({SAMPLE_NAME}, the Stanford bunny)");
             }
@@ -220,28 +232,39 @@ fn print_summary(s: &BuildSummary) {
         format_size(s.bytes),
         s.bytes_per_voxel
     );
-    let stages: Vec<String> = s
-        .stages
-        .iter()
-        .map(|t| format!("{} {:.2}s", t.stage, t.seconds))
-        .collect();
-    println!("  time         {:.2}s ({})", s.seconds, stages.join(", "));
+    println!(
+        "  time         {:.2}s{}",
+        s.seconds,
+        if s.resumed { " (resumed)" } else { "" }
+    );
+    for t in &s.stages {
+        let note = if t.resumed {
+            "  (continued from the interrupted run)"
+        } else {
+            ""
+        };
+        println!(
+            "    {:<12} {:>8.2}s  peak memory {}{note}",
+            t.stage,
+            t.seconds,
+            format_size(t.peak_rss)
+        );
+    }
+    println!(
+        "  peak memory  {} (budget {}, planned {})",
+        format_size(s.peak_rss),
+        format_size(s.memory_plan.budget),
+        format_size(s.memory_plan.planned)
+    );
     for w in &s.warnings {
         println!("  warning      {w}");
     }
 }
 
 fn run_gen(a: GenArgs) -> Result<()> {
-    let sample_dir;
     let base = match &a.base {
         Some(p) => p.clone(),
-        None => {
-            sample_dir =
-                tempfile::tempdir().context("creating a temporary folder for the sample")?;
-            let p = sample_dir.path().join(SAMPLE_NAME);
-            std::fs::write(&p, SAMPLE).context("writing the bundled sample")?;
-            p
-        }
+        None => bundled_sample()?,
     };
     let bar = if a.quiet {
         indicatif::ProgressBar::hidden()
@@ -267,4 +290,18 @@ fn run_gen(a: GenArgs) -> Result<()> {
         format_size(bytes)
     );
     Ok(())
+}
+
+/// The bundled sample as a file: `<temp dir>/voxlod-sample-<version>/bunny.ply`, written only
+/// when missing or different, so its path and modification time stay the same across runs.
+fn bundled_sample() -> Result<PathBuf> {
+    let dir = std::env::temp_dir().join(format!("voxlod-sample-{}", env!("CARGO_PKG_VERSION")));
+    let p = dir.join(SAMPLE_NAME);
+    if std::fs::read(&p).map_or(true, |b| b != SAMPLE) {
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let tmp = dir.join(format!("{SAMPLE_NAME}.{}.tmp", std::process::id()));
+        std::fs::write(&tmp, SAMPLE).with_context(|| format!("writing {}", tmp.display()))?;
+        std::fs::rename(&tmp, &p).with_context(|| format!("writing {}", p.display()))?;
+    }
+    Ok(p)
 }

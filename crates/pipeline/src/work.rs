@@ -1,0 +1,110 @@
+//! The work folder of one build: explicit on-disk intermediates (spool, bins, leaf log) and
+//! the markers that say which stages are complete, so a killed or interrupted build started
+//! again with the same arguments continues where it stopped.
+//!
+//! The folder's name is derived from everything the intermediates depend on (input file
+//! identity, resolution, mode, zstd level, tool version), so a changed input or setting never
+//! resumes from stale data.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use serde::{de::DeserializeOwned, Serialize};
+
+use crate::BuildSettings;
+
+pub struct WorkDir {
+    path: PathBuf,
+}
+
+/// FNV-1a, 64 bit: a stable hash for the folder name (std's hasher is not stable across
+/// releases).
+fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
+    for b in bytes {
+        h ^= *b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+impl WorkDir {
+    /// The key of a build: input identity (canonical path, size, modification time) and the
+    /// settings that change the intermediates.
+    pub fn key(input: &Path, s: &BuildSettings) -> Result<String> {
+        let canon = input
+            .canonicalize()
+            .with_context(|| format!("{}: cannot resolve the path", input.display()))?;
+        let meta = std::fs::metadata(&canon)
+            .with_context(|| format!("{}: cannot read its metadata", input.display()))?;
+        let mtime = meta
+            .modified()
+            .ok()
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map_or(0, |d| d.as_nanos());
+        let text = format!(
+            "{}\n{}\n{}\n{}\n{}\n{}\n{}",
+            canon.display(),
+            meta.len(),
+            mtime,
+            s.resolution,
+            s.mode,
+            s.zstd_level,
+            env!("CARGO_PKG_VERSION")
+        );
+        Ok(format!(
+            "{:016x}",
+            fnv1a(text.as_bytes(), 0xcbf2_9ce4_8422_2325)
+        ))
+    }
+
+    /// Opens (resuming) or creates the work folder for `output` under `parent`. Returns whether
+    /// it existed.
+    pub fn open(parent: &Path, output: &Path, key: &str) -> Result<(WorkDir, bool)> {
+        let name = output
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "out".into());
+        let path = parent.join(format!(".voxlod-work-{name}-{key}"));
+        let existed = path.is_dir();
+        if !existed {
+            std::fs::create_dir_all(&path)
+                .with_context(|| format!("creating the work folder {}", path.display()))?;
+        }
+        Ok((WorkDir { path }, existed))
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn file(&self, name: &str) -> PathBuf {
+        self.path.join(name)
+    }
+
+    /// A stage marker, or None when it is missing or unreadable (then the stage runs again).
+    pub fn marker<T: DeserializeOwned>(&self, name: &str) -> Option<T> {
+        let bytes = std::fs::read(self.file(name)).ok()?;
+        serde_json::from_slice(&bytes).ok()
+    }
+
+    /// Writes a stage marker atomically (temporary name, fsync, rename), so a marker exists
+    /// only once its stage's data is complete.
+    pub fn set_marker<T: Serialize>(&self, name: &str, value: &T) -> Result<()> {
+        let tmp = self.file(&format!("{name}.tmp"));
+        let fin = self.file(name);
+        let bytes = serde_json::to_vec(value)?;
+        let write = || -> std::io::Result<()> {
+            let f = std::fs::File::create(&tmp)?;
+            std::io::Write::write_all(&mut &f, &bytes)?;
+            f.sync_all()?;
+            std::fs::rename(&tmp, &fin)
+        };
+        write().with_context(|| format!("writing {}", fin.display()))
+    }
+
+    /// Removes the folder and everything in it.
+    pub fn remove(self) -> Result<()> {
+        std::fs::remove_dir_all(&self.path)
+            .with_context(|| format!("removing the work folder {}", self.path.display()))
+    }
+}
