@@ -1,15 +1,18 @@
 //! Voxelization throughput on a made-up mesh: an icosphere filling a grid.
 //!
-//! `cargo run --release -p voxlod-voxelize --example voxelize_bench -- [subdiv=6] [resolution=1024]`
+//! `cargo run --release -p voxlod-voxelize --example voxelize_bench -- [subdiv=6] [resolution=1024] [mesh]`
+//!
+//! With a mesh file (PLY, OBJ, STL) its triangles, fitted to the grid, replace the icosphere.
 //!
 //! Reports, per mode: the bare overlap test (`voxelize_triangle`, counting voxels), the full
-//! chunk voxelizer on one thread (overlap + clipping + attributes + encoding), and
-//! `voxelize_grid` on all rayon threads.
+//! chunk voxelizer on one thread (overlap + clipping + attributes + encoding) with the fast paths
+//! and with the general clipping only (`ChunkVoxelizer::set_fast_paths(false)`), whether both
+//! give the same voxel records, and `voxelize_grid` on all rayon threads.
 
 use std::collections::HashMap;
 use std::time::Instant;
 
-use voxlod_geom::{Grid, Triangle, CHUNK};
+use voxlod_geom::{Bounds, Grid, Triangle, CHUNK};
 use voxlod_voxelize::{voxelize_grid, voxelize_triangle, ChunkVoxelizer, Mode};
 
 fn icosphere(subdiv: u32) -> Vec<[[f64; 3]; 3]> {
@@ -81,6 +84,45 @@ fn icosphere(subdiv: u32) -> Vec<[[f64; 3]; 3]> {
     f.iter().map(|t| t.map(|i| v[i])).collect()
 }
 
+/// The icosphere filling 90% of the grid, vertex colours red, green, blue.
+fn sphere(subdiv: u32, res: u32) -> Vec<Triangle> {
+    let r = 0.45 * res as f64;
+    let c = 0.5 * res as f64 + 0.123;
+    println!("icosphere subdiv {subdiv}, radius {r:.0}");
+    icosphere(subdiv)
+        .iter()
+        .map(|t| {
+            let mut tri = Triangle::new(t.map(|p| p.map(|x| (c + r * x) as f32)));
+            tri.c = [[200, 30, 30, 255], [30, 200, 30, 255], [30, 30, 200, 255]];
+            tri
+        })
+        .collect()
+}
+
+/// A mesh file's triangles in grid coordinates (the grid fitted to its bounds).
+fn mesh(path: &std::path::Path, res: u32) -> Vec<Triangle> {
+    let src = voxlod_ingest::MeshSource::open(path).expect("open mesh");
+    let mut tris = Vec::new();
+    src.stream(
+        &mut |b| {
+            tris.extend_from_slice(b);
+            Ok(())
+        },
+        &mut |_, _| {},
+    )
+    .expect("read mesh");
+    let mut bounds = Bounds::default();
+    for t in &tris {
+        bounds.add_triangle(t);
+    }
+    let grid = Grid::fit(&bounds, res).expect("grid");
+    for t in &mut tris {
+        t.v = t.v.map(|p| grid.to_grid(p));
+    }
+    println!("{}: {}", path.display(), src.info().format);
+    tris
+}
+
 /// CPU time of this thread in seconds (Linux schedstat), so that the one-thread numbers are
 /// meaningful on a shared machine; `None` elsewhere.
 fn thread_cpu() -> Option<f64> {
@@ -92,18 +134,12 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let subdiv: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
     let res: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1024);
-    let r = 0.45 * res as f64;
-    let c = 0.5 * res as f64 + 0.123;
-    let tris: Vec<Triangle> = icosphere(subdiv)
-        .iter()
-        .map(|t| {
-            let mut tri = Triangle::new(t.map(|p| p.map(|x| (c + r * x) as f32)));
-            tri.c = [[200, 30, 30, 255], [30, 200, 30, 255], [30, 30, 200, 255]];
-            tri
-        })
-        .collect();
+    let tris = match args.get(3) {
+        Some(path) => mesh(std::path::Path::new(path), res),
+        None => sphere(subdiv, res),
+    };
     println!(
-        "icosphere subdiv {subdiv}: {} triangles, radius {r:.0} in a {res}³ grid, {} rayon threads",
+        "{} triangles in a {res}³ grid, {} rayon threads",
         tris.len(),
         rayon::current_num_threads()
     );
@@ -123,36 +159,58 @@ fn main() {
         );
 
         // full chunk voxelizer, one thread: bin, then chunk by chunk
-        let grid = Grid::new([0.0; 3], res as f64, res).expect("grid");
-        let c0 = thread_cpu();
-        let t0 = Instant::now();
-        let mut bins: HashMap<[u32; 3], Vec<Triangle>> = HashMap::new();
-        for t in &tris {
-            if let Some((lo, hi)) = grid.chunk_range(t) {
-                for z in lo[2]..=hi[2] {
-                    for y in lo[1]..=hi[1] {
-                        for x in lo[0]..=hi[0] {
-                            bins.entry([x, y, z]).or_default().push(*t);
+        let mut outputs = Vec::new();
+        let mut count = 0usize;
+        for fast in [true, false] {
+            let grid = Grid::new([0.0; 3], res as f64, res).expect("grid");
+            let c0 = thread_cpu();
+            let t0 = Instant::now();
+            let mut bins: HashMap<[u32; 3], Vec<Triangle>> = HashMap::new();
+            for t in &tris {
+                if let Some((lo, hi)) = grid.chunk_range(t) {
+                    for z in lo[2]..=hi[2] {
+                        for y in lo[1]..=hi[1] {
+                            for x in lo[0]..=hi[0] {
+                                bins.entry([x, y, z]).or_default().push(*t);
+                            }
                         }
                     }
                 }
             }
+            let mut keys: Vec<[u32; 3]> = bins.keys().copied().collect();
+            keys.sort();
+            let mut cv = ChunkVoxelizer::new(mode);
+            cv.set_fast_paths(fast);
+            let mut out = Vec::new();
+            count = 0;
+            for k in &keys {
+                cv.begin(k.map(|x| x * CHUNK));
+                cv.add(&bins[k]);
+                let v = cv.finish();
+                count += v.len();
+                out.push(v);
+            }
+            let dt = cpu_or_wall(c0, t0);
+            let name = if fast { "fast" } else { "general" };
+            println!(
+                "{mode:>12} chunk {name:>7}, 1 thread (cpu): {count:>10} voxels  {dt:7.3} s  {:7.2} M voxels/s  ({} chunks)",
+                count as f64 / dt / 1e6,
+                keys.len()
+            );
+            outputs.push(out);
         }
-        let mut keys: Vec<[u32; 3]> = bins.keys().copied().collect();
-        keys.sort();
-        let mut cv = ChunkVoxelizer::new(mode);
-        let mut count = 0usize;
-        for k in &keys {
-            cv.begin(k.map(|x| x * CHUNK));
-            cv.add(&bins[k]);
-            count += cv.finish().len();
-        }
-        let dt = cpu_or_wall(c0, t0);
-        println!(
-            "{mode:>12} chunk, 1 thread (cpu): {count:>10} voxels      {dt:7.3} s  {:7.2} M voxels/s  ({} chunks)",
-            count as f64 / dt / 1e6,
-            keys.len()
-        );
+        let differ: usize = outputs[0]
+            .iter()
+            .zip(&outputs[1])
+            .map(|(a, b)| {
+                if a.len() != b.len() {
+                    a.len().max(b.len())
+                } else {
+                    a.iter().zip(b).filter(|(x, y)| x != y).count()
+                }
+            })
+            .sum();
+        println!("{mode:>12} fast vs general: {differ} of {count} voxel records differ");
 
         // parallel grid driver
         let t0 = Instant::now();

@@ -5,11 +5,12 @@
 //! Memory is bounded by the chunk: a dense 256³ `u32` slot index (64 MiB, allocated once as zero
 //! pages, cleared sparsely after each chunk) and one accumulator per occupied voxel.
 
-use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, pack_normal, Voxel};
+use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, Voxel};
 use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
 
-use crate::clip::{area_scale, Poly};
+use crate::column::Columns;
 use crate::overlap::{to_f64, TriSetup};
+use crate::round::{pack_normal, round_f64};
 use crate::Mode;
 
 const N: usize = (CHUNK * CHUNK * CHUNK) as usize;
@@ -28,6 +29,36 @@ struct Acc {
     k: u32,
     un: [f64; 3],
     uc: [f64; 4],
+}
+
+impl Acc {
+    /// The sums after one contribution (`0 + x`, as [`Acc::add`] on zeroed sums would give).
+    #[inline]
+    fn first(idx: u32, w: f64, n: [f64; 3], c: [f64; 4]) -> Acc {
+        Acc {
+            idx,
+            w: 0.0 + w,
+            wn: n.map(|x| 0.0 + w * x),
+            wc: c.map(|x| 0.0 + w * x),
+            k: 1,
+            un: n.map(|x| 0.0 + x),
+            uc: c.map(|x| 0.0 + x),
+        }
+    }
+
+    #[inline]
+    fn add(&mut self, w: f64, n: [f64; 3], c: [f64; 4]) {
+        self.w += w;
+        self.k += 1;
+        for k in 0..3 {
+            self.wn[k] += w * n[k];
+            self.un[k] += n[k];
+        }
+        for k in 0..4 {
+            self.wc[k] += w * c[k];
+            self.uc[k] += c[k];
+        }
+    }
 }
 
 /// Per-triangle attribute interpolation: barycentrics at a point, vertex normals / colours.
@@ -112,6 +143,7 @@ pub struct ChunkVoxelizer {
     slot: Vec<u32>,
     acc: Vec<Acc>,
     skipped: u64,
+    fast: bool,
 }
 
 impl ChunkVoxelizer {
@@ -123,7 +155,15 @@ impl ChunkVoxelizer {
             slot: vec![0u32; N],
             acc: Vec::new(),
             skipped: 0,
+            fast: true,
         }
+    }
+
+    /// For tests and benchmarks: `false` computes every weight by the general clipping of
+    /// [`crate::clipped_area`] (bit-identical to it), `true` (the default) uses the closed forms
+    /// of [`crate::column`] where they apply (equal up to rounding).
+    pub fn set_fast_paths(&mut self, on: bool) {
+        self.fast = on;
     }
 
     /// The voxelization mode.
@@ -166,39 +206,16 @@ impl ChunkVoxelizer {
                 continue;
             }
             let attrs = Attrs::new(t);
-            let scale = area_scale(s.n);
-            let tri = Poly::triangle(&s.v);
             let tri_centroid =
                 [0, 1, 2].map(|k| (t.v[0][k] as f64 + t.v[1][k] as f64 + t.v[2][k] as f64) / 3.0);
-            let (tmin, tmax) = tri.bounds();
-            let mut column = tri;
-            let mut column_z = (tmin[2], tmax[2]);
+            let mut cols = Columns::new(&s, self.fast);
             let slot = &mut self.slot;
             let acc = &mut self.acc;
             s.scan(lo_s, hi_s, |p, first| {
-                let [x, y, z] = p.map(|c| c as f64);
                 if first {
-                    // the four side planes once per column; skipped (same result) when the
-                    // triangle lies inside the column
-                    column =
-                        if tmin[0] >= x && tmax[0] <= x + 1.0 && tmin[1] >= y && tmax[1] <= y + 1.0
-                        {
-                            column_z = (tmin[2], tmax[2]);
-                            tri
-                        } else {
-                            let c = tri.clip_column(x, y);
-                            column_z = c.bounds_z();
-                            c
-                        };
+                    cols.begin(p[0] as f64, p[1] as f64);
                 }
-                // the two depth planes per voxel; skipped (same result) when the column's part
-                // lies inside the voxel
-                let clipped = if column_z.0 >= z && column_z.1 <= z + 1.0 {
-                    column
-                } else {
-                    column.clip_depth(z)
-                };
-                let (w, c) = clipped.area_centroid(scale);
+                let (w, c) = cols.voxel(p[2] as f64);
                 let q = match c {
                     Some(c) => s.unswizzle(c),
                     None => tri_centroid,
@@ -210,22 +227,10 @@ impl ChunkVoxelizer {
                 let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
                 let sl = &mut slot[idx as usize];
                 if *sl == 0 {
-                    acc.push(Acc {
-                        idx,
-                        ..Acc::default()
-                    });
+                    acc.push(Acc::first(idx, w, n, col));
                     *sl = acc.len() as u32;
-                }
-                let a = &mut acc[*sl as usize - 1];
-                a.w += w;
-                a.k += 1;
-                for k in 0..3 {
-                    a.wn[k] += w * n[k];
-                    a.un[k] += n[k];
-                }
-                for k in 0..4 {
-                    a.wc[k] += w * col[k];
-                    a.uc[k] += col[k];
+                } else {
+                    acc[*sl as usize - 1].add(w, n, col);
                 }
             });
         }
@@ -234,33 +239,67 @@ impl ChunkVoxelizer {
     /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
     /// with normal, colour and face mask. Resets for the next `begin`.
     pub fn finish(&mut self) -> Vec<Voxel> {
-        // sort (Morton code, slot) keys rather than the large accumulators
+        // encode in slot order (sequential), then sort (Morton code, slot) keys by radix and
+        // gather: no comparison sort, no random access into the large accumulators
+        let enc: Vec<Voxel> = self.acc.iter().map(encode).collect();
         let mut keys: Vec<u64> = self
             .acc
             .iter()
             .enumerate()
             .map(|(i, a)| (a.idx as u64) << 32 | i as u64)
             .collect();
-        keys.sort_unstable();
+        radix_sort_morton(&mut keys);
         let out = keys
             .iter()
-            .map(|&k| {
-                let a = &self.acc[(k & 0xffff_ffff) as usize];
-                let pos = demorton3(a.idx as u64).map(|c| c as u8);
-                let (n, c) = average(a);
-                let normal = pack_normal(n);
-                let mask = face_mask(normal) | border_caps(pos);
-                let rgba = c.map(|x| x.round().clamp(0.0, 255.0) as u8);
-                Voxel::new(pos, mask, normal, pack_color(rgba))
-            })
+            .map(|&k| enc[(k & 0xffff_ffff) as usize])
             .collect();
-        self.reset();
+        // clear the slot index in Morton order (ascending addresses), then the accumulators
+        for &k in &keys {
+            self.slot[(k >> 32) as usize] = 0;
+        }
+        self.acc.clear();
         out
     }
 
     /// Triangles skipped (zero area or non-finite) since this voxelizer was made.
     pub fn skipped(&self) -> u64 {
         self.skipped
+    }
+}
+
+/// The voxel record of an accumulator.
+#[inline]
+fn encode(a: &Acc) -> Voxel {
+    let pos = demorton3(a.idx as u64).map(|c| c as u8);
+    let (n, c) = average(a);
+    let normal = pack_normal(n);
+    let mask = face_mask(normal) | border_caps(pos);
+    let rgba = c.map(|x| round_f64(x).clamp(0.0, 255.0) as u8);
+    Voxel::new(pos, mask, normal, pack_color(rgba))
+}
+
+/// Sorts keys `morton << 32 | slot` by their 24-bit Morton code (LSD radix, three 8-bit
+/// digits); Morton codes are unique within a chunk, so this is the order of a full sort.
+fn radix_sort_morton(keys: &mut Vec<u64>) {
+    if keys.len() < 64 {
+        keys.sort_unstable();
+        return;
+    }
+    let mut tmp = vec![0u64; keys.len()];
+    for shift in [32u32, 40, 48] {
+        let mut count = [0usize; 257];
+        for &k in keys.iter() {
+            count[((k >> shift) & 0xff) as usize + 1] += 1;
+        }
+        for i in 0..256 {
+            count[i + 1] += count[i];
+        }
+        for &k in keys.iter() {
+            let d = ((k >> shift) & 0xff) as usize;
+            tmp[count[d]] = k;
+            count[d] += 1;
+        }
+        std::mem::swap(keys, &mut tmp);
     }
 }
 

@@ -20,6 +20,12 @@ pub struct Poly {
 }
 
 impl Poly {
+    /// The polygon without vertices.
+    pub const EMPTY: Poly = Poly {
+        len: 0,
+        p: [[0.0; 3]; MAX_POLY],
+    };
+
     /// The triangle as a polygon.
     #[inline]
     pub fn triangle(v: &[[f64; 3]; 3]) -> Poly {
@@ -40,15 +46,23 @@ impl Poly {
     /// every vertex is inside the polygon is returned unchanged.
     #[inline]
     pub fn clip(&self, k: usize, b: f64, upper: bool) -> Poly {
-        if upper {
-            self.clip_side::<true>(k, b)
+        let mut out = Poly::EMPTY;
+        let clipped = if upper {
+            self.clip_into::<true>(k, b, &mut out)
         } else {
-            self.clip_side::<false>(k, b)
+            self.clip_into::<false>(k, b, &mut out)
+        };
+        if clipped {
+            out
+        } else {
+            *self
         }
     }
 
+    /// [`Poly::clip`] writing into `out` (no copy, no temporary): returns `false`, leaving `out`
+    /// untouched, when every vertex is inside (the result is `self`).
     #[inline(always)]
-    fn clip_side<const UPPER: bool>(&self, k: usize, b: f64) -> Poly {
+    pub(crate) fn clip_into<const UPPER: bool>(&self, k: usize, b: f64, out: &mut Poly) -> bool {
         let mut d = [0.0f64; MAX_POLY];
         let mut all_in = true;
         for i in 0..self.len {
@@ -60,12 +74,9 @@ impl Poly {
             all_in &= d[i] >= 0.0;
         }
         if all_in {
-            return *self;
+            return false;
         }
-        let mut out = Poly {
-            len: 0,
-            p: [[0.0; 3]; MAX_POLY],
-        };
+        out.len = 0;
         for i in 0..self.len {
             let j = if i + 1 == self.len { 0 } else { i + 1 };
             let (da, dc) = (d[i], d[j]);
@@ -88,7 +99,30 @@ impl Poly {
                 out.push(q);
             }
         }
-        out
+        true
+    }
+
+    /// Area and centroid ([`Poly::area_centroid`]) of the part in the slab `z ∈ [z, z+1]`
+    /// ([`Poly::clip_depth`]), with `t1`, `t2` as scratch space.
+    #[inline]
+    pub(crate) fn depth_area_centroid(
+        &self,
+        z: f64,
+        area_scale: f64,
+        t1: &mut Poly,
+        t2: &mut Poly,
+    ) -> (f64, Option<[f64; 3]>) {
+        let a = if self.clip_into::<false>(2, z, t1) {
+            &*t1
+        } else {
+            self
+        };
+        let b = if a.clip_into::<true>(2, z + 1.0, t2) {
+            &*t2
+        } else {
+            a
+        };
+        b.area_centroid(area_scale)
     }
 
     #[inline]
@@ -124,10 +158,21 @@ impl Poly {
     /// Clips to the column `[x, x+1] × [y, y+1]` (axes 0 and 1).
     #[inline]
     pub fn clip_column(&self, x: f64, y: f64) -> Poly {
-        self.clip(0, x, false)
-            .clip(0, x + 1.0, true)
-            .clip(1, y, false)
-            .clip(1, y + 1.0, true)
+        let mut out = *self;
+        let mut t = Poly::EMPTY;
+        if out.clip_into::<false>(0, x, &mut t) {
+            out = t;
+        }
+        if out.clip_into::<true>(0, x + 1.0, &mut t) {
+            out = t;
+        }
+        if out.clip_into::<false>(1, y, &mut t) {
+            out = t;
+        }
+        if out.clip_into::<true>(1, y + 1.0, &mut t) {
+            out = t;
+        }
+        out
     }
 
     /// Clips to the slab `z ∈ [z, z+1]` (axis 2).

@@ -66,11 +66,14 @@
 
 pub mod chunk;
 pub mod clip;
+pub mod column;
 pub mod grid;
 pub mod overlap;
+mod round;
 
 pub use chunk::ChunkVoxelizer;
 pub use clip::clipped_area;
+pub use column::voxel_areas;
 pub use grid::{voxelize_grid, GridVoxels};
 pub use overlap::{voxelize_triangle, TriSetup};
 
