@@ -1,0 +1,147 @@
+//! Export of one level as a quad mesh in binary PLY, to look at in MeshLab or Blender: each
+//! active face of each voxel (its face mask, FORMAT.md section 6) becomes one quad of four
+//! vertices in world coordinates. Vertices are not shared between quads, so every quad carries
+//! its voxel's attributes: the **vertex normal is the voxel's normal** (normalized; the face
+//! direction where the voxel's normal is zero), which shades like the Chajdas renderer, and the
+//! colour is the voxel's RGBA.
+//!
+//! Two passes over the level's nodes (count, then write), so memory does not grow with the
+//! level: the PLY header needs the counts first.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
+
+use voxlod_format::voxel::unpack_normal;
+use voxlod_format::Reader;
+
+use crate::faces::{face_direction, level_nodes, node_faces, unit_face_corners, Face};
+use crate::RenderError;
+
+/// What [`export_ply`] wrote.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExportSummary {
+    /// Voxels of the level.
+    pub voxels: u64,
+    /// Quads written (active faces).
+    pub quads: u64,
+    /// Vertices written (4 per quad).
+    pub vertices: u64,
+    /// File size in bytes.
+    pub bytes: u64,
+}
+
+/// Bytes per vertex record: 6 floats and 4 colour bytes.
+const VERTEX_BYTES: u64 = 6 * 4 + 4;
+/// Bytes per face record: a count byte and 4 ints.
+const FACE_BYTES: u64 = 1 + 4 * 4;
+
+/// Writes the voxels of `level` as quads to a binary little-endian PLY at `path`.
+pub fn export_ply(reader: &Reader, level: u32, path: &Path) -> Result<ExportSummary, RenderError> {
+    let nodes = level_nodes(reader, level)?;
+    let mut buf = Vec::new();
+    let mut quads = 0u64;
+    let mut voxels = 0u64;
+    for &i in &nodes {
+        node_faces(reader, i, &mut buf, &mut |_| quads += 1)?;
+        voxels += buf.len() as u64;
+    }
+    let vertices = 4 * quads;
+    if vertices > u32::MAX as u64 {
+        return Err(RenderError::Option(format!(
+            "level {level} has {quads} faces, more than a PLY with int indices can hold; export a coarser level"
+        )));
+    }
+    let io = |op: &'static str| {
+        move |source| RenderError::Io {
+            path: path.to_owned(),
+            op,
+            source,
+        }
+    };
+    let file = File::create(path).map_err(io("creating"))?;
+    let mut w = BufWriter::with_capacity(1 << 20, file);
+    let spec = reader.spec();
+    let header = format!(
+        "ply\nformat binary_little_endian 1.0\n\
+         comment voxlod export: level {level} of {}³ grid, voxel edge {}, {voxels} voxels\n\
+         comment one quad per active voxel face; vertex normal = voxel normal\n\
+         element vertex {vertices}\n\
+         property float x\nproperty float y\nproperty float z\n\
+         property float nx\nproperty float ny\nproperty float nz\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n\
+         element face {quads}\n\
+         property list uchar int vertex_indices\n\
+         end_header\n",
+        spec.resolution,
+        spec.voxel_size_at(level)
+    );
+    w.write_all(header.as_bytes()).map_err(io("writing"))?;
+
+    // vertices, node by node, in the same order as counted
+    let mut err = None;
+    let mut written = 0u64;
+    for &i in &nodes {
+        node_faces(reader, i, &mut buf, &mut |f: Face| {
+            if err.is_some() {
+                return;
+            }
+            if let Err(e) = write_quad_vertices(&mut w, &f) {
+                err = Some(e);
+            }
+            written += 1;
+        })?;
+        if let Some(e) = err.take() {
+            return Err(io("writing")(e));
+        }
+    }
+    debug_assert_eq!(written, quads);
+    if written != quads {
+        return Err(RenderError::Option(format!(
+            "the file changed between passes: {quads} faces counted, {written} read"
+        )));
+    }
+    let mut rec = [0u8; FACE_BYTES as usize];
+    rec[0] = 4;
+    for q in 0..quads as u32 {
+        for k in 0..4u32 {
+            let at = 1 + 4 * k as usize;
+            rec[at..at + 4].copy_from_slice(&(4 * q + k).to_le_bytes());
+        }
+        w.write_all(&rec).map_err(io("writing"))?;
+    }
+    w.flush().map_err(io("writing"))?;
+    let bytes = header.len() as u64 + vertices * VERTEX_BYTES + quads * FACE_BYTES;
+    Ok(ExportSummary {
+        voxels,
+        quads,
+        vertices,
+        bytes,
+    })
+}
+
+/// The normal a face is drawn with: the voxel's, or the face direction if that is zero.
+pub fn shading_normal(f: &Face) -> [f32; 3] {
+    let q = unpack_normal(f.normal);
+    let len = ((q[0] * q[0] + q[1] * q[1] + q[2] * q[2]) as f32).sqrt();
+    if len == 0.0 {
+        face_direction(f.dir)
+    } else {
+        q.map(|c| c as f32 / len)
+    }
+}
+
+fn write_quad_vertices(w: &mut impl Write, f: &Face) -> std::io::Result<()> {
+    let n = shading_normal(f);
+    let mut rec = [0u8; VERTEX_BYTES as usize];
+    for c in unit_face_corners(f.dir) {
+        for a in 0..3 {
+            let p = (f.min[a] + f.edge * c[a] as f64) as f32;
+            rec[4 * a..4 * a + 4].copy_from_slice(&p.to_le_bytes());
+            rec[12 + 4 * a..16 + 4 * a].copy_from_slice(&n[a].to_le_bytes());
+        }
+        rec[24..28].copy_from_slice(&f.rgba);
+        w.write_all(&rec)?;
+    }
+    Ok(())
+}

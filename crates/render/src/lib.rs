@@ -1,0 +1,77 @@
+//! Looking at voxlod octrees: pictures and meshes.
+//!
+//! - [`Renderer`] draws a file headless on wgpu (Vulkan, or lavapipe where there is no GPU)
+//!   the way the renderer of Chajdas, Reitinger & Westermann ("Scalable rendering for very
+//!   large meshes", WSCG 2014) does: each voxel a small cube of which only the faces in its
+//!   face mask are drawn, shaded with its normal under a directional light and its colour.
+//!   The nodes drawn are one level, or the screen-space error cut for the camera
+//!   ([`Lod`], `Reader::select_by_error`); the camera frames the model by default ([`View`]).
+//! - [`export_ply`] writes one level as a quad mesh (binary PLY with normals and colours).
+//!
+//! ```
+//! use voxlod_format::voxel::{border_caps, face_mask, pack_color, pack_normal, Voxel};
+//! use voxlod_format::{encode_node, FileSpec, Reader, Writer, MODE_THIN};
+//!
+//! let dir = tempfile::tempdir().unwrap();
+//! let path = dir.path().join("one.voxlod");
+//! let n = pack_normal([0.0, 0.0, 1.0]);
+//! let v = Voxel::new([4, 4, 4], face_mask(n) | border_caps([4, 4, 4]), n, pack_color([255, 0, 0, 255]));
+//! let mut w = Writer::create(&path, FileSpec::new(256, MODE_THIN, [0.0; 3], 0.1)).unwrap();
+//! w.write_node(0, [0, 0, 0], 0, &encode_node(&[v], 3).unwrap()).unwrap();
+//! w.finish(&serde_json::json!({})).unwrap();
+//! let reader = Reader::open(&path).unwrap();
+//!
+//! // one +z face: one quad
+//! let out = dir.path().join("level0.ply");
+//! let s = voxlod_render::export_ply(&reader, 0, &out).unwrap();
+//! assert_eq!((s.voxels, s.quads, s.vertices), (1, 1, 4));
+//! assert_eq!(std::fs::metadata(&out).unwrap().len(), s.bytes);
+//! ```
+//!
+//! Rendering needs an adapter; see `tests/render.rs` for a complete example with
+//! [`Renderer::new`], [`frame`] and [`Renderer::render`].
+
+mod camera;
+mod draw;
+mod error;
+mod export;
+mod faces;
+mod picture;
+
+pub use camera::{model_bounds, Shot, View};
+pub use draw::{Renderer, BACKGROUND};
+pub use error::RenderError;
+pub use export::{export_ply, shading_normal, ExportSummary};
+pub use faces::{face_direction, node_faces, unit_face_corners, Face};
+pub use picture::Picture;
+
+use voxlod_format::Reader;
+
+/// Which nodes to draw.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lod {
+    /// Every node of one level (0 = the finest).
+    Level(u32),
+    /// The screen-space error cut: refine while a node's voxels project to more than this
+    /// many pixels (`Reader::select_by_error`).
+    Error(f64),
+}
+
+/// The camera framing the model for `view`, and the nodes `lod` selects for it.
+pub fn frame(reader: &Reader, view: &View, lod: Lod) -> Result<(Shot, Vec<usize>), RenderError> {
+    let bounds = model_bounds(reader)
+        .ok_or_else(|| RenderError::Option("the file has no voxels to draw".into()))?;
+    let shot = Shot::frame(bounds, view)?;
+    let nodes = match lod {
+        Lod::Level(l) => faces::level_nodes(reader, l)?,
+        Lod::Error(px) => {
+            if !(px.is_finite() && px > 0.0) {
+                return Err(RenderError::Option(format!(
+                    "screen-space error {px} must be a positive number of pixels"
+                )));
+            }
+            reader.select_by_error(&shot.error_camera(), px)
+        }
+    };
+    Ok((shot, nodes))
+}
