@@ -97,6 +97,9 @@ fn dilate(s: Setup, ti: u32) -> Deferred {
     d.c = r[2];
     d.tri = ti;
     d._pad = 0u;
+    let oi = swizzle_i(params.origin, s.axis).xy;
+    d.lo = s.lo.xy - oi;
+    d.hi = s.hi.xy - oi;
     return d;
 }
 

@@ -39,12 +39,14 @@ fn vs(@builtin(vertex_index) vi: u32) -> VsOut {
 @fragment
 fn fs(in: VsOut) -> @location(0) vec4<f32> {
     let d = deferred[in.slot];
+    let q = vec2<i32>(floor(in.pos.xy));
+    if any(q < d.lo) || any(q > d.hi) {
+        return vec4<f32>(0.0);
+    }
     let s = setup(d.tri);
     let o = swizzle_i(params.origin, s.axis);
-    let px = i32(floor(in.pos.x)) + o.x;
-    let py = i32(floor(in.pos.y)) + o.y;
-    if s.ok && px >= s.lo.x && px <= s.hi.x && py >= s.lo.y && py <= s.hi.y {
-        column(s, d.tri, px, py);
+    if s.ok {
+        column(s, d.tri, q.x + o.x, q.y + o.y);
     }
     return vec4<f32>(0.0);
 }

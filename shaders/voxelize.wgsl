@@ -54,6 +54,11 @@ struct Deferred {
     c: vec2<f32>,
     tri: u32,
     _pad: u32,
+    // the triangle's column range in the chunk (chunk-local, swizzled): fragments of the
+    // dilated triangle outside it are discarded before the setup (the dilated vertices of a
+    // sliver lie far away, Hertel's miters)
+    lo: vec2<i32>,
+    hi: vec2<i32>,
 };
 
 // Per-triangle setup (paper 3.1.2), swizzled so that the dominant axis is z.
@@ -257,12 +262,14 @@ fn column(s: Setup, ti: u32, px: i32, py: i32) {
     }
 }
 
-// The triangle-parallel routine: every column of the triangle's range in the chunk.
+// The triangle-parallel routine: every column of the triangle's range in the chunk. One flat
+// loop, not two nested ones: lanes of a SIMD group iterate in lockstep, so nested loops would
+// cost max(width) × max(height) over the group's triangles against lavapipe's iteration cap.
 fn voxelize_triangle(s: Setup, ti: u32) {
-    for (var px = s.lo.x; px <= s.hi.x; px++) {
-        for (var py = s.lo.y; py <= s.hi.y; py++) {
-            column(s, ti, px, py);
-        }
+    let w = s.hi.x - s.lo.x + 1;
+    let n = w * (s.hi.y - s.lo.y + 1);
+    for (var c = 0; c < n; c++) {
+        column(s, ti, s.lo.x + c % w, s.lo.y + c / w);
     }
 }
 

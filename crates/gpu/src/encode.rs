@@ -20,7 +20,8 @@ fn sum(acc: &[u32], k: usize) -> f64 {
 
 /// Appends the voxels whose slots are in `[lo, hi)`: `occ` is the occupancy bitset (bit `i` of
 /// word `w` is local voxel `32 w + i`, index `x + 256 (y + 256 z)`), `base` the first slot of
-/// each word, `acc` the accumulators of slots `lo..hi`.
+/// each word, `acc` the accumulators of slots `lo..hi`. Returns how many occupied voxels got no
+/// contribution at all (a shader invocation was cut short); those are not appended.
 pub(crate) fn decode(
     occ: &[u32],
     base: &[u32],
@@ -28,7 +29,8 @@ pub(crate) fn decode(
     lo: u32,
     hi: u32,
     out: &mut Vec<Voxel>,
-) {
+) -> usize {
+    let mut empty = 0;
     debug_assert_eq!(occ.len(), base.len());
     debug_assert_eq!(acc.len(), (hi - lo) as usize * SLOT_WORDS);
     for (w, (&bits, &b)) in occ.iter().zip(base).enumerate() {
@@ -44,15 +46,20 @@ pub(crate) fn decode(
                 let idx = w as u32 * 32 + bit;
                 let pos = [idx & 255, (idx >> 8) & 255, idx >> 16].map(|c| c as u8);
                 let a = &acc[(slot - lo) as usize * SLOT_WORDS..][..SLOT_WORDS];
-                out.push(voxel(pos, a));
+                match voxel(pos, a) {
+                    Some(v) => out.push(v),
+                    None => empty += 1,
+                }
             }
             slot += 1;
         }
     }
+    empty
 }
 
-/// One voxel from its sums: area-weighted means, or unweighted means if the total weight is 0.
-fn voxel(pos: [u8; 3], a: &[u32]) -> Voxel {
+/// One voxel from its sums: area-weighted means, or unweighted means if the total weight is 0;
+/// None if nothing was added.
+fn voxel(pos: [u8; 3], a: &[u32]) -> Option<Voxel> {
     let w = sum(a, 0);
     let (n, c) = if w > 0.0 {
         (
@@ -74,5 +81,5 @@ fn voxel(pos: [u8; 3], a: &[u32]) -> Voxel {
     let normal = pack_normal(n);
     let mask = face_mask(normal) | border_caps(pos);
     let rgba = c.map(|x| x.round().clamp(0.0, 255.0) as u8);
-    Voxel::new(pos, mask, normal, pack_color(rgba))
+    Some(Voxel::new(pos, mask, normal, pack_color(rgba)))
 }

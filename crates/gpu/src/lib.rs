@@ -52,8 +52,10 @@ use std::str::FromStr;
 
 /// Default cutoff (voxels² of dominant projected area) between triangles voxelized in the
 /// classification pass and triangles deferred to the fragment pass. The paper finds "a few
-/// voxels²" best on a GTX 480; on lavapipe the measured optimum is flat between about 2 and 32
-/// (see examples/gpu_bench.rs).
+/// voxels²" best on a GTX 480. On lavapipe (2 loaded cores, thin mode, one 256³ chunk,
+/// examples/gpu_bench.rs) hybrid at 8 took 2.9 s on bun_zipper against 3.8 s at 4 and 10.5 s at
+/// 2; Dabrovic Sponza kept improving up to 16-128 (8.9 s at 16, 11.6 s at 8). The measurements
+/// are noisy (other builds were running); an automatic cutoff search is still to do.
 pub const DEFAULT_CUTOFF: f32 = 8.0;
 
 /// Which GPU voxelization scheme to run (paper section 3).
@@ -114,6 +116,11 @@ pub enum GpuError {
     /// Reading a buffer back failed (device lost, or polling failed).
     #[error("GPU read-back failed on {adapter}: {reason}")]
     Readback { adapter: String, reason: String },
+    /// Some occupied voxels received no attributes in the accumulation pass: a shader
+    /// invocation was cut short by the driver (lavapipe stops an invocation after 65535 loop
+    /// iterations). A bug of this crate if it ever happens.
+    #[error("GPU voxelization incomplete on {adapter}: {voxels} marked voxels got no attributes")]
+    Incomplete { adapter: String, voxels: usize },
     /// The chunk origin is not a multiple of 256 or too large for the i32 coordinates of the
     /// shaders.
     #[error("chunk origin {0:?} is not a multiple of 256 below 2^31")]

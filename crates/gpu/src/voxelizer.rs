@@ -19,7 +19,7 @@ const OCC_BYTES: u64 = OCC_WORDS * 4;
 /// per deferred triangle, and a dispatch dimension is at most 65535.
 const BATCH: usize = 65535;
 /// Bytes of one deferred triangle record.
-const DEFERRED_BYTES: u64 = 32;
+const DEFERRED_BYTES: u64 = 48;
 /// Most voxel slots accumulated per pass (96 MiB of accumulators, under the 128 MiB binding limit).
 const MAX_WINDOW: u64 = 1 << 19;
 const WG: u32 = 64;
