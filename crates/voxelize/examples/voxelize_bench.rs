@@ -2,7 +2,9 @@
 //!
 //! `cargo run --release -p voxlod-voxelize --example voxelize_bench -- [subdiv=6] [resolution=1024] [mesh]`
 //!
-//! With a mesh file (PLY, OBJ, STL) its triangles, fitted to the grid, replace the icosphere.
+//! With a mesh file (PLY, OBJ, STL) its triangles, fitted to the grid, replace the icosphere
+//! (`-` keeps the icosphere). A fifth argument `fast` or `general` runs only that chunk path and
+//! skips the grid driver (for profiling).
 //!
 //! Reports, per mode: the bare overlap test (`voxelize_triangle`, counting voxels), the full
 //! chunk voxelizer on one thread (overlap + clipping + attributes + encoding) with the fast paths
@@ -134,7 +136,12 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let subdiv: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
     let res: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1024);
-    let tris = match args.get(3) {
+    let paths: &[bool] = match args.get(4).map(|s| s.as_str()) {
+        Some("fast") => &[true],
+        Some("general") => &[false],
+        _ => &[true, false],
+    };
+    let tris = match args.get(3).filter(|s| *s != "-") {
         Some(path) => mesh(std::path::Path::new(path), res),
         None => sphere(subdiv, res),
     };
@@ -161,7 +168,7 @@ fn main() {
         // full chunk voxelizer, one thread: bin, then chunk by chunk
         let mut outputs = Vec::new();
         let mut count = 0usize;
-        for fast in [true, false] {
+        for &fast in paths {
             let grid = Grid::new([0.0; 3], res as f64, res).expect("grid");
             let c0 = thread_cpu();
             let t0 = Instant::now();
@@ -198,6 +205,9 @@ fn main() {
                 keys.len()
             );
             outputs.push(out);
+        }
+        if outputs.len() < 2 {
+            continue;
         }
         let differ: usize = outputs[0]
             .iter()

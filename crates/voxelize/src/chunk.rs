@@ -2,8 +2,10 @@
 //! large meshes", WSCG 2014, section 3) with the overlap tests of [`crate::overlap`] and
 //! clipped-area weighted attributes ([`crate::clip`]).
 //!
-//! Memory is bounded by the chunk: a dense 256³ `u32` slot index (64 MiB, allocated once as zero
-//! pages, cleared sparsely after each chunk) and one accumulator per occupied voxel.
+//! Memory is bounded by the chunk: a two-level slot index by Morton code (a table of the 32³
+//! bricks of 8³ voxels, 128 KiB, and a 2 KiB block of slots per touched brick, allocated in
+//! touch order so that one triangle's voxels stay in cache) and one accumulator per occupied
+//! voxel. Global Morton code = brick Morton code · 512 + Morton code inside the brick.
 
 use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, Voxel};
 use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
@@ -13,50 +15,69 @@ use crate::overlap::{to_f64, TriSetup};
 use crate::round::{pack_normal, round_f64};
 use crate::Mode;
 
-const N: usize = (CHUNK * CHUNK * CHUNK) as usize;
+/// Bricks of 8³ voxels per chunk, slots per brick.
+const BRICKS: usize = 32 * 32 * 32;
+const BRICK: usize = 512;
 
 /// Sums of one voxel's contributions, in f64 and in triangle order.
-#[derive(Clone, Copy, Debug, Default)]
+///
+/// The unweighted sums `Σ n`, `Σ c` are only used if `Σ w = 0`, i.e. if every contribution has
+/// zero weight, and then the weighted sums are all zero; so both share `s`: it holds the
+/// unweighted sums while `w == 0` and restarts as the weighted sums with the first positive
+/// weight (the zero-weight terms before it add only zeros to them). The averages are the same as
+/// with separate sums (up to the sign of a zero sum, which encodes the same).
+#[derive(Clone, Copy, Debug)]
 struct Acc {
-    /// Morton code of the in-chunk position, also the slot index (Z-order keeps the voxels of
-    /// one triangle close together in the 64 MiB index).
+    /// Morton code of the in-chunk position.
     idx: u32,
-    /// Σ w, Σ w·n, Σ w·c
-    w: f64,
-    wn: [f64; 3],
-    wc: [f64; 4],
-    /// count, Σ n, Σ c (the fallback when Σ w = 0)
+    /// number of contributions
     k: u32,
-    un: [f64; 3],
-    uc: [f64; 4],
+    /// Σ w
+    w: f64,
+    /// `w > 0`: Σ w·n, Σ w·c; `w == 0`: Σ n, Σ c
+    s: [f64; 7],
 }
 
 impl Acc {
-    /// The sums after one contribution (`0 + x`, as [`Acc::add`] on zeroed sums would give).
+    /// The sums after one contribution.
     #[inline]
     fn first(idx: u32, w: f64, n: [f64; 3], c: [f64; 4]) -> Acc {
+        let f = if w > 0.0 { w } else { 1.0 };
         Acc {
             idx,
-            w: 0.0 + w,
-            wn: n.map(|x| 0.0 + w * x),
-            wc: c.map(|x| 0.0 + w * x),
             k: 1,
-            un: n.map(|x| 0.0 + x),
-            uc: c.map(|x| 0.0 + x),
+            w: 0.0 + w,
+            s: [
+                0.0 + f * n[0],
+                0.0 + f * n[1],
+                0.0 + f * n[2],
+                0.0 + f * c[0],
+                0.0 + f * c[1],
+                0.0 + f * c[2],
+                0.0 + f * c[3],
+            ],
         }
     }
 
     #[inline]
     fn add(&mut self, w: f64, n: [f64; 3], c: [f64; 4]) {
-        self.w += w;
         self.k += 1;
-        for k in 0..3 {
-            self.wn[k] += w * n[k];
-            self.un[k] += n[k];
-        }
-        for k in 0..4 {
-            self.wc[k] += w * c[k];
-            self.uc[k] += c[k];
+        let x = [n[0], n[1], n[2], c[0], c[1], c[2], c[3]];
+        if self.w > 0.0 {
+            self.w += w;
+            for k in 0..7 {
+                self.s[k] += w * x[k];
+            }
+        } else if w > 0.0 {
+            // the first positive weight: the weighted sums so far are zero
+            self.w += w;
+            for k in 0..7 {
+                self.s[k] = 0.0 + w * x[k];
+            }
+        } else {
+            for k in 0..7 {
+                self.s[k] += x[k];
+            }
         }
     }
 }
@@ -139,20 +160,23 @@ impl Attrs {
 pub struct ChunkVoxelizer {
     mode: Mode,
     origin: [u32; 3],
-    /// slot + 1 of each local voxel by Morton code, 0 = empty
-    slot: Vec<u32>,
+    /// block + 1 of each brick (`morton >> 9`), 0 = none yet
+    bricks: Vec<u32>,
+    /// per touched brick, slot + 1 of each voxel (`morton & 511`), 0 = empty
+    blocks: Vec<u32>,
     acc: Vec<Acc>,
     skipped: u64,
     fast: bool,
 }
 
 impl ChunkVoxelizer {
-    /// A voxelizer for `mode`; allocates the 64 MiB slot index (zeroed pages, touched lazily).
+    /// A voxelizer for `mode`.
     pub fn new(mode: Mode) -> Self {
         ChunkVoxelizer {
             mode,
             origin: [0; 3],
-            slot: vec![0u32; N],
+            bricks: vec![0u32; BRICKS],
+            blocks: Vec::new(),
             acc: Vec::new(),
             skipped: 0,
             fast: true,
@@ -184,8 +208,9 @@ impl ChunkVoxelizer {
 
     fn reset(&mut self) {
         for a in &self.acc {
-            self.slot[a.idx as usize] = 0;
+            self.bricks[(a.idx >> 9) as usize] = 0;
         }
+        self.blocks.clear();
         self.acc.clear();
     }
 
@@ -209,7 +234,8 @@ impl ChunkVoxelizer {
             let tri_centroid =
                 [0, 1, 2].map(|k| (t.v[0][k] as f64 + t.v[1][k] as f64 + t.v[2][k] as f64) / 3.0);
             let mut cols = Columns::new(&s, self.fast);
-            let slot = &mut self.slot;
+            let bricks = &mut self.bricks;
+            let blocks = &mut self.blocks;
             let acc = &mut self.acc;
             s.scan(lo_s, hi_s, |p, first| {
                 if first {
@@ -225,7 +251,12 @@ impl ChunkVoxelizer {
                 let local = [0, 1, 2].map(|k| (g[k] as i64 - o[k]) as u32);
                 debug_assert!(local.iter().all(|&c| c < CHUNK));
                 let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
-                let sl = &mut slot[idx as usize];
+                let b = &mut bricks[(idx >> 9) as usize];
+                if *b == 0 {
+                    blocks.resize(blocks.len() + BRICK, 0);
+                    *b = (blocks.len() / BRICK) as u32;
+                }
+                let sl = &mut blocks[(*b as usize - 1) * BRICK + (idx as usize & (BRICK - 1))];
                 if *sl == 0 {
                     acc.push(Acc::first(idx, w, n, col));
                     *sl = acc.len() as u32;
@@ -253,11 +284,7 @@ impl ChunkVoxelizer {
             .iter()
             .map(|&k| enc[(k & 0xffff_ffff) as usize])
             .collect();
-        // clear the slot index in Morton order (ascending addresses), then the accumulators
-        for &k in &keys {
-            self.slot[(k >> 32) as usize] = 0;
-        }
-        self.acc.clear();
+        self.reset();
         out
     }
 
@@ -305,10 +332,9 @@ fn radix_sort_morton(keys: &mut Vec<u64>) {
 
 /// The voxel's (normal, colour): area-weighted means, or unweighted means if Σ w = 0.
 fn average(a: &Acc) -> ([f32; 3], [f64; 4]) {
-    if a.w > 0.0 {
-        (a.wn.map(|x| (x / a.w) as f32), a.wc.map(|x| x / a.w))
-    } else {
-        let k = a.k as f64;
-        (a.un.map(|x| (x / k) as f32), a.uc.map(|x| x / k))
-    }
+    let d = if a.w > 0.0 { a.w } else { a.k as f64 };
+    (
+        [0, 1, 2].map(|k| (a.s[k] / d) as f32),
+        [3, 4, 5, 6].map(|k| a.s[k] / d),
+    )
 }

@@ -61,15 +61,26 @@ pub(crate) struct Columns {
     kind: Kind,
     x: f64,
     y: f64,
-    col: Poly,
+    /// Polygon buffers: the General column polygon is `bufs[col]`, the others are scratch.
+    bufs: [Poly; 3],
+    col: usize,
     zlo: f64,
     zhi: f64,
     /// The plane's z at the Square's corners `(x, y)`, `(x+1, y)`, `(x+1, y+1)`, `(x, y+1)`.
     corner_z: [f64; 4],
     /// Area and centroid of the whole column polygon, once computed.
     whole: Option<(f64, Option<[f64; 3]>)>,
-    t1: Poly,
-    t2: Poly,
+}
+
+/// `bufs[i]` and the two other buffers.
+#[inline]
+fn split3(bufs: &mut [Poly; 3], i: usize) -> (&Poly, &mut Poly, &mut Poly) {
+    let [a, b, c] = bufs;
+    match i {
+        0 => (a, b, c),
+        1 => (b, a, c),
+        _ => (c, a, b),
+    }
 }
 
 impl Columns {
@@ -100,13 +111,12 @@ impl Columns {
             kind: Kind::General,
             x: 0.0,
             y: 0.0,
-            col: tri,
+            bufs: [Poly::EMPTY; 3],
+            col: 0,
             zlo: tmin[2],
             zhi: tmax[2],
             corner_z: [0.0; 4],
             whole: None,
-            t1: Poly::EMPTY,
-            t2: Poly::EMPTY,
         }
     }
 
@@ -146,8 +156,37 @@ impl Columns {
     #[inline]
     fn general(&mut self, x: f64, y: f64) {
         self.kind = Kind::General;
-        self.col = self.tri.clip_column(x, y);
-        (self.zlo, self.zhi) = self.col.bounds_z();
+        // Poly::clip_column, ping-ponging between two buffers instead of copying
+        let [b0, b1, _] = &mut self.bufs;
+        let mut cur = None; // None: the triangle; Some(i): bufs[i]
+        for (k, b, upper) in [
+            (0, x, false),
+            (0, x + 1.0, true),
+            (1, y, false),
+            (1, y + 1.0, true),
+        ] {
+            let (src, dst, next): (&Poly, &mut Poly, usize) = match cur {
+                None => (&self.tri, &mut *b0, 0),
+                Some(0) => (&*b0, &mut *b1, 1),
+                _ => (&*b1, &mut *b0, 0),
+            };
+            let clipped = if upper {
+                src.clip_into::<true>(k, b, dst)
+            } else {
+                src.clip_into::<false>(k, b, dst)
+            };
+            if clipped {
+                cur = Some(next);
+            }
+        }
+        self.col = match cur {
+            Some(i) => i,
+            None => {
+                self.bufs[0] = self.tri;
+                0
+            }
+        };
+        (self.zlo, self.zhi) = self.bufs[self.col].bounds_z();
     }
 
     #[inline]
@@ -166,7 +205,7 @@ impl Columns {
             }
             let w = match self.kind {
                 Kind::Triangle => self.tri.area_centroid(self.scale),
-                Kind::General => self.col.area_centroid(self.scale),
+                Kind::General => self.bufs[self.col].area_centroid(self.scale),
                 Kind::Square => {
                     let (cx, cy) = (self.x + 0.5, self.y + 0.5);
                     (self.scale, Some([cx, cy, self.z(cx, cy)]))
@@ -177,12 +216,12 @@ impl Columns {
         }
         match self.kind {
             Kind::Triangle => {
-                self.tri
-                    .depth_area_centroid(z, self.scale, &mut self.t1, &mut self.t2)
+                let [t1, t2, _] = &mut self.bufs;
+                self.tri.depth_area_centroid(z, self.scale, t1, t2)
             }
             Kind::General => {
-                self.col
-                    .depth_area_centroid(z, self.scale, &mut self.t1, &mut self.t2)
+                let (col, t1, t2) = split3(&mut self.bufs, self.col);
+                col.depth_area_centroid(z, self.scale, t1, t2)
             }
             Kind::Square => {
                 let (x, y) = (self.x, self.y);
@@ -193,7 +232,8 @@ impl Columns {
                 sq.p[1] = [x + 1.0, y, c[1]];
                 sq.p[2] = [x + 1.0, y + 1.0, c[2]];
                 sq.p[3] = [x, y + 1.0, c[3]];
-                sq.depth_area_centroid(z, self.scale, &mut self.t1, &mut self.t2)
+                let [_, t1, t2] = &mut self.bufs;
+                sq.depth_area_centroid(z, self.scale, t1, t2)
             }
         }
     }

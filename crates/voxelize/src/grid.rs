@@ -60,7 +60,7 @@ pub fn voxelize_grid(
             }
         }
     }
-    // at most one 64 MiB voxelizer per worker thread
+    // at most one voxelizer per worker thread
     let pool: Mutex<Vec<ChunkVoxelizer>> = Mutex::new(Vec::new());
     let bins: Vec<([u32; 3], Vec<Triangle>)> = bins.into_values().collect();
     let mut chunks: Vec<([u32; 3], Vec<Voxel>)> = bins
