@@ -9,8 +9,12 @@ use clap::{Args, Parser, Subcommand};
 use voxlod_pipeline::{format_size, parse_size, BuildSettings, BuildSummary};
 use voxlod_voxelize::Mode;
 
+mod diff;
+mod export;
 mod gen;
 mod inspect;
+mod render;
+mod verify;
 
 /// The sample mesh bundled with the tool (the npm `bunny` package's Stanford bunny, 3,674
 /// triangles, public domain), used when `build` is given no input.
@@ -32,6 +36,14 @@ enum Command {
     Inspect(InspectArgs),
     /// Write a massive scan-like test mesh (binary PLY): transformed, coloured copies of a base mesh.
     Gen(GenArgs),
+    /// Check every checksum and invariant of an octree file (parents = merge of children, ...).
+    Verify(verify::VerifyArgs),
+    /// Compare two octree files chunk by chunk (for regression tests).
+    Diff(diff::DiffArgs),
+    /// Draw an octree file to a PNG (headless GPU; lavapipe without a GPU).
+    Render(render::RenderArgs),
+    /// Write one level of an octree file as a quad mesh (binary PLY with normals and colours).
+    Export(export::ExportArgs),
 }
 
 #[derive(Args)]
@@ -118,6 +130,10 @@ fn main() -> ExitCode {
         Command::Build(a) => run_build(a),
         Command::Inspect(a) => inspect::run(&a.file, a.json),
         Command::Gen(a) => run_gen(a),
+        Command::Verify(a) => verify::run(a),
+        Command::Diff(a) => diff::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Export(a) => export::run(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,106 @@
+//! `voxlod render FILE -o image.png`: a headless picture of the octree (each voxel a cube of
+//! its active faces, shaded by normal and colour), see `voxlod-render`.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use voxlod_format::Reader;
+use voxlod_render::{Lod, Renderer, View};
+
+#[derive(Args)]
+pub struct RenderArgs {
+    /// An octree file.
+    file: PathBuf,
+    /// Output PNG file.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Draw every node of this level (0 = finest).
+    #[arg(long, conflicts_with = "error")]
+    level: Option<u32>,
+    /// Draw the screen-space error cut: refine while voxels project to more than this many
+    /// pixels [default: 1].
+    #[arg(long)]
+    error: Option<f64>,
+    /// Image size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1024x768", value_parser = parse_size)]
+    size: (u32, u32),
+    /// Direction from the model towards the camera, x,y,z.
+    #[arg(long, default_value = "0.55,0.35,1", value_parser = parse_vec3, allow_hyphen_values = true)]
+    view: [f64; 3],
+    /// World up vector, x,y,z.
+    #[arg(long, default_value = "0,1,0", value_parser = parse_vec3, allow_hyphen_values = true)]
+    up: [f64; 3],
+    /// Vertical field of view in degrees.
+    #[arg(long, default_value_t = 35.0)]
+    fov: f64,
+    /// Move closer: 1 frames the whole model, 2 is twice as close.
+    #[arg(long, default_value_t = 1.0)]
+    zoom: f64,
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("'{s}' is not WIDTHxHEIGHT (e.g. 1024x768)"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("'{s}' is not WIDTHxHEIGHT (e.g. 1024x768)"))
+    };
+    Ok((p(w)?, p(h)?))
+}
+
+fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|c| c.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}' is not x,y,z (e.g. 0.5,0.3,1)"))?;
+    match v[..] {
+        [x, y, z] => Ok([x, y, z]),
+        _ => Err(format!("'{s}' is not x,y,z (three numbers)")),
+    }
+}
+
+pub fn run(a: RenderArgs) -> Result<()> {
+    let t = Instant::now();
+    let r = Reader::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
+    let lod = match (a.level, a.error) {
+        (Some(l), _) => Lod::Level(l),
+        (None, Some(e)) => Lod::Error(e),
+        (None, None) => Lod::Error(1.0),
+    };
+    let view = View {
+        width: a.size.0,
+        height: a.size.1,
+        direction: a.view,
+        up: a.up,
+        fov_y_deg: a.fov,
+        zoom: a.zoom,
+    };
+    let (shot, nodes) = voxlod_render::frame(&r, &view, lod)?;
+    let renderer = Renderer::new()?;
+    let pic = renderer.render(&r, &nodes, &shot)?;
+    if pic.coverage().iter().all(|&c| !c) {
+        bail!("nothing of the model is in the picture (check --view, --up and --zoom)");
+    }
+    pic.write_png(&a.output)?;
+    let mut levels: Vec<u32> = nodes.iter().map(|&i| r.nodes()[i].level).collect();
+    levels.sort_unstable();
+    levels.dedup();
+    println!(
+        "wrote {}: {}x{}, {} nodes (levels {:?}), {} voxels, {} faces drawn on {} in {:.2}s",
+        a.output.display(),
+        pic.width,
+        pic.height,
+        nodes.len(),
+        levels,
+        pic.voxels,
+        pic.faces_drawn,
+        renderer.adapter(),
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
