@@ -12,7 +12,7 @@ use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
 
 use crate::column::Columns;
 use crate::overlap::{to_f64, TriSetup};
-use crate::round::{pack_normal, round_f64};
+use crate::round::{pack_normal, quotient_f32, round_quotient};
 use crate::Mode;
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
@@ -185,7 +185,7 @@ impl ChunkVoxelizer {
 
     /// For tests and benchmarks: `false` computes every weight by the general clipping of
     /// [`crate::clipped_area`] (bit-identical to it), `true` (the default) uses the closed forms
-    /// of [`crate::column`] where they apply (equal up to rounding).
+    /// of [`crate::column`](mod@crate::column) where they apply (equal up to rounding).
     pub fn set_fast_paths(&mut self, on: bool) {
         self.fast = on;
     }
@@ -294,14 +294,18 @@ impl ChunkVoxelizer {
     }
 }
 
-/// The voxel record of an accumulator.
+/// The voxel record of an accumulator: the means `s / d` (`d = Σ w`, or the count if `Σ w = 0`)
+/// from one reciprocal, each exactly as the division would give where it matters
+/// ([`quotient_f32`], [`round_quotient`]).
 #[inline]
 fn encode(a: &Acc) -> Voxel {
     let pos = demorton3(a.idx as u64).map(|c| c as u8);
-    let (n, c) = average(a);
+    let d = if a.w > 0.0 { a.w } else { a.k as f64 };
+    let r = 1.0 / d;
+    let n = [0, 1, 2].map(|k| quotient_f32(a.s[k], d, a.s[k] * r));
     let normal = pack_normal(n);
     let mask = face_mask(normal) | border_caps(pos);
-    let rgba = c.map(|x| round_f64(x).clamp(0.0, 255.0) as u8);
+    let rgba = [3, 4, 5, 6].map(|k| round_quotient(a.s[k], d, a.s[k] * r).clamp(0.0, 255.0) as u8);
     Voxel::new(pos, mask, normal, pack_color(rgba))
 }
 
@@ -328,13 +332,4 @@ fn radix_sort_morton(keys: &mut Vec<u64>) {
         }
         std::mem::swap(keys, &mut tmp);
     }
-}
-
-/// The voxel's (normal, colour): area-weighted means, or unweighted means if Σ w = 0.
-fn average(a: &Acc) -> ([f32; 3], [f64; 4]) {
-    let d = if a.w > 0.0 { a.w } else { a.k as f64 };
-    (
-        [0, 1, 2].map(|k| (a.s[k] / d) as f32),
-        [3, 4, 5, 6].map(|k| a.s[k] / d),
-    )
 }

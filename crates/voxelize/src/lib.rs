@@ -6,7 +6,11 @@
 //!   ([`Mode::Conservative`], 26-separating: every voxel the closed triangle touches;
 //!   [`Mode::Thin`], 6-separating: the naive digital plane restricted to the triangle). The exact
 //!   definitions, and where they differ from the paper's pseudocode, are in that module's docs.
-//! * [`clip`]: [`clipped_area`], the triangle's area inside a voxel and its centroid.
+//! * [`clip`]: [`clipped_area`], the triangle's area inside a voxel and its centroid (the
+//!   definition of the weights).
+//! * [`column`](mod@column): [`voxel_areas`], the same areas and centroids for all the voxels of a triangle,
+//!   factored column by column, with closed forms for the common cases (what the chunk
+//!   voxelizer uses).
 //! * [`chunk`]: [`ChunkVoxelizer`], which accumulates attributes per voxel of a chunk and emits
 //!   the 12-byte [`voxlod_format::Voxel`] records sorted by Morton code.
 //! * [`grid`]: [`voxelize_grid`], a whole in-memory grid, chunks in parallel.
@@ -38,6 +42,22 @@
 //! `face_mask(normal word) | border_caps(pos)`, colour = `pack_color(round(colour) clamped to
 //! 0..255)` with round half away from zero. Voxels are sorted by `morton8` of their in-chunk
 //! position. A GPU port computing in f32 matches up to rounding.
+//!
+//! # How the chunk voxelizer computes this quickly
+//!
+//! The weights and centroids are computed column by column ([`column`](mod@column)): the triangle's part
+//! above a column of its dominant projection is clipped once, each voxel of the column only
+//! clips that part to its depth slab, and a column part lying in one voxel is measured once.
+//! Where the column's square lies inside the triangle's projection (most columns of a large
+//! triangle), the part is the square lifted to the plane: no edge clipping, and if the plane
+//! stays inside one voxel layer over the square, weight `|n|/|n_z|` and centroid the lifted
+//! square centre in closed form. These fast paths differ from [`clipped_area`] only by rounding
+//! (measured below 1e-12 relative, `tests/column.rs`); ties, where a voxel boundary passes
+//! within 1e-7 of a square corner, take the general path. The encoding avoids libm calls and
+//! all but one division per voxel, giving the same bits as the formulas above (`round.rs`).
+//! [`ChunkVoxelizer::set_fast_paths`]`(false)` computes every weight by the general clipping;
+//! on the npm bunny at 4096³ (54 M conservative, 32 M thin voxels) both give identical
+//! records.
 //!
 //! # Example
 //!
