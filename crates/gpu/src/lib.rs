@@ -27,14 +27,19 @@
 //! ```
 //! use voxlod_geom::Triangle;
 //! use voxlod_gpu::{GpuMethod, GpuVoxelizer, DEFAULT_CUTOFF};
-//! use voxlod_voxelize::Mode;
+//! use voxlod_voxelize::{ChunkVoxelizer, Mode};
 //!
 //! let mut gpu = GpuVoxelizer::new(Mode::Conservative, GpuMethod::Hybrid, DEFAULT_CUTOFF)
 //!     .expect("no GPU adapter (install mesa-vulkan-drivers for lavapipe)");
 //! // a triangle in the plane z = 2.5 covering the lower-left half of [0,2]²
 //! let t = Triangle::new([[0.0, 0.0, 2.5], [2.0, 0.0, 2.5], [0.0, 2.0, 2.5]]);
 //! let voxels = gpu.voxelize_chunk([0, 0, 0], &[t]).unwrap();
-//! assert_eq!(voxels.len(), 4);
+//! // every voxel the closed triangle touches, with the CPU reference's attributes
+//! let mut cpu = ChunkVoxelizer::new(Mode::Conservative);
+//! cpu.begin([0, 0, 0]);
+//! cpu.add(&[t]);
+//! assert_eq!(voxels, cpu.finish());
+//! assert_eq!(voxels.len(), 6); // columns (0,0) (1,0) (0,1) (1,1) (2,0) (0,2) at z = 2
 //! assert_eq!(voxels[0].pos(), [0, 0, 2]);
 //! assert_eq!(voxels[0].normal_f32(), [0.0, 0.0, 1.0]);
 //! assert_eq!(gpu.last_split(), (1, 0)); // small: voxelized in the classification pass
