@@ -7,12 +7,11 @@
 //! touch order so that one triangle's voxels stay in cache) and one accumulator per occupied
 //! voxel. Global Morton code = brick Morton code · 512 + Morton code inside the brick.
 
-use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, Voxel};
+use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, pack_normal, Voxel};
 use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
 
 use crate::column::Columns;
 use crate::overlap::{to_f64, TriSetup};
-use crate::round::{pack_normal, quotient_f32, round_quotient};
 use crate::Mode;
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
@@ -294,19 +293,16 @@ impl ChunkVoxelizer {
     }
 }
 
-/// The voxel record of an accumulator: the means `s / d` (`d = Σ w`, or the count if `Σ w = 0`)
-/// from one reciprocal, each exactly as the division would give where it matters
-/// ([`quotient_f32`], [`round_quotient`]).
+/// The voxel record of an accumulator: area-weighted means, or unweighted means if Σ w = 0.
 #[inline]
 fn encode(a: &Acc) -> Voxel {
     let pos = demorton3(a.idx as u64).map(|c| c as u8);
     let d = if a.w > 0.0 { a.w } else { a.k as f64 };
-    let r = 1.0 / d;
-    let n = [0, 1, 2].map(|k| quotient_f32(a.s[k], d, a.s[k] * r));
-    let normal = pack_normal(n);
+    let s = &a.s;
+    let normal = pack_normal([(s[0] / d) as f32, (s[1] / d) as f32, (s[2] / d) as f32]);
     let mask = face_mask(normal) | border_caps(pos);
-    let rgba = [3, 4, 5, 6].map(|k| round_quotient(a.s[k], d, a.s[k] * r).clamp(0.0, 255.0) as u8);
-    Voxel::new(pos, mask, normal, pack_color(rgba))
+    let c = |k: usize| (s[k] / d).round().clamp(0.0, 255.0) as u8;
+    Voxel::new(pos, mask, normal, pack_color([c(3), c(4), c(5), c(6)]))
 }
 
 /// Sorts keys `morton << 32 | slot` by their 24-bit Morton code (LSD radix, three 8-bit

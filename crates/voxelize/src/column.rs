@@ -20,14 +20,13 @@
 //!
 //! The results equal [`crate::clipped_area`] up to rounding (below 1e-12 relative on the random
 //! triangles of `tests/column.rs`, which checks 1e-9). A Square with a voxel boundary within
-//! [`TIE`] of one of its corners could produce a zero-area piece whose centroid (the mean of its
+//! `TIE` (1e-7) of one of its corners could produce a zero-area piece whose centroid (the mean of its
 //! vertices) depends on how exactly it is cut, so it takes the general path. With the fast paths
 //! off (`ChunkVoxelizer::set_fast_paths(false)`), every polygon is the one `clipped_area` clips,
 //! and the results are bit-identical to it.
 
 use crate::clip::{area_scale, Poly};
 use crate::overlap::TriSetup;
-use crate::round::round_f64;
 
 /// A Square whose plane passes within this distance (voxels) of a voxel boundary at a corner
 /// goes to the general path.
@@ -142,7 +141,7 @@ impl Columns {
             ];
             // a voxel boundary (nearly) through a corner could cut off a zero-area piece, whose
             // centroid depends on how exactly it is cut: leave those ties to the general path
-            if c.iter().all(|&z| (z - round_f64(z)).abs() > TIE) {
+            if c.iter().all(|&z| (z - z.round()).abs() > TIE) {
                 self.kind = Kind::Square;
                 self.corner_z = c;
                 self.zlo = c[0].min(c[1]).min(c[2]).min(c[3]);

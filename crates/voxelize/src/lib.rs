@@ -53,8 +53,7 @@
 //! stays inside one voxel layer over the square, weight `|n|/|n_z|` and centroid the lifted
 //! square centre in closed form. These fast paths differ from [`clipped_area`] only by rounding
 //! (measured below 1e-12 relative, `tests/column.rs`); ties, where a voxel boundary passes
-//! within 1e-7 of a square corner, take the general path. The encoding avoids libm calls and
-//! all but one division per voxel, giving the same bits as the formulas above (`round.rs`).
+//! within 1e-7 of a square corner, take the general path.
 //! [`ChunkVoxelizer::set_fast_paths`]`(false)` computes every weight by the general clipping;
 //! on the npm bunny at 4096³ (54 M conservative, 32 M thin voxels) both give identical
 //! records.
@@ -89,7 +88,6 @@ pub mod clip;
 pub mod column;
 pub mod grid;
 pub mod overlap;
-mod round;
 
 pub use chunk::ChunkVoxelizer;
 pub use clip::clipped_area;
