@@ -204,7 +204,7 @@ impl Reader {
             let refine = e.child_mask != 0
                 && self
                     .screen_error(i, camera)
-                    .is_some_and(|err| !(err <= max_error_px));
+                    .is_some_and(|err| err > max_error_px || err.is_nan());
             if refine {
                 for c in self.children(i).iter().rev().flatten() {
                     stack.push(*c);

@@ -5,7 +5,7 @@
 
 use std::sync::{Arc, Mutex};
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use voxlod_format::Reader;
 
 use crate::camera::Shot;
@@ -248,7 +248,7 @@ impl Renderer {
             .as_vec3();
         let mut uniforms = [0f32; 20];
         uniforms[..16].copy_from_slice(&view_proj.to_cols_array());
-        uniforms[16..19].copy_from_slice(&Vec3::from(light).to_array());
+        uniforms[16..19].copy_from_slice(&light.to_array());
 
         use wgpu::util::DeviceExt;
         let ubuf = self
