@@ -673,3 +673,60 @@ fn killed_build_leaves_no_output() {
         assert!(!out.exists(), "a killed run left {}", out.display());
     }
 }
+
+/// `--backend gpu` (lavapipe in CI: a test that needs the GPU fails when no adapter is found)
+/// writes the same file as the CPU backend, in both modes, with a fixed and a searched cutoff.
+#[test]
+fn gpu_backend_writes_the_same_file_as_cpu() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let s = sample();
+    for (mode, cutoff) in [("conservative", "8"), ("thin", "auto")] {
+        let cpu = d.join(format!("cpu-{mode}.voxlod"));
+        let gpu = d.join(format!("gpu-{mode}.voxlod"));
+        ok(&voxlod(
+            &[
+                "build",
+                "-q",
+                s.to_str().unwrap(),
+                "-o",
+                cpu.to_str().unwrap(),
+                "-r",
+                "256",
+                "-m",
+                mode,
+                "--backend",
+                "cpu",
+            ],
+            d,
+        ));
+        let o = voxlod(
+            &[
+                "build",
+                "-q",
+                "--json",
+                s.to_str().unwrap(),
+                "-o",
+                gpu.to_str().unwrap(),
+                "-r",
+                "256",
+                "-m",
+                mode,
+                "--backend",
+                "gpu",
+                "--cutoff",
+                cutoff,
+            ],
+            d,
+        );
+        ok(&o);
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let used = summary["backend"].as_str().unwrap();
+        assert!(used.starts_with("gpu "), "{used}");
+        assert_eq!(
+            std::fs::read(&cpu).unwrap(),
+            std::fs::read(&gpu).unwrap(),
+            "{mode}: GPU and CPU files differ ({used})"
+        );
+    }
+}

@@ -11,6 +11,8 @@ pub(crate) struct Gpu {
     pub queue: wgpu::Queue,
     pub name: String,
     pub f64: bool,
+    /// A CPU-emulated device (lavapipe, llvmpipe, WARP).
+    pub software: bool,
     pub limits: wgpu::Limits,
     pub error: Arc<Mutex<Option<String>>>,
 }
@@ -69,6 +71,7 @@ pub(crate) fn open() -> Result<Gpu, GpuError> {
         queue,
         name,
         f64: features.contains(wgpu::Features::SHADER_F64),
+        software: info.device_type == wgpu::DeviceType::Cpu,
         limits,
         error,
     })

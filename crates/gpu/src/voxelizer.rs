@@ -282,6 +282,12 @@ impl GpuVoxelizer {
         self.gpu.name.clone()
     }
 
+    /// True when the adapter is a software rasterizer running on the CPU (lavapipe,
+    /// llvmpipe): correct, but slower than the CPU backend.
+    pub fn is_software(&self) -> bool {
+        self.gpu.software
+    }
+
     /// Whether the shaders compute in f64 (bit-compatible with the CPU) or f32.
     pub fn precision(&self) -> Precision {
         self.precision

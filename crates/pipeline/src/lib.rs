@@ -12,6 +12,7 @@
 //! println!("{} voxels at level 0", summary.levels[0].voxels);
 //! ```
 
+mod backend;
 mod leaf_log;
 mod memory;
 mod octree_writer;
@@ -20,13 +21,13 @@ mod size;
 mod system;
 mod work;
 
+pub use backend::{Backend, Cutoff};
 pub use memory::MemoryPlan;
 pub use octree_writer::{LevelStats, OctreeWriter};
 pub use size::{format_size, parse_size};
 pub use system::{interrupted, peak_rss, request_interrupt};
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -36,7 +37,7 @@ use voxlod_format::{encode_node, EncodedNode, FileSpec, Voxel, Writer};
 use voxlod_geom::{Bounds, Grid};
 use voxlod_ingest::{IngestError, MeshSource};
 use voxlod_tile::{Bins, ChunkBin, Spool, Spooler, TileError};
-use voxlod_voxelize::{ChunkVoxelizer, Mode};
+use voxlod_voxelize::Mode;
 
 use leaf_log::LeafLog;
 use progress::Stage;
@@ -60,6 +61,12 @@ pub struct BuildSettings {
     pub zstd_level: i32,
     /// Folder for temporary files (default: the output's folder).
     pub tmp_dir: Option<PathBuf>,
+    /// Voxelizer: auto (a hardware GPU if found, else the CPU), cpu or gpu.
+    pub backend: Backend,
+    /// GPU method: hybrid, triangle or fragment.
+    pub gpu_method: String,
+    /// GPU hybrid cutoff in voxels², or auto.
+    pub cutoff: Cutoff,
     /// Show progress bars on stderr.
     #[serde(skip)]
     pub progress: bool,
@@ -78,6 +85,9 @@ impl Default for BuildSettings {
             memory: 2 << 30,
             zstd_level: voxlod_format::DEFAULT_ZSTD_LEVEL,
             tmp_dir: None,
+            backend: Backend::Auto,
+            gpu_method: "hybrid".into(),
+            cutoff: Cutoff::default(),
             progress: false,
             interrupt_after_chunks: None,
         }
@@ -106,6 +116,8 @@ pub struct BuildSummary {
     pub resolution: u32,
     pub mode: Mode,
     pub threads: usize,
+    /// The voxelizer that ran (backend, adapter, method, cutoff).
+    pub backend: String,
     /// Non-empty leaf chunk bins (chunks some triangle's range touches).
     pub chunk_bins: usize,
     /// Triangle records in the bins (a triangle spanning k chunks counts k times).
@@ -339,13 +351,24 @@ fn run(
     let grid = Grid::fit(&bounds, s.resolution)
         .with_context(|| format!("{}: fitting the grid", input.display()))?;
 
+    let mut backend_used = String::from("(voxelized by the interrupted run)");
     let leaves_marker = match leaves_done {
         Some(m) => {
             stage_done(&mut stages, "tile", Instant::now(), true);
             stage_done(&mut stages, "voxelize", Instant::now(), true);
             m
         }
-        None => tile_and_voxelize(s, &grid, &plan, &pool, work, &marker, bounds, &mut stages)?,
+        None => tile_and_voxelize(
+            s,
+            &grid,
+            &plan,
+            &pool,
+            work,
+            &marker,
+            bounds,
+            &mut stages,
+            &mut backend_used,
+        )?,
     };
     if leaves_marker.skipped > 0 {
         warnings.push(format!("{} triangle/chunk pairs skipped by the voxelizer (zero area after the move to grid coordinates)", leaves_marker.skipped));
@@ -422,6 +445,7 @@ fn run(
         resolution: s.resolution,
         mode: s.mode,
         threads,
+        backend: backend_used,
         chunk_bins,
         binned_triangles,
         total_voxels,
@@ -453,6 +477,7 @@ fn tile_and_voxelize(
     marker: &SpoolMarker,
     bounds: Bounds,
     stages: &mut Vec<StageTime>,
+    backend_used: &mut String,
 ) -> Result<LeavesMarker> {
     let stage_done =
         |stages: &mut Vec<StageTime>, stage: &'static str, t: Instant, resumed: bool| {
@@ -542,9 +567,16 @@ fn tile_and_voxelize(
             let mut log = LeafLog::open(&leaves_path)?;
             let start = log.records() as usize;
             let stage_resumed = start > 0;
-            let workers: Vec<Mutex<ChunkVoxelizer>> = (0..plan.voxelizers)
-                .map(|_| Mutex::new(ChunkVoxelizer::new(s.mode)))
-                .collect();
+            let (voxelizers, description) = backend::Voxelizers::new(
+                s.backend,
+                s.mode,
+                plan.voxelizers,
+                pool.current_num_threads(),
+                &s.gpu_method,
+                s.cutoff,
+                &bins,
+            )?;
+            *backend_used = description;
             let bar = Stage::items(s.progress, "voxelize", chunks.len() as u64);
             bar.set(start as u64, chunks.len() as u64);
             let batch = plan.voxelizers * 4;
@@ -554,21 +586,13 @@ fn tile_and_voxelize(
                     return Err(interrupted_error(work.path()));
                 }
                 let last = (first + batch).min(chunks.len());
+                let voxelized = voxelizers.run(pool, &bins, first..last);
                 let results: Vec<Result<(Option<EncodedNode>, u64)>> = pool.install(|| {
-                    (first..last)
+                    voxelized
                         .into_par_iter()
-                        .map(|i| {
-                            let slot = rayon::current_thread_index().unwrap_or(0) % workers.len();
-                            let mut vz = workers[slot].lock().unwrap_or_else(|p| p.into_inner());
-                            let before = vz.skipped();
-                            vz.begin(chunks[i].origin());
-                            bins.read_chunk(i, 64 * 1024, &mut |tris| {
-                                vz.add(tris);
-                                Ok(())
-                            })?;
-                            let voxels = vz.finish();
-                            let skipped = vz.skipped() - before;
-                            drop(vz);
+                        .zip(first..last)
+                        .map(|(r, i)| {
+                            let (voxels, skipped) = r?;
                             let enc = if voxels.is_empty() {
                                 None
                             } else {
@@ -591,7 +615,7 @@ fn tile_and_voxelize(
                 }
             }
             bar.finish();
-            drop(workers);
+            drop(voxelizers);
             let records = log.records();
             log.finish()?;
             let mut skipped = 0u64;

@@ -42,13 +42,14 @@ impl WorkDir {
             .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
             .map_or(0, |d| d.as_nanos());
         let text = format!(
-            "{}\n{}\n{}\n{}\n{}\n{}\n{}",
+            "{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
             canon.display(),
             meta.len(),
             mtime,
             s.resolution,
             s.mode,
             s.zstd_level,
+            s.backend,
             env!("CARGO_PKG_VERSION")
         );
         Ok(format!(

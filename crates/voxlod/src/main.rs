@@ -101,6 +101,18 @@ struct BuildArgs {
     /// zstd level of node payloads (-7..=22).
     #[arg(long)]
     zstd_level: Option<i32>,
+    /// Voxelizer: auto (a hardware GPU if one is found, else the CPU), cpu, or gpu (any adapter,
+    /// software ones such as lavapipe included).
+    #[arg(long)]
+    backend: Option<voxlod_pipeline::Backend>,
+    /// GPU method: hybrid (classify, small triangles at once, large ones rasterized),
+    /// triangle or fragment [default: hybrid].
+    #[arg(long)]
+    gpu_method: Option<String>,
+    /// GPU hybrid cutoff: projected area in voxels² from which a triangle is deferred to the
+    /// fragment pass, or `auto` to search per mesh [default: 8].
+    #[arg(long)]
+    cutoff: Option<voxlod_pipeline::Cutoff>,
     /// Folder for temporary files [default: the output's folder].
     #[arg(long)]
     tmp: Option<PathBuf>,
@@ -170,6 +182,15 @@ fn run_build(a: BuildArgs) -> Result<()> {
     if let Some(v) = a.zstd_level {
         s.zstd_level = v;
     }
+    if let Some(v) = a.backend {
+        s.backend = v;
+    }
+    if let Some(v) = a.gpu_method.clone() {
+        s.gpu_method = v;
+    }
+    if let Some(v) = a.cutoff {
+        s.cutoff = v;
+    }
     if a.tmp.is_some() {
         s.tmp_dir = a.tmp.clone();
     }
@@ -234,6 +255,7 @@ fn print_summary(s: &BuildSummary) {
         "  grid         {}³, {} mode, {} threads",
         s.resolution, s.mode, s.threads
     );
+    println!("  voxelizer    {}", s.backend);
     println!(
         "  chunk bins   {} ({} triangle records)",
         s.chunk_bins, s.binned_triangles

@@ -1,0 +1,315 @@
+//! Which voxelizer runs the chunks: the CPU `ChunkVoxelizer` on every core, or the GPU hybrid
+//! voxelizer (`voxlod-gpu`, feature `gpu`), and the GPU cutoff search.
+
+use std::sync::Mutex;
+
+use anyhow::{Context, Result};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use voxlod_format::Voxel;
+use voxlod_tile::Bins;
+use voxlod_voxelize::{ChunkVoxelizer, Mode};
+
+/// `--backend`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// A hardware GPU when one is found, else the CPU (a software rasterizer such as lavapipe
+    /// is slower than the CPU backend, so `auto` does not pick it).
+    #[default]
+    Auto,
+    Cpu,
+    /// Any adapter, software ones included; an error when there is none.
+    Gpu,
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "auto" => Ok(Backend::Auto),
+            "cpu" => Ok(Backend::Cpu),
+            "gpu" => Ok(Backend::Gpu),
+            _ => Err(format!("unknown backend '{s}' (auto, cpu or gpu)")),
+        }
+    }
+}
+
+impl std::fmt::Display for Backend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Backend::Auto => "auto",
+            Backend::Cpu => "cpu",
+            Backend::Gpu => "gpu",
+        })
+    }
+}
+
+/// `--cutoff`: the projected area (voxels²) from which the GPU hybrid defers a triangle to the
+/// fragment pass, or `auto` for a short bracketing search on the build's largest chunk.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Cutoff {
+    Auto,
+    Fixed(f32),
+}
+
+impl Default for Cutoff {
+    fn default() -> Self {
+        Cutoff::Fixed(DEFAULT_CUTOFF)
+    }
+}
+
+/// The GPU crate's default (a few voxels², as the paper finds best).
+pub const DEFAULT_CUTOFF: f32 = 8.0;
+
+impl std::str::FromStr for Cutoff {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(Cutoff::Auto);
+        }
+        match s.parse::<f32>() {
+            Ok(v) if v.is_finite() && v >= 0.0 => Ok(Cutoff::Fixed(v)),
+            _ => Err(format!(
+                "cutoff '{s}' is not 'auto' or a non-negative number of voxels²"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for Cutoff {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Cutoff::Auto => f.write_str("auto"),
+            Cutoff::Fixed(v) => write!(f, "{v}"),
+        }
+    }
+}
+
+impl Serialize for Cutoff {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&self.to_string())
+    }
+}
+
+impl<'de> Deserialize<'de> for Cutoff {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum V {
+            N(f32),
+            S(String),
+        }
+        match V::deserialize(d)? {
+            V::N(n) => format!("{n}").parse().map_err(serde::de::Error::custom),
+            V::S(s) => s.parse().map_err(serde::de::Error::custom),
+        }
+    }
+}
+
+/// The voxelizers of one build.
+pub(crate) enum Voxelizers {
+    Cpu(Vec<Mutex<ChunkVoxelizer>>),
+    #[cfg(feature = "gpu")]
+    Gpu(Box<Mutex<voxlod_gpu::GpuVoxelizer>>),
+}
+
+/// Result of one chunk: its voxels and the triangles the voxelizer skipped.
+pub(crate) type ChunkResult = Result<(Vec<Voxel>, u64)>;
+
+impl Voxelizers {
+    /// Creates the voxelizers for `backend`; returns them with a description for the summary
+    /// and any warning.
+    #[allow(unused_variables)]
+    pub(crate) fn new(
+        backend: Backend,
+        mode: Mode,
+        cpu_workers: usize,
+        threads: usize,
+        gpu_method: &str,
+        cutoff: Cutoff,
+        bins: &Bins,
+    ) -> Result<(Voxelizers, String)> {
+        let cpu = || {
+            let v = Voxelizers::Cpu(
+                (0..cpu_workers)
+                    .map(|_| Mutex::new(ChunkVoxelizer::new(mode)))
+                    .collect(),
+            );
+            (
+                v,
+                format!("cpu ({cpu_workers} chunk voxelizers on {threads} threads)"),
+            )
+        };
+        match backend {
+            Backend::Cpu => Ok(cpu()),
+            #[cfg(feature = "gpu")]
+            Backend::Auto | Backend::Gpu => {
+                let method: voxlod_gpu::GpuMethod =
+                    gpu_method
+                        .parse()
+                        .map_err(|e: voxlod_gpu::ParseMethodError| {
+                            anyhow::anyhow!("--gpu-method: {}", e.0)
+                        })?;
+                let fixed = match cutoff {
+                    Cutoff::Fixed(c) => c,
+                    Cutoff::Auto => DEFAULT_CUTOFF,
+                };
+                let gpu = match voxlod_gpu::GpuVoxelizer::new(mode, method, fixed) {
+                    Ok(g) => g,
+                    Err(e) if backend == Backend::Auto => {
+                        let (v, d) = cpu();
+                        return Ok((v, format!("{d}; no GPU: {e}")));
+                    }
+                    Err(e) => return Err(e).context("--backend gpu"),
+                };
+                if backend == Backend::Auto && gpu.is_software() {
+                    let (v, d) = cpu();
+                    return Ok((v, format!("{d}; the only GPU adapter, {}, is a software rasterizer (use --backend gpu to force it)", gpu.adapter_name())));
+                }
+                let mut gpu = gpu;
+                let mut desc = format!("gpu {} ({method}", gpu.adapter_name());
+                if method == voxlod_gpu::GpuMethod::Hybrid {
+                    let c = match cutoff {
+                        Cutoff::Fixed(c) => c,
+                        Cutoff::Auto => search_cutoff(&mut gpu, bins)?,
+                    };
+                    gpu.set_method(method, c);
+                    desc += &format!(
+                        ", cutoff {c} voxels²{}",
+                        if cutoff == Cutoff::Auto {
+                            " found by search"
+                        } else {
+                            ""
+                        }
+                    );
+                }
+                desc += ")";
+                Ok((Voxelizers::Gpu(Box::new(Mutex::new(gpu))), desc))
+            }
+            #[cfg(not(feature = "gpu"))]
+            Backend::Auto => {
+                let (v, d) = cpu();
+                Ok((v, format!("{d}; built without the gpu feature")))
+            }
+            #[cfg(not(feature = "gpu"))]
+            Backend::Gpu => {
+                anyhow::bail!("--backend gpu: this voxlod was built without the `gpu` feature")
+            }
+        }
+    }
+
+    /// Voxelizes chunks `range` of `bins`: in parallel on the CPU, one after another on the GPU.
+    pub(crate) fn run(
+        &self,
+        pool: &rayon::ThreadPool,
+        bins: &Bins,
+        range: std::ops::Range<usize>,
+    ) -> Vec<ChunkResult> {
+        let chunks = bins.chunks();
+        match self {
+            Voxelizers::Cpu(workers) => pool.install(|| {
+                range
+                    .into_par_iter()
+                    .map(|i| {
+                        let slot = rayon::current_thread_index().unwrap_or(0) % workers.len();
+                        let mut vz = workers[slot].lock().unwrap_or_else(|p| p.into_inner());
+                        let before = vz.skipped();
+                        vz.begin(chunks[i].origin());
+                        bins.read_chunk(i, 64 * 1024, &mut |tris| {
+                            vz.add(tris);
+                            Ok(())
+                        })?;
+                        let voxels = vz.finish();
+                        Ok((voxels, vz.skipped() - before))
+                    })
+                    .collect()
+            }),
+            #[cfg(feature = "gpu")]
+            Voxelizers::Gpu(gpu) => {
+                let mut gpu = gpu.lock().unwrap_or_else(|p| p.into_inner());
+                range
+                    .map(|i| {
+                        let tris = read_all(bins, i)?;
+                        let voxels =
+                            gpu.voxelize_chunk(chunks[i].origin(), &tris)
+                                .with_context(|| {
+                                    format!("GPU voxelization of chunk {:?}", chunks[i].coord)
+                                })?;
+                        Ok((voxels, 0))
+                    })
+                    .collect()
+            }
+        }
+    }
+}
+
+/// All triangles of chunk `i` (the GPU voxelizer takes a chunk at once and batches inside).
+#[cfg(feature = "gpu")]
+fn read_all(bins: &Bins, i: usize) -> Result<Vec<voxlod_geom::Triangle>> {
+    let mut tris = Vec::with_capacity(bins.chunks()[i].count as usize);
+    bins.read_chunk(i, 64 * 1024, &mut |b| {
+        tris.extend_from_slice(b);
+        Ok(())
+    })?;
+    Ok(tris)
+}
+
+/// `--cutoff auto`: times the hybrid on the chunk with the most triangles (its first 256Ki)
+/// at cutoffs 1, 4, 16, 64, 256 voxels², then at the geometric midpoints around the fastest,
+/// and returns the fastest (the paper's suggested future work). The voxels do not depend on
+/// the cutoff, so neither does the output file.
+#[cfg(feature = "gpu")]
+fn search_cutoff(gpu: &mut voxlod_gpu::GpuVoxelizer, bins: &Bins) -> Result<f32> {
+    let Some(i) = (0..bins.chunks().len()).max_by_key(|&i| bins.chunks()[i].count) else {
+        return Ok(DEFAULT_CUTOFF);
+    };
+    let mut tris = read_all(bins, i)?;
+    tris.truncate(256 * 1024);
+    let origin = bins.chunks()[i].origin();
+    let mut time = |c: f32| -> Result<f64> {
+        gpu.set_method(voxlod_gpu::GpuMethod::Hybrid, c);
+        let t = std::time::Instant::now();
+        gpu.voxelize_chunk(origin, &tris)
+            .context("timing a cutoff")?;
+        Ok(t.elapsed().as_secs_f64())
+    };
+    time(DEFAULT_CUTOFF)?; // warm-up: pipelines, buffers
+    let mut best = (f64::INFINITY, DEFAULT_CUTOFF);
+    for c in [1.0f32, 4.0, 16.0, 64.0, 256.0] {
+        let t = time(c)?;
+        if t < best.0 {
+            best = (t, c);
+        }
+    }
+    for c in [best.1 * 0.5, best.1 * 2.0] {
+        let t = time(c)?;
+        if t < best.0 {
+            best = (t, c);
+        }
+    }
+    Ok(best.1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_settings() {
+        assert_eq!("gpu".parse::<Backend>(), Ok(Backend::Gpu));
+        assert!("tpu".parse::<Backend>().is_err());
+        assert_eq!("auto".parse::<Cutoff>(), Ok(Cutoff::Auto));
+        assert_eq!("2.5".parse::<Cutoff>(), Ok(Cutoff::Fixed(2.5)));
+        assert!("-1".parse::<Cutoff>().is_err());
+        #[derive(Deserialize)]
+        struct T {
+            c: Cutoff,
+            b: Backend,
+        }
+        let t: T = toml::from_str("c = 16\nb = \"cpu\"").unwrap();
+        assert_eq!((t.c, t.b), (Cutoff::Fixed(16.0), Backend::Cpu));
+        let t: T = toml::from_str("c = \"auto\"\nb = \"auto\"").unwrap();
+        assert_eq!((t.c, t.b), (Cutoff::Auto, Backend::Auto));
+    }
+}
