@@ -62,6 +62,11 @@ pub(crate) struct Columns {
     kind: Kind,
     x: f64,
     y: f64,
+    /// The x-slab of the General columns at `slab_x`: the triangle clipped to
+    /// `[slab_x, slab_x+1]`, in `slab[i]` for `slab_at == Some(i)`, the triangle itself if `None`.
+    slab_x: f64,
+    slab: [Poly; 2],
+    slab_at: Option<usize>,
     /// Polygon buffers: the General column polygon is `bufs[col]`, the others are scratch.
     bufs: [Poly; 3],
     col: usize,
@@ -71,6 +76,35 @@ pub(crate) struct Columns {
     corner_z: [f64; 4],
     /// Area and centroid of the whole column polygon, once computed.
     whole: Option<(f64, Option<[f64; 3]>)>,
+}
+
+/// Clips `src` by the axis planes `(axis, bound, upper)` in order ([`Poly::clip`]), ping-ponging
+/// between `a` (0) and `b` (1) instead of copying; returns which holds the result, `None` if no
+/// plane cut anything (the result is `src`).
+#[inline]
+fn clip_planes(
+    src: &Poly,
+    planes: [(usize, f64, bool); 2],
+    a: &mut Poly,
+    b: &mut Poly,
+) -> Option<usize> {
+    let mut cur = None;
+    for (k, bound, upper) in planes {
+        let (from, to, next): (&Poly, &mut Poly, usize) = match cur {
+            None => (src, &mut *a, 0),
+            Some(0) => (&*a, &mut *b, 1),
+            _ => (&*b, &mut *a, 0),
+        };
+        let clipped = if upper {
+            from.clip_into::<true>(k, bound, to)
+        } else {
+            from.clip_into::<false>(k, bound, to)
+        };
+        if clipped {
+            cur = Some(next);
+        }
+    }
+    cur
 }
 
 /// `bufs[i]` and the two other buffers.
@@ -112,6 +146,9 @@ impl Columns {
             kind: Kind::General,
             x: 0.0,
             y: 0.0,
+            slab_x: f64::NAN,
+            slab: [Poly::EMPTY; 2],
+            slab_at: None,
             bufs: [Poly::EMPTY; 3],
             col: 0,
             zlo: tmin[2],
@@ -157,33 +194,22 @@ impl Columns {
     #[inline]
     fn general(&mut self, x: f64, y: f64) {
         self.kind = Kind::General;
-        // Poly::clip_column, ping-ponging between two buffers instead of copying
-        let [b0, b1, _] = &mut self.bufs;
-        let mut cur = None; // None: the triangle; Some(i): bufs[i]
-        for (k, b, upper) in [
-            (0, x, false),
-            (0, x + 1.0, true),
-            (1, y, false),
-            (1, y + 1.0, true),
-        ] {
-            let (src, dst, next): (&Poly, &mut Poly, usize) = match cur {
-                None => (&self.tri, &mut *b0, 0),
-                Some(0) => (&*b0, &mut *b1, 1),
-                _ => (&*b1, &mut *b0, 0),
-            };
-            let clipped = if upper {
-                src.clip_into::<true>(k, b, dst)
-            } else {
-                src.clip_into::<false>(k, b, dst)
-            };
-            if clipped {
-                cur = Some(next);
-            }
+        // Poly::clip_column, in its plane order x−, x+, y−, y+: the x-slab (the triangle clipped
+        // by x− and x+) is kept for the following columns of the same x
+        if x != self.slab_x {
+            self.slab_x = x;
+            let [s0, s1] = &mut self.slab;
+            self.slab_at = clip_planes(&self.tri, [(0, x, false), (0, x + 1.0, true)], s0, s1);
         }
-        self.col = match cur {
+        let src = match self.slab_at {
+            None => &self.tri,
+            Some(i) => &self.slab[i],
+        };
+        let [b0, b1, _] = &mut self.bufs;
+        self.col = match clip_planes(src, [(1, y, false), (1, y + 1.0, true)], b0, b1) {
             Some(i) => i,
             None => {
-                self.bufs[0] = self.tri;
+                self.bufs[0] = *src;
                 0
             }
         };
