@@ -64,18 +64,18 @@ impl Acc {
         let x = [n[0], n[1], n[2], c[0], c[1], c[2], c[3]];
         if self.w > 0.0 {
             self.w += w;
-            for k in 0..7 {
-                self.s[k] += w * x[k];
+            for (s, x) in self.s.iter_mut().zip(x) {
+                *s += w * x;
             }
         } else if w > 0.0 {
             // the first positive weight: the weighted sums so far are zero
             self.w += w;
-            for k in 0..7 {
-                self.s[k] = 0.0 + w * x[k];
+            for (s, x) in self.s.iter_mut().zip(x) {
+                *s = 0.0 + w * x;
             }
         } else {
-            for k in 0..7 {
-                self.s[k] += x[k];
+            for (s, x) in self.s.iter_mut().zip(x) {
+                *s += x;
             }
         }
     }

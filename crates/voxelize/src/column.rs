@@ -12,7 +12,8 @@
 //!   lifted to the plane `z(x, y) = (d − n_x x − n_y y) / n_z`, no edge clipping needed; when the
 //!   plane stays inside one voxel over the square, its area is `|n| / n_z` exactly and its
 //!   centroid the lifted square centre (closed form, no clipping at all).
-//! * **General**: the triangle clipped by the four side planes.
+//! * **General**: the triangle clipped by the four side planes, in the order of `clipped_area`
+//!   (x−, x+, y−, y+); the x-slab after the first two is kept for the columns of the same x.
 //!
 //! When the column polygon's z-range lies inside the voxel's slab (one voxel per column, the
 //! usual case for thin voxelization and shallow triangles), its area and centroid are computed
