@@ -8,6 +8,10 @@ use voxlod_geom::Triangle;
 /// Triangles per batch handed to the caller's callback (64 Ki triangles = 5.5 MiB).
 pub const BATCH: usize = 1 << 16;
 
+/// Triangles between two calls of the release hook: bounds the pages of a memory-mapped
+/// input that can be resident at once (at most 3 vertex pages per triangle, plus the faces).
+pub const RELEASE_EVERY: u32 = 8192;
+
 pub(crate) struct Emitter<'a> {
     batch: Vec<Triangle>,
     f: &'a mut dyn FnMut(&[Triangle]) -> Result<(), IngestError>,
@@ -16,6 +20,10 @@ pub(crate) struct Emitter<'a> {
     /// Input bytes consumed so far; readers update it, the emitter reports it.
     pub bytes_done: u64,
     pub bytes_total: u64,
+    /// Called every [`RELEASE_EVERY`] triangles: drops the resident pages of a memory-mapped
+    /// input, so that the process's resident memory stays bounded whatever the file size.
+    release: Option<&'a dyn Fn()>,
+    since_release: u32,
 }
 
 impl<'a> Emitter<'a> {
@@ -31,7 +39,15 @@ impl<'a> Emitter<'a> {
             stats: IngestStats::default(),
             bytes_done: 0,
             bytes_total,
+            release: None,
+            since_release: 0,
         }
+    }
+
+    /// Installs the release hook (see the field).
+    pub fn with_release(mut self, release: Option<&'a dyn Fn()>) -> Self {
+        self.release = release;
+        self
     }
 
     /// A triangle whose corners repeat a vertex index: zero area, skipped and counted.
@@ -60,6 +76,13 @@ impl<'a> Emitter<'a> {
         }
         self.batch.push(t);
         self.stats.triangles += 1;
+        self.since_release += 1;
+        if self.since_release == RELEASE_EVERY {
+            self.since_release = 0;
+            if let Some(r) = self.release {
+                r();
+            }
+        }
         if self.batch.len() == BATCH {
             self.flush()?;
         }

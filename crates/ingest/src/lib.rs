@@ -214,7 +214,12 @@ impl MeshSource {
             Reader::Ply(p) => p.progress_total(),
             _ => self.file_len,
         };
-        let mut em = batch::Emitter::new(f, progress, total);
+        let release = || match &self.reader {
+            Reader::Ply(p) => p.release_pages(),
+            Reader::Stl(s) => s.release_pages(),
+            Reader::Obj(_) => {}
+        };
+        let mut em = batch::Emitter::new(f, progress, total).with_release(Some(&release));
         match &self.reader {
             Reader::Ply(p) => p.stream(&mut em)?,
             Reader::Obj(o) => o.stream(&mut em)?,

@@ -115,6 +115,17 @@ impl PlySource {
             | (if l.has_colors { TRI_HAS_COLORS } else { 0 })
     }
 
+    /// Drops this process's resident pages of the memory-mapped input (they stay in the page
+    /// cache, so touching them again is a minor fault, not a read): the mapping's share of
+    /// resident memory stays bounded by what a few thousand triangles touch.
+    pub fn release_pages(&self) {
+        if let Some(m) = &self.map {
+            // SAFETY: the map is a read-only shared file mapping; after MADV_DONTNEED its pages
+            // are read back from the file on the next access, with the same contents.
+            let _ = unsafe { m.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
+        }
+    }
+
     pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
         match (&self.map, self.header.encoding) {
             (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, em),

@@ -114,6 +114,17 @@ impl StlSource {
         ))
     }
 
+    /// Drops this process's resident pages of the memory-mapped input (they stay in the page
+    /// cache, so touching them again is a minor fault, not a read): the mapping's share of
+    /// resident memory stays bounded by what a few thousand triangles touch.
+    pub fn release_pages(&self) {
+        if let Some((m, _)) = &self.binary {
+            // SAFETY: the map is a read-only shared file mapping; after MADV_DONTNEED its pages
+            // are read back from the file on the next access, with the same contents.
+            let _ = unsafe { m.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
+        }
+    }
+
     pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
         match &self.binary {
             Some((map, n)) => self.stream_binary(map, *n, em),

@@ -165,7 +165,13 @@ impl Voxelizers {
                 };
                 if backend == Backend::Auto && gpu.is_software() {
                     let (v, d) = cpu();
-                    return Ok((v, format!("{d}; the only GPU adapter, {}, is a software rasterizer (use --backend gpu to force it)", gpu.adapter_name())));
+                    return Ok((
+                        v,
+                        format!(
+                            "{d}; skipped the software GPU adapter {} (--backend gpu forces it)",
+                            gpu.adapter_name()
+                        ),
+                    ));
                 }
                 let mut gpu = gpu;
                 let mut desc = format!("gpu {} ({method}", gpu.adapter_name());

@@ -137,6 +137,7 @@ struct InspectArgs {
 }
 
 fn main() -> ExitCode {
+    quiet_mesa_wsi();
     let cli = Cli::parse();
     let r = match cli.command {
         Command::Build(a) => run_build(a),
@@ -342,4 +343,22 @@ fn bundled_sample() -> Result<PathBuf> {
         std::fs::rename(&tmp, &p).with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(p)
+}
+
+/// Mesa's Vulkan window-system layer prints "XDG_RUNTIME_DIR is invalid or not set" when the
+/// GPU is probed on a machine without a desktop session. Point it at a private folder when the
+/// variable is missing (done first thing in main, before any thread exists).
+fn quiet_mesa_wsi() {
+    let valid = std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| Path::new(&d).is_dir());
+    if !valid {
+        let dir = std::env::temp_dir().join("voxlod-runtime");
+        if std::fs::create_dir_all(&dir).is_ok() {
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::PermissionsExt;
+                let _ = std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700));
+            }
+            std::env::set_var("XDG_RUNTIME_DIR", &dir);
+        }
+    }
 }
