@@ -184,7 +184,8 @@ impl ChunkVoxelizer {
 
     /// For tests and benchmarks: `false` computes every weight by the general clipping of
     /// [`crate::clipped_area`] (bit-identical to it), `true` (the default) uses the closed forms
-    /// of [`crate::column`](mod@crate::column) where they apply (equal up to rounding).
+    /// of [`crate::column`](mod@crate::column) where they apply (equal up to rounding, so
+    /// the records are equal except where opposite normals cancel; see the crate docs).
     pub fn set_fast_paths(&mut self, on: bool) {
         self.fast = on;
     }

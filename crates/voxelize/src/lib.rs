@@ -56,7 +56,11 @@
 //! within 1e-7 of a square corner, take the general path.
 //! [`ChunkVoxelizer::set_fast_paths`]`(false)` computes every weight by the general clipping;
 //! on the npm bunny at 4096³ (54 M conservative, 32 M thin voxels) both give identical
-//! records.
+//! records. Where coplanar triangles of opposite orientation overlap (double-sided walls of CAD
+//! meshes), `Σ w·normal` cancels to rounding noise (`|N|/W < 1e-8`) and the packed normal of
+//! such a voxel is that noise, so it can differ: 202 of 3.4 M records of the conference room
+//! at 1024³ (conservative), 31,186 of 8.0 M of Munich at 2048³ (conservative), 14,367 of
+//! 6.9 M (thin); colours and voxel sets never differ.
 //!
 //! # Example
 //!
