@@ -38,6 +38,19 @@ fn voxlod(args: &[&str], cwd: &Path) -> Output {
         .expect("running voxlod")
 }
 
+/// `build -q INPUT -o OUT` followed by `extra`, as owned strings.
+fn build_args(input: &Path, out: &Path, extra: &[&str]) -> Vec<String> {
+    let mut a: Vec<String> = vec![
+        "build".into(),
+        "-q".into(),
+        input.to_str().unwrap().into(),
+        "-o".into(),
+        out.to_str().unwrap().into(),
+    ];
+    a.extend(extra.iter().map(|x| x.to_string()));
+    a
+}
+
 fn ok(o: &Output) {
     assert!(
         o.status.success(),
@@ -526,17 +539,7 @@ fn interrupted_build_resumes_to_identical_bytes() {
     let fresh = d.join("fresh.voxlod");
     let out = d.join("resumed.voxlod");
     let s = sample();
-    let args = |o: &Path| {
-        vec![
-            "build".to_string(),
-            "-q".into(),
-            s.to_str().unwrap().into(),
-            "-o".into(),
-            o.to_str().unwrap().into(),
-            "-r".into(),
-            "2048".into(),
-        ]
-    };
+    let args = |o: &Path| build_args(&s, o, &["-r", "2048"]);
     let run = |a: Vec<String>| Command::new(BIN).args(&a).current_dir(d).output().unwrap();
     ok(&run(args(&fresh)));
     for stop in ["10", "100"] {
@@ -593,19 +596,7 @@ fn killed_build_resumes_to_identical_bytes() {
     let fresh = d.join("fresh.voxlod");
     let out = d.join("k.voxlod");
     let s = sample();
-    let args = |o: &Path| {
-        vec![
-            "build".to_string(),
-            "-q".into(),
-            s.to_str().unwrap().into(),
-            "-o".into(),
-            o.to_str().unwrap().into(),
-            "-r".into(),
-            "2048".into(),
-            "-m".into(),
-            "thin".into(),
-        ]
-    };
+    let args = |o: &Path| build_args(&s, o, &["-r", "2048", "-m", "thin"]);
     ok(&Command::new(BIN)
         .args(args(&fresh))
         .current_dir(d)
