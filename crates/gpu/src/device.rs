@@ -101,6 +101,20 @@ impl Gpu {
         self.check()
     }
 
+    /// Waits until submission `idx` has finished.
+    pub fn wait_for(&self, idx: wgpu::SubmissionIndex) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::Wait {
+                submission_index: Some(idx),
+                timeout: None,
+            })
+            .map_err(|e| GpuError::Readback {
+                adapter: self.name.clone(),
+                reason: e.to_string(),
+            })?;
+        self.check()
+    }
+
     /// Copies `size` bytes of `src` into `staging` (MAP_READ) and returns them.
     pub fn read(
         &self,

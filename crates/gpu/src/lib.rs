@@ -126,6 +126,10 @@ pub enum GpuError {
     /// iterations). A bug of this crate if it ever happens.
     #[error("GPU voxelization incomplete on {adapter}: {voxels} marked voxels got no attributes")]
     Incomplete { adapter: String, voxels: usize },
+    /// A replay of [`GpuVoxelizer::voxelize_chunk_streamed`] yielded a different number of
+    /// (finite) triangles than the first one.
+    #[error("the chunk's triangles were replayed differently: {first} triangles, then {again}")]
+    Replay { first: u64, again: u64 },
     /// The chunk origin is not a multiple of 256 or too large for the i32 coordinates of the
     /// shaders.
     #[error("chunk origin {0:?} is not a multiple of 256 below 2^31")]

@@ -56,7 +56,8 @@ pub struct GpuVoxelizer {
     bgl_compute: wgpu::BindGroupLayout,
     bgl_raster: wgpu::BindGroupLayout,
     params: wgpu::Buffer,
-    tris: wgpu::Buffer,
+    /// two triangle buffers: batch k+1 is uploaded while batch k runs
+    tris: [wgpu::Buffer; 2],
     occ: wgpu::Buffer,
     deferred: wgpu::Buffer,
     args: wgpu::Buffer,
@@ -68,9 +69,24 @@ pub struct GpuVoxelizer {
     /// stands in for `args` in the sweep pass's bind group (a buffer cannot be bound as storage
     /// in the dispatch that reads it as indirect arguments)
     args_dummy: wgpu::Buffer,
-    bind: Option<(wgpu::BindGroup, wgpu::BindGroup, wgpu::BindGroup)>,
+    /// bind groups per triangle buffer
+    bind: [Option<Groups>; 2],
+    /// the last submission that used each triangle buffer, until waited for
+    inflight: [Option<wgpu::SubmissionIndex>; 2],
+    /// the triangle buffer the next batch goes to
+    next: usize,
+    resident: Option<Resident>,
+    /// triangles per batch
+    batch: usize,
+    /// host copy of the batch being filled
+    pending: Vec<Triangle>,
+    /// leave out second passes that would draw nothing (see `may_defer`)
+    skip_empty: bool,
     split: (u64, u64),
 }
+
+/// (compute, raster, sweep) bind groups.
+type Groups = (wgpu::BindGroup, wgpu::BindGroup, wgpu::BindGroup);
 
 fn storage_entry(
     binding: u32,
@@ -231,7 +247,7 @@ impl GpuVoxelizer {
             std::mem::size_of::<Params>() as u64,
             U::UNIFORM | U::COPY_DST,
         );
-        let tris = buf("triangles", 88 * 1024, U::STORAGE | U::COPY_DST);
+        let tris = [0, 1].map(|_| buf("triangles", 88 * 1024, U::STORAGE | U::COPY_DST));
         let occ = buf(
             "occupancy",
             OCC_BYTES,
@@ -272,7 +288,13 @@ impl GpuVoxelizer {
             staging,
             target,
             args_dummy,
-            bind: None,
+            bind: [None, None],
+            inflight: [None, None],
+            next: 0,
+            resident: None,
+            batch: BATCH,
+            pending: Vec::new(),
+            skip_empty: true,
             split: (0, 0),
         })
     }
@@ -321,15 +343,46 @@ impl GpuVoxelizer {
         self.split
     }
 
+    /// Triangles per GPU batch (default and maximum 65,535: the sweep pass dispatches one
+    /// workgroup per deferred triangle, and a dispatch dimension is at most 65,535).
+    pub fn batch_size(&self) -> usize {
+        self.batch
+    }
+
+    /// Sets the triangles per GPU batch, clamped to 1..=65,535. Smaller batches hold less in
+    /// memory (88 bytes per triangle, twice on the device, up to three times on the host) but
+    /// cost more submissions; the voxels do not depend on it.
+    pub fn set_batch_size(&mut self, n: usize) {
+        self.batch = n.clamp(1, BATCH);
+    }
+
+    /// Whether the second pass (fragment or sweep) of a batch is left out when the host can
+    /// tell, from the triangles' areas and extents, that the classification pass defers
+    /// nothing (default on; the voxels do not depend on it). For benchmarks.
+    pub fn set_skip_empty_passes(&mut self, on: bool) {
+        self.skip_empty = on;
+    }
+
+    /// Grows triangle buffer `slot` to at least `size` bytes (see [`GpuVoxelizer::ensure`]).
+    fn ensure_tris(&mut self, slot: usize, size: u64) {
+        let b = &mut self.tris[slot];
+        if b.size() >= size {
+            return;
+        }
+        let size = size.max(b.size() * 2).next_multiple_of(256);
+        *b = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("triangles"),
+            size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        self.bind[slot] = None;
+    }
+
     /// Grows `buf` to at least `size` bytes (new buffers are zeroed by wgpu, which is slow on a
     /// CPU device, hence reuse with geometric growth).
     fn ensure(&mut self, which: Which, size: u64) {
         let (b, usage, label) = match which {
-            Which::Tris => (
-                &mut self.tris,
-                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                "triangles",
-            ),
             Which::Deferred => (&mut self.deferred, wgpu::BufferUsages::STORAGE, "deferred"),
             Which::Accum => (
                 &mut self.accum,
@@ -354,14 +407,15 @@ impl GpuVoxelizer {
             usage,
             mapped_at_creation: false,
         });
-        self.bind = None;
+        self.bind = [None, None];
     }
 
-    /// (compute, raster, sweep) bind groups.
-    fn bind_groups(&mut self) -> (wgpu::BindGroup, wgpu::BindGroup, wgpu::BindGroup) {
-        if let Some(b) = &self.bind {
+    /// The bind groups of the passes reading triangle buffer `slot`.
+    fn bind_groups(&mut self, slot: usize) -> Groups {
+        if let Some(b) = &self.bind[slot] {
             return b.clone();
         }
+        let tris = &self.tris[slot];
         let d = &self.gpu.device;
         fn e(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
             wgpu::BindGroupEntry {
@@ -375,7 +429,7 @@ impl GpuVoxelizer {
                 layout: &self.bgl_compute,
                 entries: &[
                     e(0, &self.params),
-                    e(1, &self.tris),
+                    e(1, tris),
                     e(2, &self.occ),
                     e(3, &self.deferred),
                     e(4, args),
@@ -392,51 +446,61 @@ impl GpuVoxelizer {
             layout: &self.bgl_raster,
             entries: &[
                 e(0, &self.params),
-                e(1, &self.tris),
+                e(1, tris),
                 e(2, &self.occ),
                 e(3, &self.deferred),
                 e(5, &self.base),
                 e(6, &self.accum),
             ],
         });
-        self.bind = Some((compute.clone(), raster.clone(), sweep.clone()));
+        self.bind[slot] = Some((compute.clone(), raster.clone(), sweep.clone()));
         (compute, raster, sweep)
     }
 
     /// Voxelizes the triangles (grid coordinates) of the chunk whose minimum voxel corner is
     /// `origin` (multiples of 256): the same voxels, normals, colours and face masks as
     /// `voxlod_voxelize::ChunkVoxelizer`, sorted by the Morton code of their in-chunk position.
-    /// Triangles with a non-finite coordinate or zero area are skipped.
+    /// Triangles with a non-finite coordinate or zero area are skipped. A thin wrapper of
+    /// [`GpuVoxelizer::voxelize_chunk_streamed`] for triangles already in memory.
     pub fn voxelize_chunk(
         &mut self,
         origin: [u32; 3],
         tris: &[Triangle],
     ) -> Result<Vec<Voxel>, GpuError> {
+        self.voxelize_chunk_streamed(origin, &mut |feed: &mut dyn FnMut(&[Triangle])| {
+            feed(tris);
+            Ok::<(), GpuError>(())
+        })
+    }
+
+    /// [`GpuVoxelizer::voxelize_chunk`] with bounded host memory: `replay(feed)` must pass all
+    /// of the chunk's triangles to `feed`, in batches of any size, and in the same order every
+    /// time it is called. It is called once for marking and, when the chunk needs more than one
+    /// GPU batch ([`GpuVoxelizer::batch_size`]), once more per accumulation window (at least
+    /// once; a window is 2^19 voxels). At most two GPU batches are in flight: while the device
+    /// works on batch k, `feed` returns and the host reads and uploads batch k+1; before batch
+    /// k+2 is uploaded, batch k is waited for (so at most three batches of triangles are held
+    /// on the host, wgpu's upload copies included).
+    ///
+    /// Errors of `replay` are returned as they are; GPU errors met while feeding stop the GPU
+    /// work (the rest of the replay is ignored) and are returned when `replay` returns. A replay
+    /// that yields a different number of triangles than the first is an error
+    /// ([`GpuError::Replay`]).
+    pub fn voxelize_chunk_streamed<E: From<GpuError>>(
+        &mut self,
+        origin: [u32; 3],
+        replay: &mut dyn FnMut(&mut dyn FnMut(&[Triangle])) -> Result<(), E>,
+    ) -> Result<Vec<Voxel>, E> {
         if origin
             .iter()
             .any(|&c| c % CHUNK != 0 || c > i32::MAX as u32 - CHUNK)
         {
-            return Err(GpuError::Origin(origin));
+            return Err(GpuError::Origin(origin).into());
         }
         self.split = (0, 0);
-        let finite: Vec<Triangle>;
-        let tris = if tris.iter().all(|t| t.is_finite()) {
-            tris
-        } else {
-            finite = tris.iter().filter(|t| t.is_finite()).copied().collect();
-            &finite
-        };
-        if tris.is_empty() {
-            return Ok(Vec::new());
-        }
-        let batch_len = tris.len().min(BATCH);
-        self.ensure(
-            Which::Tris,
-            (batch_len * std::mem::size_of::<Triangle>()) as u64,
-        );
-        self.ensure(Which::Deferred, batch_len as u64 * DEFERRED_BYTES);
+        self.resident = None;
+        self.pending.clear();
         let origin_i = origin.map(|c| c as i32);
-        let batches: Vec<&[Triangle]> = tris.chunks(BATCH).collect();
 
         // pass 1: mark the occupancy bitset
         {
@@ -445,12 +509,16 @@ impl GpuVoxelizer {
             enc.clear_buffer(&self.counter, 0, None);
             self.gpu.queue.submit([enc.finish()]);
         }
-        for b in &batches {
-            self.run_batch(b, origin_i, PHASE_MARK, (0, 0), true)?;
+        let mut st = Stream::new(origin_i, PHASE_MARK, (0, 0));
+        replay(&mut |b: &[Triangle]| self.feed(&mut st, b))?;
+        self.finish_stream(&mut st)?;
+        let (marked_batches, marked_tris) = (st.batches, st.tris);
+        if marked_tris == 0 {
+            return Ok(Vec::new());
         }
         // compaction: a slot per occupied voxel
         let (count, small, large) = {
-            let (compute, _, _) = self.bind_groups();
+            let (compute, _, _) = self.bind_groups(0);
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
             {
                 let mut pass = enc.begin_compute_pass(&Default::default());
@@ -463,6 +531,7 @@ impl GpuVoxelizer {
             let c: &[u32] = bytemuck::cast_slice(&c);
             (c[0] as u64, c[1] as u64, c[2] as u64)
         };
+        self.inflight = [None, None];
         self.split = (small, large);
         if count == 0 {
             return Ok(Vec::new());
@@ -498,17 +567,27 @@ impl GpuVoxelizer {
                 enc.clear_buffer(&self.accum, 0, Some(bytes));
                 self.gpu.queue.submit([enc.finish()]);
             }
-            let reupload = batches.len() > 1;
-            for b in &batches {
-                self.run_batch(
-                    b,
-                    origin_i,
-                    PHASE_ACCUMULATE,
-                    (lo as u32, hi as u32),
-                    reupload,
-                )?;
+            let slots = (lo as u32, hi as u32);
+            match self.resident {
+                // one batch: its triangles are still on the device
+                Some(r) if marked_batches == 1 => {
+                    self.record(r.slot, r.len, origin_i, PHASE_ACCUMULATE, slots, r.defers)?;
+                }
+                _ => {
+                    let mut st = Stream::new(origin_i, PHASE_ACCUMULATE, slots);
+                    replay(&mut |b: &[Triangle]| self.feed(&mut st, b))?;
+                    self.finish_stream(&mut st)?;
+                    if st.tris != marked_tris {
+                        return Err(GpuError::Replay {
+                            first: marked_tris,
+                            again: st.tris,
+                        }
+                        .into());
+                    }
+                }
             }
             let acc = self.gpu.read(&self.accum, &self.staging, bytes)?;
+            self.inflight = [None, None];
             decode(
                 &occ,
                 &base,
@@ -523,16 +602,108 @@ impl GpuVoxelizer {
         Ok(voxels)
     }
 
-    /// One batch of triangles through the classification pass and the fragment pass.
-    fn run_batch(
+    /// Takes the next piece of a replay: fills the pending batch (finite triangles only) and
+    /// submits every full one; a full, finite piece of the caller's batch is uploaded as is.
+    fn feed(&mut self, st: &mut Stream, mut tris: &[Triangle]) {
+        while !tris.is_empty() && st.error.is_none() {
+            let room = self.batch - self.pending.len();
+            let (head, rest) = tris.split_at(room.min(tris.len()));
+            tris = rest;
+            let r = if self.pending.is_empty()
+                && head.len() == self.batch
+                && head.iter().all(Triangle::is_finite)
+            {
+                self.submit(st, head)
+            } else {
+                self.pending
+                    .extend(head.iter().filter(|t| t.is_finite()).copied());
+                if self.pending.len() == self.batch {
+                    let full = std::mem::take(&mut self.pending);
+                    let r = self.submit(st, &full);
+                    self.pending = full;
+                    self.pending.clear();
+                    r
+                } else {
+                    Ok(())
+                }
+            };
+            if let Err(e) = r {
+                st.error = Some(e);
+            }
+        }
+    }
+
+    /// Submits the last, partial batch of a replay; returns the first error of the replay.
+    fn finish_stream(&mut self, st: &mut Stream) -> Result<(), GpuError> {
+        if st.error.is_none() && !self.pending.is_empty() {
+            let last = std::mem::take(&mut self.pending);
+            if let Err(e) = self.submit(st, &last) {
+                st.error = Some(e);
+            }
+            self.pending = last;
+        }
+        self.pending.clear();
+        match st.error.take() {
+            Some(e) => Err(e),
+            None => Ok(()),
+        }
+    }
+
+    /// Uploads one batch into the triangle buffer not used by the previous batch (after the
+    /// batch before that, which used it, has finished) and submits its passes.
+    fn submit(&mut self, st: &mut Stream, tris: &[Triangle]) -> Result<(), GpuError> {
+        debug_assert!(!tris.is_empty() && tris.len() <= self.batch);
+        let slot = self.next;
+        self.next ^= 1;
+        if let Some(idx) = self.inflight[slot].take() {
+            self.gpu.wait_for(idx)?;
+        }
+        let bytes = std::mem::size_of_val(tris) as u64;
+        self.ensure_tris(slot, bytes);
+        self.ensure(Which::Deferred, tris.len() as u64 * DEFERRED_BYTES);
+        self.gpu
+            .queue
+            .write_buffer(&self.tris[slot], 0, bytemuck::cast_slice(tris));
+        let defers = self.may_defer(tris);
+        let idx = self.record(slot, tris.len(), st.origin, st.phase, st.slots, defers)?;
+        self.inflight[slot] = Some(idx);
+        self.resident = Some(Resident {
+            slot,
+            len: tris.len(),
+            defers,
+        });
+        st.batches += 1;
+        st.tris += tris.len() as u64;
+        Ok(())
+    }
+
+    /// Whether the classification pass may defer a triangle of `tris` to the second pass
+    /// (fragment pass, or the sweep pass of [`GpuMethod::Triangle`]). False only when every
+    /// triangle is, with a margin for the shader's rounding, under the cutoff and within
+    /// `INLINE_COLUMNS` columns in all three projections: then the second pass would draw
+    /// nothing and is not recorded. Costs a cross product per triangle on the host.
+    fn may_defer(&self, tris: &[Triangle]) -> bool {
+        let cutoff = match self.method {
+            _ if !self.skip_empty => return true,
+            GpuMethod::Fragment => return true,
+            GpuMethod::Triangle => f64::INFINITY,
+            GpuMethod::Hybrid => self.cutoff as f64 * 0.999,
+        };
+        !tris.iter().all(|t| certainly_inline(t, cutoff))
+    }
+
+    /// Records and submits the classification pass and, if `defers`, the second pass of one
+    /// batch (`len` triangles in triangle buffer `slot`).
+    fn record(
         &mut self,
-        tris: &[Triangle],
+        slot: usize,
+        len: usize,
         origin: [i32; 3],
         phase: u32,
         slots: (u32, u32),
-        upload: bool,
-    ) -> Result<(), GpuError> {
-        let groups = (tris.len() as u32).div_ceil(WG);
+        defers: bool,
+    ) -> Result<wgpu::SubmissionIndex, GpuError> {
+        let groups = (len as u32).div_ceil(WG);
         let groups_x = groups.min(32768);
         let groups_y = groups.div_ceil(groups_x);
         let cutoff = match self.method {
@@ -546,7 +717,7 @@ impl GpuVoxelizer {
                 Mode::Conservative => 0,
                 Mode::Thin => 1,
             },
-            tri_count: tris.len() as u32,
+            tri_count: len as u32,
             cutoff,
             phase,
             slot_lo: slots.0,
@@ -554,15 +725,10 @@ impl GpuVoxelizer {
             groups_x,
             pad: [0; 2],
         };
-        if upload {
-            self.gpu
-                .queue
-                .write_buffer(&self.tris, 0, bytemuck::cast_slice(tris));
-        }
         self.gpu
             .queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        let (compute, raster, sweep) = self.bind_groups();
+        let (compute, raster, sweep) = self.bind_groups(slot);
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         enc.clear_buffer(&self.args, 0, None);
         {
@@ -571,7 +737,9 @@ impl GpuVoxelizer {
             pass.set_bind_group(0, &compute, &[]);
             pass.dispatch_workgroups(groups_x, groups_y, 1);
         }
-        if self.method == GpuMethod::Triangle {
+        if !defers {
+            // every triangle was voxelized by the classification pass
+        } else if self.method == GpuMethod::Triangle {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&self.sweep);
             pass.set_bind_group(0, &sweep, &[]);
@@ -595,14 +763,76 @@ impl GpuVoxelizer {
             pass.set_bind_group(0, &raster, &[]);
             pass.draw_indirect(&self.args, 0);
         }
-        self.gpu.queue.submit([enc.finish()]);
-        self.gpu.check()
+        let idx = self.gpu.queue.submit([enc.finish()]);
+        self.gpu.check()?;
+        Ok(idx)
     }
+}
+
+/// Columns (2D cells of the dominant projection) up to which the classification pass voxelizes
+/// a triangle itself; `INLINE_COLUMNS` of shaders/classify.wgsl.
+const INLINE_COLUMNS: f64 = 64.0;
+
+/// True when the classification pass certainly voxelizes `t` itself (or skips it): its
+/// dominant projected area plus a bound on the shader's rounding (f32 on adapters without
+/// f64) is below `cutoff`, and its closed voxel range spans at most `INLINE_COLUMNS` columns in
+/// each of the three projections (so whichever dominant axis the shader picks at a tie).
+fn certainly_inline(t: &Triangle, cutoff: f64) -> bool {
+    let v = t.v.map(|p| p.map(f64::from));
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let (e1, e2) = (sub(v[1], v[0]), sub(v[2], v[0]));
+    let n = [
+        e1[1] * e2[2] - e1[2] * e2[1],
+        e1[2] * e2[0] - e1[0] * e2[2],
+        e1[0] * e2[1] - e1[1] * e2[0],
+    ];
+    let len = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    let area = 0.5 * n[0].abs().max(n[1].abs()).max(n[2].abs());
+    if !(area + 1e-5 * len(e1) * len(e2) < cutoff) {
+        return false;
+    }
+    // voxel range [ceil(min) - 1, floor(max)] per axis, as the shader's setup (before clamping)
+    let w: [f64; 3] = std::array::from_fn(|k| {
+        let lo = v[0][k].min(v[1][k]).min(v[2][k]);
+        let hi = v[0][k].max(v[1][k]).max(v[2][k]);
+        hi.floor() - lo.ceil() + 2.0
+    });
+    w[0] * w[1] <= INLINE_COLUMNS && w[1] * w[2] <= INLINE_COLUMNS && w[0] * w[2] <= INLINE_COLUMNS
+}
+
+/// One replay of a chunk's triangles: what its batches run and what was submitted.
+struct Stream {
+    origin: [i32; 3],
+    phase: u32,
+    slots: (u32, u32),
+    batches: u64,
+    tris: u64,
+    error: Option<GpuError>,
+}
+
+impl Stream {
+    fn new(origin: [i32; 3], phase: u32, slots: (u32, u32)) -> Stream {
+        Stream {
+            origin,
+            phase,
+            slots,
+            batches: 0,
+            tris: 0,
+            error: None,
+        }
+    }
+}
+
+/// The last batch submitted: which triangle buffer holds it.
+#[derive(Clone, Copy)]
+struct Resident {
+    slot: usize,
+    len: usize,
+    defers: bool,
 }
 
 #[derive(Clone, Copy)]
 enum Which {
-    Tris,
     Deferred,
     Accum,
     Staging,
