@@ -2,6 +2,7 @@
 //! degenerate ones are counted and dropped, the rest are handed on in batches of
 //! [`BATCH`] triangles, with a progress report per batch.
 
+use crate::ply_faces::LocalBatch;
 use crate::{IngestError, IngestStats};
 use voxlod_geom::Triangle;
 
@@ -76,17 +77,43 @@ impl<'a> Emitter<'a> {
         }
         self.batch.push(t);
         self.stats.triangles += 1;
-        self.since_release += 1;
-        if self.since_release == RELEASE_EVERY {
+        self.added(1);
+        if self.batch.len() == BATCH {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Takes the triangles of a [`LocalBatch`] (already checked for zero area) and its counts,
+    /// batching them exactly as [`Emitter::push`] would.
+    pub fn push_local(&mut self, lb: LocalBatch) -> Result<(), IngestError> {
+        self.stats.polygons += lb.polygons;
+        self.stats.degenerate_skipped += lb.degenerate + lb.repeated;
+        self.stats.repeated_index += lb.repeated;
+        let mut rest = &lb.tris[..];
+        while !rest.is_empty() {
+            let take = (BATCH - self.batch.len()).min(rest.len());
+            self.batch.extend_from_slice(&rest[..take]);
+            rest = &rest[take..];
+            self.stats.triangles += take as u64;
+            self.added(take as u32);
+            if self.batch.len() == BATCH {
+                self.flush()?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Counts `n` triangles towards the next call of the release hook.
+    #[inline]
+    fn added(&mut self, n: u32) {
+        self.since_release += n;
+        if self.since_release >= RELEASE_EVERY {
             self.since_release = 0;
             if let Some(r) = self.release {
                 r();
             }
         }
-        if self.batch.len() == BATCH {
-            self.flush()?;
-        }
-        Ok(())
     }
 
     fn flush(&mut self) -> Result<(), IngestError> {

@@ -200,6 +200,18 @@ impl MeshSource {
         &self.info
     }
 
+    /// True if streaming the mesh again costs about as much as reading a copy of its triangles
+    /// from disk would: the input is a memory-mapped binary PLY or binary STL, decoded in place
+    /// with no vertex array built in memory. A tiler can then pass over the input several times
+    /// instead of spooling it.
+    pub fn rereadable(&self) -> bool {
+        match &self.reader {
+            Reader::Ply(p) => p.is_mapped(),
+            Reader::Stl(s) => s.is_mapped(),
+            Reader::Obj(_) => false,
+        }
+    }
+
     /// Streams every triangle in file order, in batches of up to [`BATCH`] triangles,
     /// calling `f` per batch. Degenerate triangles (exactly zero area) are skipped and
     /// counted. `progress(bytes_done, bytes_total)` is called after each batch (input bytes;

@@ -4,7 +4,7 @@
 //! in a second pass over the file.
 
 use crate::batch::Emitter;
-use crate::ply_faces::stream_faces;
+use crate::ply_faces::{stream_faces, stream_triangles_parallel};
 use crate::ply_header::{parse_header, Element, Encoding, Header};
 use crate::ply_records::{
     AsciiRecords, Counter, CountingReader, Records, SliceRecords, StreamRecords,
@@ -100,6 +100,11 @@ impl PlySource {
         ))
     }
 
+    /// True for binary (not gzip) input, read through the memory map.
+    pub fn is_mapped(&self) -> bool {
+        self.map.is_some()
+    }
+
     /// Input bytes the progress reports count up to.
     pub fn progress_total(&self) -> u64 {
         if self.map.is_some() {
@@ -158,7 +163,7 @@ impl PlySource {
         }
     }
 
-    fn faces_from_map<const BE: bool, V: VertexSource>(
+    fn faces_from_map<const BE: bool, V: VertexSource + Sync>(
         &self,
         data: &[u8],
         verts: &V,
@@ -166,17 +171,33 @@ impl PlySource {
     ) -> Result<(), IngestError> {
         for &(ei, list, strips) in &self.header.layout.sources {
             let off = self.offsets[ei].unwrap_or(data.len());
-            let mut src = SliceRecords::<BE>::new(&self.path, data, off);
-            stream_faces(
-                &self.path,
-                &mut src,
-                &self.header.elements[ei],
-                list,
-                strips,
-                verts,
-                self.flags(),
-                em,
-            )?;
+            let el = &self.header.elements[ei];
+            if strips {
+                let mut src = SliceRecords::<BE>::new(&self.path, data, off);
+                stream_faces(
+                    &self.path,
+                    &mut src,
+                    el,
+                    list,
+                    strips,
+                    verts,
+                    self.flags(),
+                    em,
+                    0..el.count,
+                    false,
+                )?;
+            } else {
+                stream_triangles_parallel::<BE, V>(
+                    &self.path,
+                    data,
+                    off,
+                    el,
+                    list,
+                    verts,
+                    self.flags(),
+                    em,
+                )?;
+            }
         }
         Ok(())
     }
@@ -262,7 +283,18 @@ impl PlySource {
             if let Some(si) = l.sources.iter().position(|s| s.0 == i) {
                 if let (false, Some(v)) = (done[si], verts.as_ref()) {
                     let (_, list, strips) = l.sources[si];
-                    stream_faces(&self.path, src, el, list, strips, v, self.flags(), em)?;
+                    stream_faces(
+                        &self.path,
+                        src,
+                        el,
+                        list,
+                        strips,
+                        v,
+                        self.flags(),
+                        em,
+                        0..el.count,
+                        false,
+                    )?;
                     done[si] = true;
                     continue;
                 }

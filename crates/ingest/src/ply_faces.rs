@@ -5,16 +5,179 @@
 
 use crate::batch::Emitter;
 use crate::ply_header::{Element, Kind, Scalar};
-use crate::ply_records::Records;
+use crate::ply_records::{Records, SliceRecords};
 use crate::ply_vertices::{non_finite, VertexSource};
 use crate::IngestError;
 use std::path::Path;
 use voxlod_geom::{Triangle, DEFAULT_COLOR, TRI_HAS_COLORS, TRI_HAS_NORMALS};
 
-/// Streams all records of element `el` (a `face` or `tristrips` element whose vertex index
-/// list is property `list`) into `em`. `flags` are the triangle flags the vertices support.
+/// Where decoded triangles go: the [`Emitter`] (sequential reading) or a [`LocalBatch`] (one
+/// worker's share of a parallel read).
+pub(crate) trait Sink {
+    fn polygon(&mut self);
+    fn repeated_index(&mut self);
+    fn push(&mut self, t: Triangle) -> Result<(), IngestError>;
+    fn bytes_done(&mut self, bytes: u64);
+}
+
+impl Sink for Emitter<'_> {
+    #[inline]
+    fn polygon(&mut self) {
+        self.stats.polygons += 1;
+    }
+    #[inline]
+    fn repeated_index(&mut self) {
+        Emitter::repeated_index(self)
+    }
+    #[inline]
+    fn push(&mut self, t: Triangle) -> Result<(), IngestError> {
+        Emitter::push(self, t)
+    }
+    #[inline]
+    fn bytes_done(&mut self, bytes: u64) {
+        self.bytes_done = bytes;
+    }
+}
+
+/// Triangles and counts of a range of face records decoded by one worker, handed to the
+/// emitter in record order afterwards ([`Emitter::push_local`]).
+#[derive(Default)]
+pub(crate) struct LocalBatch {
+    pub tris: Vec<Triangle>,
+    pub polygons: u64,
+    pub degenerate: u64,
+    pub repeated: u64,
+}
+
+impl Sink for LocalBatch {
+    #[inline]
+    fn polygon(&mut self) {
+        self.polygons += 1;
+    }
+    #[inline]
+    fn repeated_index(&mut self) {
+        self.repeated += 1;
+    }
+    #[inline]
+    fn push(&mut self, t: Triangle) -> Result<(), IngestError> {
+        // the same test as `Emitter::push`
+        if t.is_degenerate() {
+            self.degenerate += 1;
+        } else {
+            self.tris.push(t);
+        }
+        Ok(())
+    }
+    #[inline]
+    fn bytes_done(&mut self, _: u64) {}
+}
+
+/// Face records per worker and round of [`stream_triangles_parallel`].
+const PARALLEL_RECORDS: u64 = 16 * 1024;
+
+/// Bytes of one record of a `face` element if it holds a triangle: every property a scalar
+/// except the index list, whose count is 3. `None` if another property is a list.
+fn triangle_record_bytes(el: &Element, list: usize) -> Option<usize> {
+    let mut n = 0;
+    for (pi, p) in el.props.iter().enumerate() {
+        n += match p.kind {
+            Kind::Scalar(s) => s.size(),
+            Kind::List { count, item } if pi == list => count.size() + 3 * item.size(),
+            Kind::List { .. } => return None,
+        };
+    }
+    Some(n)
+}
+
+/// Streams a memory-mapped binary `face` element (not strips) starting at byte `off` of
+/// `data`, decoding in parallel on the current rayon pool while every record is a triangle
+/// (so that record `r` starts at `off + r · size`): rounds of [`PARALLEL_RECORDS`] records per
+/// thread are decoded into [`LocalBatch`]es and handed to `em` in record order, so the
+/// triangles, counts and the first error are those of the sequential reader. At the first
+/// record that is not a triangle, the rest is read sequentially.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn stream_faces<R: Records, V: VertexSource>(
+pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
+    path: &Path,
+    data: &[u8],
+    off: usize,
+    el: &Element,
+    list: usize,
+    verts: &V,
+    flags: u32,
+    em: &mut Emitter,
+) -> Result<(), IngestError> {
+    use rayon::prelude::*;
+    // the sequential reader from record `first`, which starts at byte `at`
+    let sequential = |first: u64, at: usize, em: &mut Emitter| {
+        let mut src = SliceRecords::<BE>::new(path, data, at);
+        let range = first..el.count;
+        stream_faces(
+            path, &mut src, el, list, false, verts, flags, em, range, false,
+        )
+        .map(drop)
+    };
+    let threads = rayon::current_num_threads() as u64;
+    let size = match triangle_record_bytes(el, list) {
+        Some(size) if threads > 1 => size as u64,
+        _ => return sequential(0, off, em),
+    };
+    let at = |rec: u64| off + (rec * size) as usize;
+    // records that fit in the file at the uniform size (the rest, if any, is read sequentially
+    // and reports the truncation as the sequential reader does)
+    let fit = ((data.len() - off) as u64 / size).min(el.count);
+    let mut rec = 0u64;
+    while rec < fit {
+        let n = (PARALLEL_RECORDS * threads).min(fit - rec);
+        let parts: Vec<(u64, u64)> = (0..threads)
+            .map(|t| (rec + n * t / threads, rec + n * (t + 1) / threads))
+            .filter(|(a, b)| a < b)
+            .collect();
+        let results: Vec<(u64, Result<(LocalBatch, Option<u64>), IngestError>)> = parts
+            .par_iter()
+            .map(|&(a, b)| {
+                let mut src = SliceRecords::<BE>::new(path, data, at(a));
+                let mut lb = LocalBatch {
+                    tris: Vec::with_capacity((b - a) as usize),
+                    ..Default::default()
+                };
+                let r = stream_faces(
+                    path,
+                    &mut src,
+                    el,
+                    list,
+                    false,
+                    verts,
+                    flags,
+                    &mut lb,
+                    a..b,
+                    true,
+                );
+                (a, r.map(|stop| (lb, stop)))
+            })
+            .collect();
+        for (a, r) in results {
+            match r {
+                Ok((lb, None)) => em.push_local(lb)?,
+                // a record that is not a triangle: the offsets from `a` on are unknown
+                Ok((_, Some(_))) => return sequential(a, at(a), em),
+                Err(e) => return Err(e),
+            }
+        }
+        rec += n;
+        em.bytes_done = at(rec) as u64;
+    }
+    if rec < el.count {
+        return sequential(rec, at(rec), em);
+    }
+    Ok(())
+}
+
+/// Streams the records `range` of element `el` (a `face` or `tristrips` element whose vertex
+/// index list is property `list`; `src` positioned at record `range.start`) into `em`. `flags` are
+/// the triangle flags the vertices support. With `only_triangles`, stops before the first
+/// record whose list does not hold exactly 3 indices and returns its index.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn stream_faces<R: Records, V: VertexSource, S: Sink>(
     path: &Path,
     src: &mut R,
     el: &Element,
@@ -22,12 +185,14 @@ pub(crate) fn stream_faces<R: Records, V: VertexSource>(
     strips: bool,
     verts: &V,
     flags: u32,
-    em: &mut Emitter,
-) -> Result<(), IngestError> {
+    em: &mut S,
+    range: std::ops::Range<u64>,
+    only_triangles: bool,
+) -> Result<Option<u64>, IngestError> {
     debug_assert!(flags & !(TRI_HAS_COLORS | TRI_HAS_NORMALS) == 0);
     let nv = verts.count();
     src.element(&el.name, el.count);
-    for rec in 0..el.count {
+    for rec in range {
         src.begin(rec)?;
         for (pi, p) in el.props.iter().enumerate() {
             let (count, item) = match p.kind {
@@ -38,8 +203,11 @@ pub(crate) fn stream_faces<R: Records, V: VertexSource>(
                 }
             };
             let k = src.list_count(count, item)?;
+            if only_triangles && k != 3 {
+                return Ok(Some(rec));
+            }
             if !strips {
-                em.stats.polygons += 1;
+                em.polygon();
             }
             // the first two corners of the fan, or the last two of the strip
             let mut win = [0usize; 2];
@@ -78,19 +246,19 @@ pub(crate) fn stream_faces<R: Records, V: VertexSource>(
             }
         }
         src.end()?;
-        em.bytes_done = src.bytes_done();
+        em.bytes_done(src.bytes_done());
     }
-    Ok(())
+    Ok(None)
 }
 
 #[inline]
-fn emit<R: Records, V: VertexSource>(
+fn emit<R: Records, V: VertexSource, S: Sink>(
     path: &Path,
     src: &R,
     verts: &V,
     tri: [usize; 3],
     flags: u32,
-    em: &mut Emitter,
+    em: &mut S,
 ) -> Result<(), IngestError> {
     if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
         em.repeated_index();

@@ -117,6 +117,11 @@ impl StlSource {
     /// Drops this process's resident pages of the memory-mapped input (they stay in the page
     /// cache, so touching them again is a minor fault, not a read): the mapping's share of
     /// resident memory stays bounded by what a few thousand triangles touch.
+    /// True for binary STL, read through the memory map.
+    pub fn is_mapped(&self) -> bool {
+        self.binary.is_some()
+    }
+
     pub fn release_pages(&self) {
         if let Some((m, _)) = &self.binary {
             // SAFETY: the map is a read-only shared file mapping; after MADV_DONTNEED its pages

@@ -1,0 +1,146 @@
+//! The parallel decoding of memory-mapped binary triangle faces must be invisible: the same
+//! triangles in the same order, the same counts and the same first error as reading one
+//! record after another (a one-thread pool) and as the ASCII encoding of the same mesh.
+
+mod common;
+
+use common::{ply, El, TempDir, V};
+use voxlod_geom::Triangle;
+use voxlod_ingest::{IngestStats, MeshSource};
+
+/// A mesh of `n` faces over a wavy grid: triangles, with an extra `uchar flags` property after
+/// the list, degenerate ones (repeated index, collinear), a quad at `quad_at` (breaks the
+/// uniform record size) and, if given, an out-of-range index at `bad_at`.
+fn mesh(n: usize, quad_at: Option<usize>, bad_at: Option<usize>) -> Vec<El> {
+    let side = 400usize;
+    let mut vrows = Vec::new();
+    for y in 0..side {
+        for x in 0..side {
+            vrows.push(vec![
+                V::S(x as f64),
+                V::S(y as f64),
+                V::S(((x * 13 + y * 7) % 11) as f64 * 0.25),
+                V::S(((x + y) % 256) as f64),
+            ]);
+        }
+    }
+    let mut frows = Vec::new();
+    for f in 0..n {
+        let i = (f / 2) % ((side - 1) * (side - 1));
+        let (x, y) = (i % (side - 1), i / (side - 1));
+        let v = (y * side + x) as f64;
+        let s = side as f64;
+        let mut idx = if f % 2 == 0 {
+            vec![v, v + 1.0, v + s]
+        } else {
+            vec![v + 1.0, v + s + 1.0, v + s]
+        };
+        if f % 997 == 5 {
+            idx[2] = idx[0]; // repeated index
+        }
+        if f % 1009 == 7 {
+            idx = vec![v, v + 1.0, v + 2.0]; // collinear along x: zero area unless z bends
+        }
+        if Some(f) == quad_at {
+            idx = vec![v, v + 1.0, v + s + 1.0, v + s];
+        }
+        if Some(f) == bad_at {
+            idx[1] = (side * side + 3) as f64;
+        }
+        frows.push(vec![V::L(idx), V::S((f % 200) as f64)]);
+    }
+    vec![
+        El {
+            name: "vertex",
+            props: vec!["float x", "float y", "float z", "uchar red"],
+            rows: vrows,
+        },
+        El {
+            name: "face",
+            props: vec!["list uchar int vertex_indices", "uchar flags"],
+            rows: frows,
+        },
+    ]
+}
+
+fn read_with(
+    threads: usize,
+    path: &std::path::Path,
+) -> Result<(Vec<Triangle>, IngestStats), String> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        let src = MeshSource::open(path).map_err(|e| e.to_string())?;
+        let mut tris = Vec::new();
+        let st = src
+            .stream(
+                &mut |b| {
+                    tris.extend_from_slice(b);
+                    Ok(())
+                },
+                &mut |_, _| {},
+            )
+            .map_err(|e| e.to_string())?;
+        Ok((tris, st))
+    })
+}
+
+#[test]
+fn parallel_equals_sequential_and_ascii() {
+    let dir = TempDir::new("parallel");
+    // several rounds of 16 Ki records per thread, a quad late in the file, none
+    for (name, quad) in [("tris", None), ("quad", Some(61_234))] {
+        let els = mesh(100_000, quad, None);
+        let bin = dir.write(&format!("{name}.ply"), ply("binary_little_endian", &els));
+        let be = dir.write(&format!("{name}_be.ply"), ply("binary_big_endian", &els));
+        let ascii = dir.write(&format!("{name}_ascii.ply"), ply("ascii", &els));
+        let (want, want_st) = read_with(1, &ascii).unwrap();
+        assert!(want_st.degenerate_skipped > 100 && want_st.repeated_index > 50);
+        assert_eq!(want_st.polygons, 100_000);
+        assert_eq!(
+            want.len() as u64,
+            100_000 + quad.is_some() as u64 - want_st.degenerate_skipped
+        );
+        for path in [&bin, &be] {
+            for threads in [1, 2, 3] {
+                let (got, st) = read_with(threads, path).unwrap();
+                assert_eq!(st, want_st, "{name} {threads} threads");
+                assert!(got == want, "{name}, {threads} threads: triangles differ");
+            }
+        }
+    }
+}
+
+#[test]
+fn parallel_reports_the_first_error_as_sequential_does() {
+    let dir = TempDir::new("parallel_err");
+    // an out-of-range index in the second round, and one after a quad
+    for (name, quad, bad) in [
+        ("late", None, Some(70_001)),
+        ("after_quad", Some(40_000), Some(40_010)),
+    ] {
+        let els = mesh(100_000, quad, bad);
+        let bin = dir.write(&format!("{name}.ply"), ply("binary_little_endian", &els));
+        let seq = read_with(1, &bin).unwrap_err();
+        assert!(seq.contains("refers to vertex"), "{seq}");
+        assert!(seq.contains(&format!("{}", bad.unwrap())), "{seq}");
+        for threads in [2, 3] {
+            assert_eq!(
+                read_with(threads, &bin).unwrap_err(),
+                seq,
+                "{name} {threads}"
+            );
+        }
+    }
+    // truncated inside the face list: the same truncation message
+    let els = mesh(100_000, None, None);
+    let mut data = ply("binary_little_endian", &els);
+    data.truncate(data.len() - 3 * 14 - 5);
+    let cut = dir.write("cut.ply", &data);
+    let seq = read_with(1, &cut).unwrap_err();
+    for threads in [2, 3] {
+        assert_eq!(read_with(threads, &cut).unwrap_err(), seq);
+    }
+}
