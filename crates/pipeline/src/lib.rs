@@ -16,9 +16,11 @@ mod backend;
 mod leaf_log;
 mod memory;
 mod octree_writer;
+mod passes;
 mod progress;
 mod size;
 mod system;
+mod window;
 mod work;
 
 pub use backend::{Backend, Cutoff};
@@ -31,12 +33,11 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use voxlod_format::{encode_node, EncodedNode, FileSpec, Voxel, Writer};
 use voxlod_geom::{Bounds, Grid};
 use voxlod_ingest::{IngestError, MeshSource};
-use voxlod_tile::{Bins, ChunkBin, Spool, Spooler, TileError};
+use voxlod_tile::{Bins, ChunkBin, Passes, RecordLayout, Spool, Spooler, TileError};
 use voxlod_voxelize::Mode;
 
 use leaf_log::LeafLog;
@@ -129,8 +130,14 @@ pub struct BuildSummary {
     pub memory_plan: MemoryPlan,
     /// Peak resident memory of the whole process (bytes).
     pub peak_rss: u64,
-    /// Largest temporary disk use planned (bytes): spool plus bins.
+    /// Largest temporary disk use planned (bytes): spool (if one is written) plus bins.
     pub temp_disk: u64,
+    /// How the tile stage read the triangles: `"input"` (passes over the memory-mapped input,
+    /// no spool) or `"spool"` (the input was parsed once into a spool).
+    pub tile_source: &'static str,
+    /// Bytes of one triangle record in the spool and bins (40–88: only the attributes the
+    /// mesh has).
+    pub record_bytes: usize,
     pub resumed: bool,
     pub stages: Vec<StageTime>,
     pub seconds: f64,
@@ -144,6 +151,9 @@ fn tile_err(e: TileError) -> IngestError {
 /// What the ingest stage leaves for a resumed run (`spool.json`).
 #[derive(Serialize, Deserialize)]
 struct SpoolMarker {
+    /// True if the triangles were written to `spool.tri`; false if the tile stage reads the
+    /// input again.
+    spooled: bool,
     count: u64,
     min: [f64; 3],
     max: [f64; 3],
@@ -254,22 +264,38 @@ fn run(
             });
         };
 
-    // Temporary disk: the spool (88 bytes per triangle) and the bins (the spool plus the
-    // triangles that straddle chunk borders) exist together during the scatter pass.
+    // Records hold only the attributes the mesh has; an input that is memory-mapped is read
+    // again by the tile passes instead of being copied to a spool.
+    let layout = RecordLayout {
+        normals: info.has_normals,
+        colors: info.has_colors,
+    };
+    let spooled = !source.rereadable();
+    let rec = layout.bytes() as u64;
+
+    // Temporary disk: the bins (the triangles plus those that straddle chunk borders, at most
+    // about 1.5× for fine meshes), and the spool if one is written, which exists during the
+    // scatter pass too.
     let input_len = std::fs::metadata(input).map(|m| m.len()).unwrap_or(0);
     let est_triangles = if info.faces > 0 {
         info.faces * 2
     } else {
         input_len / 12
     };
-    let temp_disk = est_triangles * voxlod_tile::TRIANGLE_BYTES * 5 / 2;
+    let temp_disk = est_triangles * rec * if spooled { 5 } else { 3 } / 2;
     if let Some(free) = system::free_disk(work.path()) {
         if s.progress {
             eprintln!(
-                "temporary disk: up to about {} in {} ({} free)",
+                "temporary disk: up to about {} in {} ({} free; {}-byte triangle records{})",
                 format_size(temp_disk),
                 work.path().display(),
-                format_size(free)
+                format_size(free),
+                rec,
+                if spooled {
+                    ", spool and bins"
+                } else {
+                    ", bins only: the mapped input is read again"
+                }
             );
         }
         if temp_disk > free {
@@ -282,7 +308,8 @@ fn run(
         }
     }
 
-    // Ingest: parse the input once, spooling triangles (world coordinates) to disk.
+    // Ingest: parse the input once, for its bounds, spooling the triangles (world
+    // coordinates) to disk unless the input can be read again cheaply.
     let t = Instant::now();
     let spool_path = work.file("spool.tri");
     let leaves_path = work.file("leaves.bin");
@@ -294,27 +321,48 @@ fn run(
     };
     let marker: SpoolMarker = match work.marker::<SpoolMarker>("spool.json") {
         Some(m)
-            if leaves_done.is_some()
-                || bins_marker.is_some()
-                || std::fs::metadata(&spool_path)
-                    .is_ok_and(|md| md.len() == m.count * voxlod_tile::TRIANGLE_BYTES) =>
+            if m.spooled == spooled
+                && (leaves_done.is_some()
+                    || bins_marker.is_some()
+                    || !m.spooled
+                    || std::fs::metadata(&spool_path)
+                        .is_ok_and(|md| md.len() == m.count * rec)) =>
         {
             stage_done(&mut stages, "ingest", t, true);
             m
         }
         _ => {
             let bar = Stage::bytes(s.progress, "ingest", input_len);
-            let mut spooler = Spooler::create(&spool_path)?;
-            let stats = source.stream(
-                &mut |tris| {
-                    if interrupted() {
-                        return Err(IngestError::Callback("interrupted".into()));
-                    }
-                    spooler.push(tris).map_err(tile_err)
-                },
-                &mut |done, total| bar.set(done, total),
-            )?;
-            let spool = spooler.finish()?;
+            let mut spooler = if spooled {
+                Some(Spooler::create(&spool_path, layout)?)
+            } else {
+                None
+            };
+            let mut count = 0u64;
+            let mut bounds = Bounds::default();
+            // (inside the pool: a mapped binary PLY is decoded on its threads)
+            let stats = pool.install(|| {
+                source.stream(
+                    &mut |tris| {
+                        if interrupted() {
+                            return Err(IngestError::Callback("interrupted".into()));
+                        }
+                        match &mut spooler {
+                            Some(sp) => sp.push(tris).map_err(tile_err),
+                            None => {
+                                count += tris.len() as u64;
+                                tris.iter().for_each(|t| bounds.add_triangle(t));
+                                Ok(())
+                            }
+                        }
+                    },
+                    &mut |done, total| bar.set(done, total),
+                )
+            })?;
+            if let Some(sp) = spooler {
+                let spool = sp.finish()?;
+                (count, bounds) = (spool.count, spool.bounds);
+            }
             bar.finish();
             let mut w = vec![];
             if stats.degenerate_skipped > 0 {
@@ -325,9 +373,10 @@ fn run(
                 ));
             }
             let m = SpoolMarker {
-                count: spool.count,
-                min: spool.bounds.min,
-                max: spool.bounds.max,
+                spooled,
+                count,
+                min: bounds.min,
+                max: bounds.max,
                 triangles: stats.triangles,
                 degenerate_skipped: stats.degenerate_skipped,
                 warnings: w,
@@ -360,6 +409,8 @@ fn run(
         }
         None => tile_and_voxelize(
             s,
+            source,
+            layout,
             &grid,
             &plan,
             &pool,
@@ -459,6 +510,8 @@ fn run(
         memory_plan: plan,
         peak_rss: system::peak_rss(),
         temp_disk,
+        tile_source: if spooled { "spool" } else { "input" },
+        record_bytes: layout.bytes(),
         resumed,
         stages,
         seconds: t0.elapsed().as_secs_f64(),
@@ -470,6 +523,8 @@ fn run(
 #[allow(clippy::too_many_arguments)]
 fn tile_and_voxelize(
     s: &BuildSettings,
+    source: &MeshSource,
+    layout: RecordLayout,
     grid: &Grid,
     plan: &MemoryPlan,
     pool: &rayon::ThreadPool,
@@ -505,32 +560,50 @@ fn tile_and_voxelize(
                 count: c[4],
             })
             .collect();
-        Bins::open(&bins_path, chunks).ok()
+        Bins::open(&bins_path, chunks, layout).ok()
     }) {
         Some(b) => {
             stage_done(stages, "tile", t, true);
             b
         }
         None => {
-            let spool = Spool {
-                path: spool_path.clone(),
-                count: marker.count,
-                bounds,
+            let spool;
+            let input;
+            let src: &dyn Passes = if marker.spooled {
+                spool = Spool {
+                    path: spool_path.clone(),
+                    count: marker.count,
+                    bounds,
+                    layout,
+                };
+                &spool
+            } else {
+                input = passes::InputPasses {
+                    source,
+                    count: marker.count,
+                };
+                &input
             };
-            let bar = Stage::items(s.progress, "count", spool.count);
-            let counts = spool.count(grid, &mut |d, n| bar.set(d, n))?;
+            let src = passes::Interruptible(src);
+            let bar = Stage::items(s.progress, "count", marker.count);
+            let counts =
+                pool.install(|| voxlod_tile::count(&src, grid, &mut |d, n| bar.set(d, n)))?;
             bar.finish();
             if interrupted() {
                 return Err(interrupted_error(work.path()));
             }
-            let bar = Stage::items(s.progress, "scatter", spool.count);
-            let bins = spool.scatter(
-                grid,
-                &counts,
-                &bins_path,
-                plan.scatter_buffer,
-                &mut |d, n| bar.set(d, n),
-            )?;
+            let bar = Stage::items(s.progress, "scatter", marker.count);
+            let bins = pool.install(|| {
+                voxlod_tile::scatter(
+                    &src,
+                    grid,
+                    &counts,
+                    &bins_path,
+                    layout,
+                    plan.scatter_buffer,
+                    &mut |d, n| bar.set(d, n),
+                )
+            })?;
             bar.finish();
             drop(counts);
             let m = BinsMarker {
@@ -579,40 +652,47 @@ fn tile_and_voxelize(
             *backend_used = description;
             let bar = Stage::items(s.progress, "voxelize", chunks.len() as u64);
             bar.set(start as u64, chunks.len() as u64);
-            let batch = plan.voxelizers * 4;
-            for first in (start..chunks.len()).step_by(batch) {
-                if interrupted() {
-                    log.finish()?;
-                    return Err(interrupted_error(work.path()));
-                }
-                let last = (first + batch).min(chunks.len());
-                let voxelized = voxelizers.run(pool, &bins, first..last);
-                let results: Vec<Result<(Option<EncodedNode>, u64)>> = pool.install(|| {
-                    voxelized
-                        .into_par_iter()
-                        .zip(first..last)
-                        .map(|(r, i)| {
-                            let (voxels, skipped) = r?;
-                            let enc = if voxels.is_empty() {
-                                None
-                            } else {
-                                Some(encode_node(&voxels, s.zstd_level).with_context(|| {
-                                    format!("encoding leaf chunk {:?}", chunks[i].coord)
-                                })?)
-                            };
-                            Ok((enc, skipped))
-                        })
-                        .collect()
-                });
-                for (i, r) in (first..last).zip(results) {
+            // Workers voxelize and encode chunks in order, at most `window` ahead of the log;
+            // the log receives them strictly in Morton order (deterministic output).
+            let window = plan.voxelizers * 4;
+            let voxelize_one = |i: usize| -> Result<(Option<EncodedNode>, u64)> {
+                let (voxels, skipped) = voxelizers
+                    .run(pool, &bins, i..i + 1)
+                    .pop()
+                    .context("the voxelizer returned no result")??;
+                let enc =
+                    if voxels.is_empty() {
+                        None
+                    } else {
+                        Some(encode_node(&voxels, s.zstd_level).with_context(|| {
+                            format!("encoding leaf chunk {:?}", chunks[i].coord)
+                        })?)
+                    };
+                Ok((enc, skipped))
+            };
+            let appended = window::ordered(
+                pool,
+                plan.voxelizers,
+                window,
+                start..chunks.len(),
+                &voxelize_one,
+                &mut |i, r| {
+                    if interrupted() {
+                        return Err(interrupted_error(work.path()));
+                    }
                     let (enc, skipped) = r?;
                     log.append(i as u64, chunks[i].coord, enc.as_ref(), skipped)?;
-                }
-                log.flush()?;
-                bar.set(last as u64, chunks.len() as u64);
-                if s.interrupt_after_chunks.is_some_and(|n| last as u64 >= n) {
-                    request_interrupt();
-                }
+                    log.flush()?;
+                    bar.set(i as u64 + 1, chunks.len() as u64);
+                    if s.interrupt_after_chunks.is_some_and(|n| i as u64 + 1 >= n) {
+                        request_interrupt();
+                    }
+                    Ok(())
+                },
+            );
+            if let Err(e) = appended {
+                log.finish()?;
+                return Err(e);
             }
             bar.finish();
             drop(voxelizers);

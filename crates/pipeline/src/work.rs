@@ -13,6 +13,11 @@ use serde::{de::DeserializeOwned, Serialize};
 
 use crate::BuildSettings;
 
+/// Version of the intermediate files (spool and bins records, markers): a work folder left by a
+/// build with another layout is never resumed. 2: compact records (`voxlod_tile::RecordLayout`),
+/// no spool for memory-mapped inputs.
+pub const WORK_FORMAT: u32 = 2;
+
 pub struct WorkDir {
     path: PathBuf,
 }
@@ -28,8 +33,8 @@ fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
 }
 
 impl WorkDir {
-    /// The key of a build: input identity (canonical path, size, modification time) and the
-    /// settings that change the intermediates.
+    /// The key of a build: input identity (canonical path, size, modification time), the
+    /// settings that change the intermediates, the tool version and [`WORK_FORMAT`].
     pub fn key(input: &Path, s: &BuildSettings) -> Result<String> {
         let canon = input
             .canonicalize()
@@ -42,7 +47,7 @@ impl WorkDir {
             .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
             .map_or(0, |d| d.as_nanos());
         let text = format!(
-            "{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
+            "{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
             canon.display(),
             meta.len(),
             mtime,
@@ -50,7 +55,8 @@ impl WorkDir {
             s.mode,
             s.zstd_level,
             s.backend,
-            env!("CARGO_PKG_VERSION")
+            env!("CARGO_PKG_VERSION"),
+            WORK_FORMAT
         );
         Ok(format!(
             "{:016x}",

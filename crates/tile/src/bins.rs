@@ -7,7 +7,57 @@ use std::path::{Path, PathBuf};
 
 use voxlod_geom::{morton3, Grid, Triangle};
 
-use crate::{TileError, TRIANGLE_BYTES};
+use crate::{to_grid, Passes, RecordLayout, TileError};
+
+/// Pass 2: counts, per leaf chunk, the triangles of `src` whose chunk range (see
+/// [`Grid::chunk_range`]) includes it. `progress(done, total)` is in triangles.
+pub fn count(
+    src: &dyn Passes,
+    grid: &Grid,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<ChunkCounts, TileError> {
+    let mut counts = ChunkCounts::new(grid)?;
+    let mut done = 0u64;
+    let total = src.count();
+    src.for_each_batch(&mut |tris| {
+        for t in tris {
+            if let Some((lo, hi)) = grid.chunk_range(&to_grid(grid, t)) {
+                counts.add_range(lo, hi);
+            }
+        }
+        done += tris.len() as u64;
+        progress(done, total);
+        Ok(())
+    })?;
+    Ok(counts)
+}
+
+/// Pass 3: writes the bins file at `path` (grid coordinates, records laid out by `layout`),
+/// buffering at most `buffer_bytes` of records in memory between flushes. `src` must yield
+/// the triangles `counts` was made from.
+pub fn scatter(
+    src: &dyn Passes,
+    grid: &Grid,
+    counts: &ChunkCounts,
+    path: &Path,
+    layout: RecordLayout,
+    buffer_bytes: u64,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<Bins, TileError> {
+    let mut sc = Scatter::create(grid, counts, path, layout, buffer_bytes)?;
+    let mut done = 0u64;
+    let total = src.count();
+    let mut gtris = Vec::new();
+    src.for_each_batch(&mut |tris| {
+        gtris.clear();
+        gtris.extend(tris.iter().map(|t| to_grid(grid, t)));
+        sc.push(&gtris)?;
+        done += tris.len() as u64;
+        progress(done, total);
+        Ok(())
+    })?;
+    sc.finish()
+}
 
 /// Triangle counts per leaf chunk, dense over the grid's `(R/256)³` chunks.
 pub struct ChunkCounts {
@@ -119,7 +169,9 @@ pub(crate) struct Scatter<'g> {
     n: u32,
     /// Triangles already written per chunk.
     written: Vec<u64>,
-    buffers: Vec<Vec<Triangle>>,
+    layout: RecordLayout,
+    /// Encoded records waiting per chunk.
+    buffers: Vec<Vec<u8>>,
     buffered: u64,
     budget: u64,
 }
@@ -129,6 +181,7 @@ impl<'g> Scatter<'g> {
         grid: &'g Grid,
         counts: &ChunkCounts,
         path: &Path,
+        layout: RecordLayout,
         buffer_bytes: u64,
     ) -> Result<Scatter<'g>, TileError> {
         let chunks = counts.layout();
@@ -144,7 +197,7 @@ impl<'g> Scatter<'g> {
             .truncate(true)
             .open(path)
             .map_err(TileError::io("create", path))?;
-        file.set_len(total * TRIANGLE_BYTES)
+        file.set_len(total * layout.bytes() as u64)
             .map_err(TileError::io("resize", path))?;
         let k = chunks.len();
         Ok(Scatter {
@@ -155,9 +208,10 @@ impl<'g> Scatter<'g> {
             slot,
             n: counts.n,
             written: vec![0; k],
+            layout,
             buffers: (0..k).map(|_| Vec::new()).collect(),
             buffered: 0,
-            budget: buffer_bytes.max(TRIANGLE_BYTES * 1024),
+            budget: buffer_bytes.max(layout.bytes() as u64 * 1024),
         })
     }
 
@@ -173,13 +227,18 @@ impl<'g> Scatter<'g> {
                         let li = ((z as usize * self.n as usize) + y as usize) * self.n as usize
                             + x as usize;
                         let s = self.slot[li];
-                        debug_assert!(s != u32::MAX, "count and scatter passes disagree");
-                        self.buffers[s as usize].push(*t);
-                        self.buffered += 1;
+                        if s == u32::MAX {
+                            return Err(TileError::Callback(format!(
+                                "chunk {:?} received a triangle but none was counted: the input changed between passes",
+                                [x, y, z]
+                            )));
+                        }
+                        self.layout.encode(t, &mut self.buffers[s as usize])?;
+                        self.buffered += self.layout.bytes() as u64;
                     }
                 }
             }
-            if self.buffered * TRIANGLE_BYTES >= self.budget {
+            if self.buffered >= self.budget {
                 self.flush()?;
             }
         }
@@ -188,24 +247,26 @@ impl<'g> Scatter<'g> {
 
     /// Writes every buffered triangle to its chunk's region and releases the buffers.
     fn flush(&mut self) -> Result<(), TileError> {
+        let rec = self.layout.bytes() as u64;
         for (i, buf) in self.buffers.iter_mut().enumerate() {
             if buf.is_empty() {
                 continue;
             }
             let c = &self.chunks[i];
-            if self.written[i] + buf.len() as u64 > c.count {
+            let n = buf.len() as u64 / rec;
+            if self.written[i] + n > c.count {
                 return Err(TileError::Callback(format!(
-                    "chunk {:?} received more triangles than counted ({} > {}): the spool changed between passes",
+                    "chunk {:?} received more triangles than counted ({} > {}): the input changed between passes",
                     c.coord,
-                    self.written[i] + buf.len() as u64,
+                    self.written[i] + n,
                     c.count
                 )));
             }
-            let off = (c.start + self.written[i]) * TRIANGLE_BYTES;
+            let off = (c.start + self.written[i]) * rec;
             self.file
-                .write_all_at(bytemuck::cast_slice(buf), off)
+                .write_all_at(buf, off)
                 .map_err(TileError::io("write", &self.path))?;
-            self.written[i] += buf.len() as u64;
+            self.written[i] += n;
             *buf = Vec::new();
         }
         self.buffered = 0;
@@ -217,7 +278,7 @@ impl<'g> Scatter<'g> {
         for (i, c) in self.chunks.iter().enumerate() {
             if self.written[i] != c.count {
                 return Err(TileError::Callback(format!(
-                    "chunk {:?} received {} triangles but {} were counted: the spool changed between passes",
+                    "chunk {:?} received {} triangles but {} were counted: the input changed between passes",
                     c.coord, self.written[i], c.count
                 )));
             }
@@ -229,22 +290,28 @@ impl<'g> Scatter<'g> {
             path: self.path,
             file: self.file,
             chunks: self.chunks,
+            layout: self.layout,
         })
     }
 }
 
 /// The finished bins file: non-empty leaf chunks in Morton order, each with its triangles
-/// (grid coordinates, in input order).
+/// (grid coordinates, in input order), as records of one [`RecordLayout`].
 pub struct Bins {
     path: PathBuf,
     file: File,
     chunks: Vec<ChunkBin>,
+    layout: RecordLayout,
 }
 
 impl Bins {
     /// Reopens a finished bins file with its layout (e.g. to resume a build). The file length
     /// must match the layout exactly.
-    pub fn open(path: &Path, chunks: Vec<ChunkBin>) -> Result<Bins, TileError> {
+    pub fn open(
+        path: &Path,
+        chunks: Vec<ChunkBin>,
+        layout: RecordLayout,
+    ) -> Result<Bins, TileError> {
         let file = File::open(path).map_err(TileError::io("open", path))?;
         let len = file.metadata().map_err(TileError::io("stat", path))?.len();
         let total: u64 = chunks.iter().map(|c| c.count).sum();
@@ -253,17 +320,24 @@ impl Bins {
             *next += c.count;
             Some(ok)
         });
-        if len != total * TRIANGLE_BYTES || !contiguous.into_iter().all(|ok| ok) {
+        if len != total * layout.bytes() as u64 || !contiguous.into_iter().all(|ok| ok) {
             return Err(TileError::Truncated {
                 path: path.to_path_buf(),
                 len,
+                record: layout.bytes() as u64,
             });
         }
         Ok(Bins {
             path: path.to_path_buf(),
             file,
             chunks,
+            layout,
         })
+    }
+
+    /// The layout of the records.
+    pub fn layout(&self) -> RecordLayout {
+        self.layout
     }
 
     pub fn chunks(&self) -> &[ChunkBin] {
@@ -289,15 +363,19 @@ impl Bins {
     ) -> Result<(), TileError> {
         assert!(batch > 0);
         let c = self.chunks[i];
-        let mut buf = vec![Triangle::new([[0.0; 3]; 3]); batch.min(c.count as usize).max(1)];
+        let rec = self.layout.bytes();
+        let cap = batch.min(c.count as usize).max(1);
+        let mut raw = vec![0u8; cap * rec];
+        let mut tris = Vec::with_capacity(cap);
         let mut done = 0u64;
         while done < c.count {
-            let n = (c.count - done).min(buf.len() as u64) as usize;
-            let off = (c.start + done) * TRIANGLE_BYTES;
+            let n = (c.count - done).min(cap as u64) as usize;
+            let off = (c.start + done) * rec as u64;
             self.file
-                .read_exact_at(bytemuck::cast_slice_mut(&mut buf[..n]), off)
+                .read_exact_at(&mut raw[..n * rec], off)
                 .map_err(TileError::io("read", &self.path))?;
-            f(&buf[..n])?;
+            self.layout.decode_all(&raw[..n * rec], &mut tris);
+            f(&tris)?;
             done += n as u64;
         }
         Ok(())
@@ -340,7 +418,11 @@ mod tests {
             t.c[0] = [(i % 256) as u8, (i / 256) as u8, 0, 255];
             tris.push(t);
         }
-        let mut sp = Spooler::create(&dir.path().join("spool")).unwrap();
+        let spool_layout = RecordLayout {
+            normals: false,
+            colors: true,
+        };
+        let mut sp = Spooler::create(&dir.path().join("spool"), spool_layout).unwrap();
         for b in tris.chunks(700) {
             sp.push(b).unwrap();
         }
@@ -348,19 +430,34 @@ mod tests {
         let mut bounds = Bounds::default();
         tris.iter().for_each(|t| bounds.add_triangle(t));
         assert_eq!(spool.bounds, bounds);
+        assert_eq!(
+            std::fs::metadata(&spool.path).unwrap().len(),
+            3000 * spool_layout.bytes() as u64
+        );
         let grid = Grid::fit(&spool.bounds, 1024).unwrap();
-        let counts = spool.count(&grid, &mut |_, _| {}).unwrap();
+        let counts = count(&spool, &grid, &mut |_, _| {}).unwrap();
         let mut previous: Option<Vec<Vec<Triangle>>> = None;
-        for budget in [TRIANGLE_BYTES * 1024, 1 << 30] {
-            let bins = spool
-                .scatter(
-                    &grid,
-                    &counts,
-                    &dir.path().join(format!("bins{budget}")),
-                    budget,
-                    &mut |_, _| {},
-                )
-                .unwrap();
+        // small budget (many flushes) and large (one), compact and full records
+        for (budget, layout) in [
+            (52 * 1024, spool_layout),
+            (1 << 30, spool_layout),
+            (88 * 1024, RecordLayout::FULL),
+        ] {
+            let path = dir.path().join(format!("bins{budget}-{}", layout.bytes()));
+            let bins = scatter(
+                &spool,
+                &grid,
+                &counts,
+                &path,
+                layout,
+                budget,
+                &mut |_, _| {},
+            )
+            .unwrap();
+            assert_eq!(
+                std::fs::metadata(&path).unwrap().len(),
+                bins.total() * layout.bytes() as u64
+            );
             let mut all = Vec::new();
             let mut last = None;
             for (i, c) in bins.chunks().iter().enumerate() {
@@ -378,7 +475,7 @@ mod tests {
                 .unwrap();
                 let want: Vec<Triangle> = tris
                     .iter()
-                    .map(|t| crate::spool::to_grid(&grid, t))
+                    .map(|t| crate::to_grid(&grid, t))
                     .filter(|g| {
                         let (lo, hi) = grid.chunk_range(g).unwrap();
                         (0..3).all(|a| lo[a] <= c.coord[a] && c.coord[a] <= hi[a])
@@ -408,8 +505,15 @@ mod tests {
     fn truncated_spool_is_an_error() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("spool");
-        std::fs::write(&p, vec![0u8; TRIANGLE_BYTES as usize * 3 + 5]).unwrap();
-        let e = crate::Spool::open(&p).unwrap_err();
-        assert!(e.to_string().contains("not a whole number"), "{e}");
+        std::fs::write(&p, vec![0u8; 52 * 3 + 5]).unwrap();
+        let layout = RecordLayout {
+            normals: false,
+            colors: true,
+        };
+        let e = crate::Spool::open(&p, layout).unwrap_err();
+        assert!(
+            e.to_string().contains("not the expected whole number"),
+            "{e}"
+        );
     }
 }

@@ -1,49 +1,79 @@
 //! Out-of-core tiling: every triangle goes into the bin of every 256³ chunk its voxels may
 //! touch, and the bins live on disk.
 //!
-//! Three passes over explicit on-disk intermediates, after PotreeConverter 2's counting-sort
-//! chunker (Schütz et al., "Fast Out-of-Core Octree Generation for Massive Point Clouds", 2020):
+//! Passes over the triangles after PotreeConverter 2's counting-sort chunker (Schütz et al.,
+//! "Fast Out-of-Core Octree Generation for Massive Point Clouds", 2020):
 //!
-//! 1. [`Spooler`]: the input triangles (world coordinates) are appended to a *spool* file while
-//!    their bounds are accumulated, so the input is parsed once, whatever its format.
-//! 2. [`Spool::count`]: with the grid known, each triangle's chunk range is counted per chunk.
-//! 3. [`Spool::scatter`]: the bins file is laid out as one pre-sized region per non-empty chunk,
-//!    in Morton order of the chunks; triangles (now in grid coordinates) are buffered in memory
-//!    up to a fixed budget and flushed to their regions with positioned writes.
+//! 1. the mesh's bounds are found (they fix the grid). An input that is cheap to read again
+//!    (a memory-mapped binary file) is simply read again by the later passes; any other input is
+//!    written once to a [`Spool`] of compact records ([`Spooler`]), parsed once whatever its
+//!    format. Both are [`Passes`]: something that can hand out the same triangles any number
+//!    of times, in the same order.
+//! 2. [`count`]: with the grid known, each triangle's chunk range is counted per chunk.
+//! 3. [`scatter`]: the bins file is laid out as one pre-sized region per non-empty chunk, in
+//!    Morton order of the chunks; triangles (now in grid coordinates) are encoded as compact
+//!    records ([`RecordLayout`]: only the attributes the mesh has), buffered in memory up to a
+//!    fixed budget and flushed to their regions with positioned writes.
 //!
-//! Memory is bounded by design: the passes read the spool through a fixed-size buffer, the
-//! scatter buffer has a byte budget, and [`Bins::read_chunk`] hands a chunk's triangles out in
-//! fixed-size batches. Only the per-chunk counters grow with the grid (8 bytes per chunk).
+//! Memory is bounded by design: the passes read through fixed-size buffers, the scatter buffer
+//! has a byte budget, and [`Bins::read_chunk`] hands a chunk's triangles out in fixed-size
+//! batches. Only the per-chunk counters grow with the grid (8 bytes per chunk).
 //!
 //! ```
 //! use voxlod_geom::{Grid, Triangle};
-//! use voxlod_tile::Spooler;
+//! use voxlod_tile::{count, scatter, RecordLayout, Spooler};
 //! let dir = tempfile::tempdir().unwrap();
-//! let mut spooler = Spooler::create(&dir.path().join("spool")).unwrap();
+//! let layout = RecordLayout { normals: false, colors: false };
+//! let mut spooler = Spooler::create(&dir.path().join("spool"), layout).unwrap();
 //! spooler.push(&[Triangle::new([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 1.0]])]).unwrap();
 //! let spool = spooler.finish().unwrap();
 //! let grid = Grid::fit(&spool.bounds, 512).unwrap();
-//! let counts = spool.count(&grid, &mut |_, _| {}).unwrap();
-//! let bins = spool.scatter(&grid, &counts, &dir.path().join("bins"), 1 << 20, &mut |_, _| {}).unwrap();
+//! let counts = count(&spool, &grid, &mut |_, _| {}).unwrap();
+//! let bins = scatter(&spool, &grid, &counts, &dir.path().join("bins"), layout, 1 << 20, &mut |_, _| {}).unwrap();
 //! assert_eq!(bins.chunks().len(), 8); // the triangle spans the whole cube: all 2×2×2 chunks
 //! let mut n = 0;
 //! bins.read_chunk(0, 1024, &mut |tris| { n += tris.len(); Ok(()) }).unwrap();
 //! assert_eq!(n, 1);
+//! assert_eq!(std::fs::metadata(dir.path().join("bins")).unwrap().len(), 8 * 40);
 //! ```
 
 mod bins;
+mod record;
 mod spool;
 
-pub use bins::{Bins, ChunkBin, ChunkCounts};
-pub use spool::{to_grid, Spool, Spooler};
+pub use bins::{count, scatter, Bins, ChunkBin, ChunkCounts};
+pub use record::RecordLayout;
+pub use spool::{Spool, Spooler};
 
 use std::path::PathBuf;
 
-/// Bytes of one triangle record in the spool and the bins.
-pub const TRIANGLE_BYTES: u64 = std::mem::size_of::<voxlod_geom::Triangle>() as u64;
+use voxlod_geom::{Grid, Triangle};
 
-/// Triangles per read batch when passing over the spool (8.25 MiB of records).
+/// Triangles per read batch when passing over a spool (3.5–8.25 MiB of records).
 pub const READ_BATCH: usize = 96 * 1024;
+
+/// The same triangles, in the same order, as many times as asked: a spool, or an input that is
+/// cheap to parse again.
+pub trait Passes: Sync {
+    /// Calls `f` with every triangle (world coordinates), in batches, in a fixed order.
+    fn for_each_batch(
+        &self,
+        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+    ) -> Result<(), TileError>;
+    /// Triangles one pass yields (for progress).
+    fn count(&self) -> u64;
+}
+
+/// The triangle with its positions in grid coordinates (normals and colours unchanged: the
+/// world-to-grid map is a uniform scale plus a translation).
+#[inline]
+pub fn to_grid(grid: &Grid, t: &Triangle) -> Triangle {
+    let mut g = *t;
+    for v in &mut g.v {
+        *v = grid.to_grid(*v);
+    }
+    g
+}
 
 /// A failure of the tiling stage; messages name the temporary file involved.
 #[derive(Debug, thiserror::Error)]
@@ -55,8 +85,12 @@ pub enum TileError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{path} is {len} bytes, not a whole number of {TRIANGLE_BYTES}-byte triangle records (truncated temporary file?)")]
-    Truncated { path: PathBuf, len: u64 },
+    #[error("{path} is {len} bytes, not the expected whole number of {record}-byte triangle records (truncated temporary file?)")]
+    Truncated {
+        path: PathBuf,
+        len: u64,
+        record: u64,
+    },
     #[error("the grid has {0} chunks; at most 2^32 are supported")]
     TooManyChunks(u64),
     #[error("{0}")]

@@ -258,8 +258,8 @@ fn print_summary(s: &BuildSummary) {
     );
     println!("  voxelizer    {}", s.backend);
     println!(
-        "  chunk bins   {} ({} triangle records)",
-        s.chunk_bins, s.binned_triangles
+        "  chunk bins   {} ({} triangle records of {} bytes, tiled from the {})",
+        s.chunk_bins, s.binned_triangles, s.record_bytes, s.tile_source
     );
     println!("  level  nodes      voxels");
     for l in &s.levels {

@@ -1,0 +1,70 @@
+//! The triangle passes of the tile stage ([`voxlod_tile::Passes`]): over the input itself when
+//! it is cheap to parse again, and a wrapper that stops any pass on Ctrl-C.
+
+use voxlod_geom::Triangle;
+use voxlod_ingest::{IngestError, MeshSource};
+use voxlod_tile::{Passes, TileError};
+
+use crate::system::interrupted;
+
+/// Passes over a memory-mapped input (see [`MeshSource::rereadable`]): parsing it again costs
+/// what reading a spool would, and saves writing one.
+pub(crate) struct InputPasses<'a> {
+    pub source: &'a MeshSource,
+    /// Triangles of the first pass: every later pass must yield as many.
+    pub count: u64,
+}
+
+impl Passes for InputPasses<'_> {
+    fn for_each_batch(
+        &self,
+        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+    ) -> Result<(), TileError> {
+        let mut inner: Option<TileError> = None;
+        let r = self.source.stream(
+            &mut |tris| {
+                f(tris).map_err(|e| {
+                    let m = e.to_string();
+                    inner = Some(e);
+                    IngestError::Callback(m)
+                })
+            },
+            &mut |_, _| {},
+        );
+        match r {
+            Ok(st) if st.triangles == self.count => Ok(()),
+            Ok(st) => Err(TileError::Callback(format!(
+                "{}: yielded {} triangles, {} on the first pass: the file changed during the build",
+                self.source.info().path.display(),
+                st.triangles,
+                self.count
+            ))),
+            Err(e) => Err(inner.take().unwrap_or(TileError::Callback(e.to_string()))),
+        }
+    }
+
+    fn count(&self) -> u64 {
+        self.count
+    }
+}
+
+/// Any passes, stopped with an error between batches once Ctrl-C was pressed.
+pub(crate) struct Interruptible<'a>(pub &'a dyn Passes);
+
+impl Passes for Interruptible<'_> {
+    fn for_each_batch(
+        &self,
+        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+    ) -> Result<(), TileError> {
+        self.0.for_each_batch(&mut |tris| {
+            if interrupted() {
+                return Err(TileError::Callback("interrupted".into()));
+            }
+            f(tris)
+        })
+    }
+
+    fn count(&self) -> u64 {
+        self.0.count()
+    }
+}
