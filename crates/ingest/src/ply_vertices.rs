@@ -168,8 +168,11 @@ impl<const BE: bool> VertexSource for MappedVertices<'_, BE> {
         let mut c = DEFAULT_COLOR;
         if self.has_colors {
             for (k, ch) in c.iter_mut().enumerate() {
-                if let Some((o, ty)) = self.attr[6 + k] {
-                    *ch = color_byte(decode_f64::<BE>(&rec[o..], ty), ty);
+                match self.attr[6 + k] {
+                    // the usual `uchar` channel is its own byte (what color_byte returns)
+                    Some((o, Scalar::U8)) => *ch = rec[o],
+                    Some((o, ty)) => *ch = color_byte(decode_f64::<BE>(&rec[o..], ty), ty),
+                    None => {}
                 }
             }
         }

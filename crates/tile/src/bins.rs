@@ -158,7 +158,10 @@ impl ChunkBin {
     }
 }
 
-/// The scatter pass in progress.
+/// The scatter pass in progress: one arena of at most the byte budget, cut into one slice per
+/// non-empty chunk in proportion to its count (at least one record). A chunk's slice is written
+/// to its region when it fills up and at the end, so nothing is allocated per triangle and
+/// every write is a whole slice.
 pub(crate) struct Scatter<'g> {
     grid: &'g Grid,
     path: PathBuf,
@@ -167,13 +170,14 @@ pub(crate) struct Scatter<'g> {
     /// Chunk linear index -> position in `chunks`.
     slot: Vec<u32>,
     n: u32,
+    layout: RecordLayout,
     /// Triangles already written per chunk.
     written: Vec<u64>,
-    layout: RecordLayout,
-    /// Encoded records waiting per chunk.
-    buffers: Vec<Vec<u8>>,
-    buffered: u64,
-    budget: u64,
+    arena: Vec<u8>,
+    /// Per chunk: first record of its slice in the arena, slice capacity, records in it.
+    slice_start: Vec<u64>,
+    slice_cap: Vec<u32>,
+    slice_len: Vec<u32>,
 }
 
 impl<'g> Scatter<'g> {
@@ -189,6 +193,7 @@ impl<'g> Scatter<'g> {
         for (i, c) in chunks.iter().enumerate() {
             slot[counts.index(c.coord)] = i as u32;
         }
+        let rec = layout.bytes() as u64;
         let total: u64 = chunks.iter().map(|c| c.count).sum();
         let file = std::fs::OpenOptions::new()
             .read(true)
@@ -197,8 +202,20 @@ impl<'g> Scatter<'g> {
             .truncate(true)
             .open(path)
             .map_err(TileError::io("create", path))?;
-        file.set_len(total * layout.bytes() as u64)
+        file.set_len(total * rec)
             .map_err(TileError::io("resize", path))?;
+        // slices in proportion to the counts; a chunk whose triangles all fit is written once
+        let arena_records = (buffer_bytes.max(rec * 1024) / rec).min(total.max(1));
+        let mut slice_start = Vec::with_capacity(chunks.len());
+        let mut slice_cap = Vec::with_capacity(chunks.len());
+        let mut at = 0u64;
+        for c in &chunks {
+            let cap = ((c.count as u128 * arena_records as u128 / total.max(1) as u128) as u64)
+                .clamp(1, c.count.min(u32::MAX as u64));
+            slice_start.push(at);
+            slice_cap.push(cap as u32);
+            at += cap;
+        }
         let k = chunks.len();
         Ok(Scatter {
             grid,
@@ -207,16 +224,18 @@ impl<'g> Scatter<'g> {
             chunks,
             slot,
             n: counts.n,
-            written: vec![0; k],
             layout,
-            buffers: (0..k).map(|_| Vec::new()).collect(),
-            buffered: 0,
-            budget: buffer_bytes.max(layout.bytes() as u64 * 1024),
+            written: vec![0; k],
+            arena: vec![0u8; (at * rec) as usize],
+            slice_start,
+            slice_cap,
+            slice_len: vec![0; k],
         })
     }
 
     /// Bins a batch of grid-space triangles.
     pub(crate) fn push(&mut self, tris: &[Triangle]) -> Result<(), TileError> {
+        let rec = self.layout.bytes();
         for t in tris {
             let Some((lo, hi)) = self.grid.chunk_range(t) else {
                 continue;
@@ -233,48 +252,52 @@ impl<'g> Scatter<'g> {
                                 [x, y, z]
                             )));
                         }
-                        self.layout.encode(t, &mut self.buffers[s as usize])?;
-                        self.buffered += self.layout.bytes() as u64;
+                        let s = s as usize;
+                        let at = (self.slice_start[s] + self.slice_len[s] as u64) as usize * rec;
+                        self.layout.encode_into(t, &mut self.arena[at..at + rec])?;
+                        self.slice_len[s] += 1;
+                        if self.slice_len[s] == self.slice_cap[s] {
+                            self.write_slice(s)?;
+                        }
                     }
                 }
-            }
-            if self.buffered >= self.budget {
-                self.flush()?;
             }
         }
         Ok(())
     }
 
-    /// Writes every buffered triangle to its chunk's region and releases the buffers.
-    fn flush(&mut self) -> Result<(), TileError> {
-        let rec = self.layout.bytes() as u64;
-        for (i, buf) in self.buffers.iter_mut().enumerate() {
-            if buf.is_empty() {
-                continue;
-            }
-            let c = &self.chunks[i];
-            let n = buf.len() as u64 / rec;
-            if self.written[i] + n > c.count {
-                return Err(TileError::Callback(format!(
-                    "chunk {:?} received more triangles than counted ({} > {}): the input changed between passes",
-                    c.coord,
-                    self.written[i] + n,
-                    c.count
-                )));
-            }
-            let off = (c.start + self.written[i]) * rec;
-            self.file
-                .write_all_at(buf, off)
-                .map_err(TileError::io("write", &self.path))?;
-            self.written[i] += n;
-            *buf = Vec::new();
+    /// Writes chunk `s`'s slice to the next part of its region and empties it.
+    fn write_slice(&mut self, s: usize) -> Result<(), TileError> {
+        let n = self.slice_len[s] as u64;
+        if n == 0 {
+            return Ok(());
         }
-        self.buffered = 0;
+        let c = &self.chunks[s];
+        if self.written[s] + n > c.count {
+            return Err(TileError::Callback(format!(
+                "chunk {:?} received more triangles than counted ({} > {}): the input changed between passes",
+                c.coord,
+                self.written[s] + n,
+                c.count
+            )));
+        }
+        let rec = self.layout.bytes() as u64;
+        let from = (self.slice_start[s] * rec) as usize;
+        self.file
+            .write_all_at(
+                &self.arena[from..from + (n * rec) as usize],
+                (c.start + self.written[s]) * rec,
+            )
+            .map_err(TileError::io("write", &self.path))?;
+        self.written[s] += n;
+        self.slice_len[s] = 0;
         Ok(())
     }
 
     pub(crate) fn finish(mut self) -> Result<Bins, TileError> {
-        self.flush()?;
+        for s in 0..self.chunks.len() {
+            self.write_slice(s)?;
+        }
         for (i, c) in self.chunks.iter().enumerate() {
             if self.written[i] != c.count {
                 return Err(TileError::Callback(format!(

@@ -47,19 +47,31 @@ impl RecordLayout {
     /// not store (they would be lost).
     #[inline]
     pub fn encode(self, t: &Triangle, out: &mut Vec<u8>) -> Result<(), TileError> {
-        if !self.normals && t.n != [[0.0; 3]; 3] || !self.colors && t.c != [DEFAULT_COLOR; 3] {
+        let at = out.len();
+        out.resize(at + self.bytes(), 0);
+        self.encode_into(t, &mut out[at..])
+    }
+
+    /// Writes the record of `t` into `out` (`out.len() == self.bytes()`); see [`Self::encode`].
+    #[inline]
+    pub fn encode_into(self, t: &Triangle, out: &mut [u8]) -> Result<(), TileError> {
+        debug_assert_eq!(out.len(), self.bytes());
+        let lost_normals = !self.normals && t.n != [[0.0; 3]; 3];
+        if lost_normals || !self.colors && t.c != [DEFAULT_COLOR; 3] {
             return Err(TileError::Callback(format!(
                 "a triangle has {} but the temporary records were laid out without them (ingest reported the mesh's attributes wrongly)",
-                if !self.normals && t.n != [[0.0; 3]; 3] { "vertex normals" } else { "colours" }
+                if lost_normals { "vertex normals" } else { "colours" }
             )));
         }
-        out.extend_from_slice(bytemuck::bytes_of(&t.v));
-        out.extend_from_slice(&t.flags.to_le_bytes());
+        out[..36].copy_from_slice(bytemuck::bytes_of(&t.v));
+        out[36..40].copy_from_slice(&t.flags.to_le_bytes());
+        let mut at = 40;
         if self.normals {
-            out.extend_from_slice(bytemuck::bytes_of(&t.n));
+            out[at..at + 36].copy_from_slice(bytemuck::bytes_of(&t.n));
+            at += 36;
         }
         if self.colors {
-            out.extend_from_slice(bytemuck::bytes_of(&t.c));
+            out[at..at + 12].copy_from_slice(bytemuck::bytes_of(&t.c));
         }
         Ok(())
     }
