@@ -440,22 +440,47 @@ fn run(
     let writer = Writer::create(output, spec)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level);
     let bar = Stage::items(s.progress, "lod+write", chunk_bins as u64);
-    let mut n = 0u64;
-    leaf_log::read_log(&leaves_path, &mut |h, payload| {
-        if interrupted() {
-            return Err(interrupted_error(work.path()));
-        }
-        if h.voxel_count == 0 {
-            octree.push_leaf(h.coord, Vec::new(), None)?;
-        } else {
-            let mut voxels: Vec<Voxel> = Vec::new();
-            let enc =
-                EncodedNode::from_payload(payload, h.voxel_count, h.payload_crc32, &mut voxels)
+    // The leaf log is read and decoded on a second thread, one leaf ahead of the merges and
+    // parent encodes of this one (two decoded leaves in flight at most).
+    type Leaf = ([u32; 3], Vec<Voxel>, Option<EncodedNode>);
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Leaf>>(1);
+    std::thread::scope(|scope| -> Result<()> {
+        scope.spawn(|| {
+            let r = leaf_log::read_log(&leaves_path, &mut |h, payload| {
+                if interrupted() {
+                    return Err(interrupted_error(work.path()));
+                }
+                let leaf = if h.voxel_count == 0 {
+                    (h.coord, Vec::new(), None)
+                } else {
+                    let mut voxels: Vec<Voxel> = Vec::new();
+                    let enc = EncodedNode::from_payload(
+                        payload,
+                        h.voxel_count,
+                        h.payload_crc32,
+                        &mut voxels,
+                    )
                     .with_context(|| format!("leaf log record {}", h.chunk))?;
-            octree.push_leaf(h.coord, voxels, Some(&enc))?;
+                    (h.coord, voxels, Some(enc))
+                };
+                // a closed channel means the writer failed: stop reading
+                tx.send(Ok(leaf))
+                    .map_err(|_| anyhow::anyhow!("the octree writer stopped"))
+            });
+            if let Err(e) = r {
+                let _ = tx.send(Err(e));
+            }
+            drop(tx);
+        });
+        // owned here, so that an early return closes the channel and stops the reader
+        let rx = rx;
+        let mut n = 0u64;
+        for leaf in rx.iter() {
+            let (coord, voxels, enc) = leaf?;
+            octree.push_leaf(coord, voxels, enc.as_ref())?;
+            n += 1;
+            bar.set(n, chunk_bins as u64);
         }
-        n += 1;
-        bar.set(n, chunk_bins as u64);
         Ok(())
     })?;
     bar.finish();
