@@ -530,62 +530,103 @@ fn config_file_with_flag_overrides() {
     );
 }
 
+/// The sample's triangles as an unindexed ASCII PLY (an input that is not memory-mapped, so
+/// the build spools it).
+fn ascii_copy_of_sample(dir: &Path) -> PathBuf {
+    use std::fmt::Write as _;
+    let src = voxlod_ingest::MeshSource::open(&sample()).unwrap();
+    let mut tris = Vec::new();
+    src.stream(
+        &mut |b| {
+            tris.extend_from_slice(b);
+            Ok(())
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    let mut t = format!(
+        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        tris.len() * 3,
+        tris.len()
+    );
+    for tri in &tris {
+        for v in &tri.v {
+            writeln!(t, "{:?} {:?} {:?}", v[0], v[1], v[2]).unwrap();
+        }
+    }
+    for i in 0..tris.len() {
+        writeln!(t, "3 {} {} {}", 3 * i, 3 * i + 1, 3 * i + 2).unwrap();
+    }
+    let p = dir.join("bunny_ascii.ply");
+    std::fs::write(&p, t).unwrap();
+    p
+}
+
 /// An interrupted build resumes from its work folder, and the result is byte-identical to an
-/// uninterrupted build.
+/// uninterrupted build: for a memory-mapped input (the tile passes read it again) and for an
+/// ASCII one (spooled).
 #[test]
 fn interrupted_build_resumes_to_identical_bytes() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let fresh = d.join("fresh.voxlod");
-    let out = d.join("resumed.voxlod");
-    let s = sample();
-    let args = |o: &Path| build_args(&s, o, &["-r", "2048"]);
-    let run = |a: Vec<String>| Command::new(BIN).args(&a).current_dir(d).output().unwrap();
-    ok(&run(args(&fresh)));
-    for stop in ["10", "100"] {
-        let mut a = args(&out);
-        a.extend([
-            "--debug-interrupt-after-chunks".to_string(),
-            stop.to_string(),
-        ]);
-        let o = run(a);
-        assert!(!o.status.success(), "an interrupted build must fail");
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(
-            err.contains("interrupted") && err.contains("resume"),
-            "{err}"
+    let ascii = ascii_copy_of_sample(d);
+    for (s, tile_source) in [(sample(), "input"), (ascii, "spool")] {
+        let fresh = d.join("fresh.voxlod");
+        let out = d.join("resumed.voxlod");
+        let args = |o: &Path| build_args(&s, o, &["-r", "2048"]);
+        let run = |a: Vec<String>| Command::new(BIN).args(&a).current_dir(d).output().unwrap();
+        ok(&run(args(&fresh)));
+        for stop in ["10", "100"] {
+            let mut a = args(&out);
+            a.extend([
+                "--debug-interrupt-after-chunks".to_string(),
+                stop.to_string(),
+            ]);
+            let o = run(a);
+            assert!(!o.status.success(), "an interrupted build must fail");
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(
+                err.contains("interrupted") && err.contains("resume"),
+                "{err}"
+            );
+            assert!(!out.exists(), "an interrupted build left an output file");
+        }
+        let o = Command::new(BIN)
+            .args(args(&out))
+            .arg("--json")
+            .current_dir(d)
+            .output()
+            .unwrap();
+        ok(&o);
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(summary["resumed"], true);
+        assert_eq!(
+            summary["stages"][0]["resumed"], true,
+            "ingest must not run again"
         );
-        assert!(!out.exists(), "an interrupted build left an output file");
+        assert_eq!(summary["tile_source"], tile_source, "{}", s.display());
+        // positions and flags only: the bunny has neither normals nor colours
+        assert_eq!(summary["record_bytes"], 40);
+        assert_eq!(
+            std::fs::read(&out).unwrap(),
+            std::fs::read(&fresh).unwrap(),
+            "resumed output differs ({})",
+            s.display()
+        );
+        let left = std::fs::read_dir(d)
+            .unwrap()
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .starts_with(".voxlod-work")
+            })
+            .count();
+        assert_eq!(left, 0, "the work folder must be removed after success");
+        std::fs::remove_file(&fresh).unwrap();
+        std::fs::remove_file(&out).unwrap();
     }
-    let o = Command::new(BIN)
-        .args(args(&out))
-        .arg("--json")
-        .current_dir(d)
-        .output()
-        .unwrap();
-    ok(&o);
-    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!(summary["resumed"], true);
-    assert_eq!(
-        summary["stages"][0]["resumed"], true,
-        "ingest must not run again"
-    );
-    assert_eq!(
-        std::fs::read(&out).unwrap(),
-        std::fs::read(&fresh).unwrap(),
-        "resumed output differs"
-    );
-    let left = std::fs::read_dir(d)
-        .unwrap()
-        .filter(|e| {
-            e.as_ref()
-                .unwrap()
-                .file_name()
-                .to_string_lossy()
-                .starts_with(".voxlod-work")
-        })
-        .count();
-    assert_eq!(left, 0, "the work folder must be removed after success");
 }
 
 /// A build killed with SIGKILL at several points resumes to the same bytes.
