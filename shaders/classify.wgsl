@@ -8,7 +8,7 @@
 // `compact`: one invocation per occupancy word; gives every word the first slot of its voxels.
 // The routines shared with the fragment pass are in voxelize.wgsl, appended by the host.
 
-@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read> tris: array<Tri>;
 @group(0) @binding(2) var<storage, read_write> occ: array<atomic<u32>>;
 @group(0) @binding(3) var<storage, read_write> deferred: array<Deferred>;

@@ -6,7 +6,7 @@
 // shader, so the vertex shader fetches the stored dilated vertices by vertex_index.
 // The shared routines are in voxelize.wgsl, appended by the host.
 
-@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(0) var<storage, read> params: Params;
 @group(0) @binding(1) var<storage, read> tris: array<Tri>;
 @group(0) @binding(2) var<storage, read_write> occ: array<atomic<u32>>;
 @group(0) @binding(3) var<storage, read> deferred: array<Deferred>;

@@ -50,7 +50,7 @@ mod encode;
 pub mod shaders;
 mod voxelizer;
 
-pub use voxelizer::GpuVoxelizer;
+pub use voxelizer::{Feed, GpuVoxelizer};
 
 use std::fmt;
 use std::str::FromStr;

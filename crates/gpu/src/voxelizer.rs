@@ -24,7 +24,10 @@ const DEFERRED_BYTES: u64 = 48;
 const MAX_WINDOW: u64 = 1 << 19;
 const WG: u32 = 64;
 
-/// `Params` of voxelize.wgsl.
+/// `Params` of voxelize.wgsl. Bound as a read-only storage buffer, not a uniform buffer:
+/// lavapipe (Mesa 22.3) inlines uniform values into the shaders and recompiles the
+/// classification pass whenever they change, about 12 ms and 1.3 MiB (never freed) per
+/// batch.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 struct Params {
@@ -105,19 +108,6 @@ fn storage_entry(
     }
 }
 
-fn uniform_entry(binding: u32, vis: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: vis,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
 impl GpuVoxelizer {
     /// Opens an adapter (Vulkan, else GL; `WGPU_BACKEND` overrides) and builds the pipelines.
     /// `cutoff` is the dominant projected area (voxels²) from which [`GpuMethod::Hybrid`] defers
@@ -136,7 +126,7 @@ impl GpuVoxelizer {
         let bgl_compute = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("voxlod compute"),
             entries: &[
-                uniform_entry(0, cs),
+                storage_entry(0, cs, true),
                 storage_entry(1, cs, true),
                 storage_entry(2, cs, false),
                 storage_entry(3, cs, false),
@@ -149,7 +139,7 @@ impl GpuVoxelizer {
         let bgl_raster = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("voxlod raster"),
             entries: &[
-                uniform_entry(0, vfs),
+                storage_entry(0, vfs, true),
                 storage_entry(1, fs, true),
                 storage_entry(2, fs, false),
                 storage_entry(3, vfs, true),
@@ -245,7 +235,7 @@ impl GpuVoxelizer {
         let params = buf(
             "params",
             std::mem::size_of::<Params>() as u64,
-            U::UNIFORM | U::COPY_DST,
+            U::STORAGE | U::COPY_DST,
         );
         let tris = [0, 1].map(|_| buf("triangles", 88 * 1024, U::STORAGE | U::COPY_DST));
         let occ = buf(
@@ -467,7 +457,7 @@ impl GpuVoxelizer {
         origin: [u32; 3],
         tris: &[Triangle],
     ) -> Result<Vec<Voxel>, GpuError> {
-        self.voxelize_chunk_streamed(origin, &mut |feed: &mut dyn FnMut(&[Triangle])| {
+        self.voxelize_chunk_streamed(origin, &mut |feed: &mut Feed<'_>| {
             feed(tris);
             Ok::<(), GpuError>(())
         })
@@ -489,7 +479,7 @@ impl GpuVoxelizer {
     pub fn voxelize_chunk_streamed<E: From<GpuError>>(
         &mut self,
         origin: [u32; 3],
-        replay: &mut dyn FnMut(&mut dyn FnMut(&[Triangle])) -> Result<(), E>,
+        replay: &mut dyn FnMut(&mut Feed<'_>) -> Result<(), E>,
     ) -> Result<Vec<Voxel>, E> {
         if origin
             .iter()
@@ -788,7 +778,8 @@ fn certainly_inline(t: &Triangle, cutoff: f64) -> bool {
     ];
     let len = |a: [f64; 3]| (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
     let area = 0.5 * n[0].abs().max(n[1].abs()).max(n[2].abs());
-    if !(area + 1e-5 * len(e1) * len(e2) < cutoff) {
+    // (finite f32 coordinates: no NaN here)
+    if area + 1e-5 * len(e1) * len(e2) >= cutoff {
         return false;
     }
     // voxel range [ceil(min) - 1, floor(max)] per axis, as the shader's setup (before clamping)
@@ -799,6 +790,10 @@ fn certainly_inline(t: &Triangle, cutoff: f64) -> bool {
     });
     w[0] * w[1] <= INLINE_COLUMNS && w[1] * w[2] <= INLINE_COLUMNS && w[0] * w[2] <= INLINE_COLUMNS
 }
+
+/// What [`GpuVoxelizer::voxelize_chunk_streamed`]'s replay callback passes the chunk's
+/// triangles to, a batch at a time.
+pub type Feed<'a> = dyn FnMut(&[Triangle]) + 'a;
 
 /// One replay of a chunk's triangles: what its batches run and what was submitted.
 struct Stream {

@@ -111,8 +111,21 @@ impl<'de> Deserialize<'de> for Cutoff {
 pub(crate) enum Voxelizers {
     Cpu(Vec<Mutex<ChunkVoxelizer>>),
     #[cfg(feature = "gpu")]
-    Gpu(Box<Mutex<voxlod_gpu::GpuVoxelizer>>),
+    Gpu(Box<Mutex<GpuRun>>),
 }
+
+/// The GPU voxelizer and the build's running totals.
+#[cfg(feature = "gpu")]
+pub(crate) struct GpuRun {
+    vz: voxlod_gpu::GpuVoxelizer,
+    /// triangles voxelized in the classification pass / deferred to the second pass, summed
+    /// over the chunks voxelized so far
+    split: (u64, u64),
+}
+
+/// Triangles per read of a chunk's bins (the CPU voxelizer's batch; the GPU voxelizer
+/// re-batches to its own size).
+const READ_BATCH: usize = 64 * 1024;
 
 /// Result of one chunk: its voxels and the triangles the voxelizer skipped.
 pub(crate) type ChunkResult = Result<(Vec<Voxel>, u64)>;
@@ -191,7 +204,13 @@ impl Voxelizers {
                     );
                 }
                 desc += ")";
-                Ok((Voxelizers::Gpu(Box::new(Mutex::new(gpu))), desc))
+                Ok((
+                    Voxelizers::Gpu(Box::new(Mutex::new(GpuRun {
+                        vz: gpu,
+                        split: (0, 0),
+                    }))),
+                    desc,
+                ))
             }
             #[cfg(not(feature = "gpu"))]
             Backend::Auto => {
@@ -222,7 +241,7 @@ impl Voxelizers {
                         let mut vz = workers[slot].lock().unwrap_or_else(|p| p.into_inner());
                         let before = vz.skipped();
                         vz.begin(chunks[i].origin());
-                        bins.read_chunk(i, 64 * 1024, &mut |tris| {
+                        bins.read_chunk(i, READ_BATCH, &mut |tris| {
                             vz.add(tris);
                             Ok(())
                         })?;
@@ -236,29 +255,64 @@ impl Voxelizers {
                 let mut gpu = gpu.lock().unwrap_or_else(|p| p.into_inner());
                 range
                     .map(|i| {
-                        let tris = read_all(bins, i)?;
-                        let voxels =
-                            gpu.voxelize_chunk(chunks[i].origin(), &tris)
-                                .with_context(|| {
-                                    format!("GPU voxelization of chunk {:?}", chunks[i].coord)
-                                })?;
+                        let voxels = voxelize_streamed(&mut gpu.vz, bins, i, u64::MAX)
+                            .with_context(|| {
+                                format!("GPU voxelization of chunk {:?}", chunks[i].coord)
+                            })?;
+                        let (small, large) = gpu.vz.last_split();
+                        gpu.split.0 += small;
+                        gpu.split.1 += large;
                         Ok((voxels, 0))
                     })
                     .collect()
             }
         }
     }
+
+    /// For the GPU backend, the triangles voxelized in the classification pass (small, under
+    /// the cutoff) and those deferred to the second pass (the fragment pass; the sweep pass of
+    /// `--gpu-method triangle`), summed over the chunks `run` has voxelized (the cutoff search
+    /// not included). A triangle spanning several chunks counts once per chunk; zero-area
+    /// triangles and parts outside a chunk count in neither. None for the CPU backend.
+    #[allow(dead_code)] // for the build summary and the CLI
+    pub(crate) fn gpu_split(&self) -> Option<(u64, u64)> {
+        match self {
+            Voxelizers::Cpu(_) => None,
+            #[cfg(feature = "gpu")]
+            Voxelizers::Gpu(gpu) => Some(gpu.lock().unwrap_or_else(|p| p.into_inner()).split),
+        }
+    }
 }
 
-/// All triangles of chunk `i` (the GPU voxelizer takes a chunk at once and batches inside).
+/// Voxelizes the first `limit` triangles of chunk `i` of `bins` on the GPU, streaming them
+/// from the bins file (replayed once per GPU phase), so that only bounded batches are in
+/// memory whatever the chunk's size.
 #[cfg(feature = "gpu")]
-fn read_all(bins: &Bins, i: usize) -> Result<Vec<voxlod_geom::Triangle>> {
-    let mut tris = Vec::with_capacity(bins.chunks()[i].count as usize);
-    bins.read_chunk(i, 64 * 1024, &mut |b| {
-        tris.extend_from_slice(b);
-        Ok(())
-    })?;
-    Ok(tris)
+fn voxelize_streamed(
+    gpu: &mut voxlod_gpu::GpuVoxelizer,
+    bins: &Bins,
+    i: usize,
+    limit: u64,
+) -> Result<Vec<Voxel>> {
+    /// Ends a read early once `limit` triangles were fed (not an error).
+    const ENOUGH: &str = "voxlod: enough triangles read";
+    let origin = bins.chunks()[i].origin();
+    gpu.voxelize_chunk_streamed(origin, &mut |feed: &mut voxlod_gpu::Feed<'_>| {
+        let mut left = limit;
+        let r = bins.read_chunk(i, READ_BATCH, &mut |tris| {
+            let n = (tris.len() as u64).min(left) as usize;
+            feed(&tris[..n]);
+            left -= n as u64;
+            if left == 0 {
+                return Err(voxlod_tile::TileError::Callback(ENOUGH.to_string()));
+            }
+            Ok(())
+        });
+        match r {
+            Err(voxlod_tile::TileError::Callback(m)) if m == ENOUGH => Ok(()),
+            r => r.map_err(anyhow::Error::from),
+        }
+    })
 }
 
 /// `--cutoff auto`: times the hybrid on the chunk with the most triangles (its first 256Ki)
@@ -270,14 +324,10 @@ fn search_cutoff(gpu: &mut voxlod_gpu::GpuVoxelizer, bins: &Bins) -> Result<f32>
     let Some(i) = (0..bins.chunks().len()).max_by_key(|&i| bins.chunks()[i].count) else {
         return Ok(DEFAULT_CUTOFF);
     };
-    let mut tris = read_all(bins, i)?;
-    tris.truncate(256 * 1024);
-    let origin = bins.chunks()[i].origin();
     let mut time = |c: f32| -> Result<f64> {
         gpu.set_method(voxlod_gpu::GpuMethod::Hybrid, c);
         let t = std::time::Instant::now();
-        gpu.voxelize_chunk(origin, &tris)
-            .context("timing a cutoff")?;
+        voxelize_streamed(gpu, bins, i, 256 * 1024).context("timing a cutoff")?;
         Ok(t.elapsed().as_secs_f64())
     };
     time(DEFAULT_CUTOFF)?; // warm-up: pipelines, buffers
