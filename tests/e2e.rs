@@ -755,6 +755,18 @@ fn gpu_backend_writes_the_same_file_as_cpu() {
         let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         let used = summary["backend"].as_str().unwrap();
         assert!(used.starts_with("gpu "), "{used}");
+        // every binned triangle went to exactly one of the two passes (the bunny has no
+        // zero-area triangles); at cutoff 8 voxels² both passes get some
+        let split = &summary["gpu_split"];
+        let (small, large) = (split[0].as_u64().unwrap(), split[1].as_u64().unwrap());
+        assert_eq!(
+            small + large,
+            summary["binned_triangles"].as_u64().unwrap(),
+            "{split}"
+        );
+        if cutoff == "8" {
+            assert!(small > 0 && large > 0, "{split}");
+        }
         assert_eq!(
             std::fs::read(&cpu).unwrap(),
             std::fs::read(&gpu).unwrap(),

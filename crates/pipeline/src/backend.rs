@@ -274,7 +274,6 @@ impl Voxelizers {
     /// `--gpu-method triangle`), summed over the chunks `run` has voxelized (the cutoff search
     /// not included). A triangle spanning several chunks counts once per chunk; zero-area
     /// triangles and parts outside a chunk count in neither. None for the CPU backend.
-    #[allow(dead_code)] // for the build summary and the CLI
     pub(crate) fn gpu_split(&self) -> Option<(u64, u64)> {
         match self {
             Voxelizers::Cpu(_) => None,

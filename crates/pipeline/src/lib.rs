@@ -119,6 +119,10 @@ pub struct BuildSummary {
     pub threads: usize,
     /// The voxelizer that ran (backend, adapter, method, cutoff).
     pub backend: String,
+    /// GPU backend: triangles voxelized in the classification pass (projected area under the
+    /// cutoff) and triangles deferred to the second pass, summed over the chunks this run
+    /// voxelized (a triangle counts once per chunk it was binned to). `None` on the CPU.
+    pub gpu_split: Option<[u64; 2]>,
     /// Non-empty leaf chunk bins (chunks some triangle's range touches).
     pub chunk_bins: usize,
     /// Triangle records in the bins (a triangle spanning k chunks counts k times).
@@ -401,6 +405,7 @@ fn run(
         .with_context(|| format!("{}: fitting the grid", input.display()))?;
 
     let mut backend_used = String::from("(voxelized by the interrupted run)");
+    let mut gpu_split = None;
     let leaves_marker = match leaves_done {
         Some(m) => {
             stage_done(&mut stages, "tile", Instant::now(), true);
@@ -419,6 +424,7 @@ fn run(
             bounds,
             &mut stages,
             &mut backend_used,
+            &mut gpu_split,
         )?,
     };
     if leaves_marker.skipped > 0 {
@@ -522,6 +528,7 @@ fn run(
         mode: s.mode,
         threads,
         backend: backend_used,
+        gpu_split,
         chunk_bins,
         binned_triangles,
         total_voxels,
@@ -558,6 +565,7 @@ fn tile_and_voxelize(
     bounds: Bounds,
     stages: &mut Vec<StageTime>,
     backend_used: &mut String,
+    gpu_split: &mut Option<[u64; 2]>,
 ) -> Result<LeavesMarker> {
     let stage_done =
         |stages: &mut Vec<StageTime>, stage: &'static str, t: Instant, resumed: bool| {
@@ -720,6 +728,7 @@ fn tile_and_voxelize(
                 return Err(e);
             }
             bar.finish();
+            *gpu_split = voxelizers.gpu_split().map(|(small, large)| [small, large]);
             drop(voxelizers);
             let records = log.records();
             log.finish()?;

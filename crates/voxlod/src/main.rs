@@ -257,6 +257,11 @@ fn print_summary(s: &BuildSummary) {
         s.resolution, s.mode, s.threads
     );
     println!("  voxelizer    {}", s.backend);
+    if let Some([small, large]) = s.gpu_split {
+        println!(
+            "  gpu split    {small} triangle/chunk pairs voxelized in the classification pass, {large} deferred to the second pass"
+        );
+    }
     println!(
         "  chunk bins   {} ({} triangle records of {} bytes, tiled from the {})",
         s.chunk_bins, s.binned_triangles, s.record_bytes, s.tile_source
