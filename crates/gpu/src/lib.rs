@@ -17,6 +17,17 @@
 //!    integers, so the sums do not depend on thread order.
 //! 5. Read-back and encoding on the CPU, voxels sorted by Morton code.
 //!
+//! **Bounded memory.** [`GpuVoxelizer::voxelize_chunk_streamed`] takes a callback that replays
+//! the chunk's triangles in batches of any size (once for marking, once more per accumulation
+//! window when the chunk needs several GPU batches), so a chunk of tens of millions of
+//! triangles never sits in host memory: the voxelizer re-batches to
+//! [`GpuVoxelizer::batch_size`] triangles, uploads batch k+1 into the second of two triangle
+//! buffers while the device runs batch k, and waits only for the batch whose buffer it reuses
+//! and where results are read back. The second pass of a batch is left out when the host sees
+//! every triangle stays in the classification pass. [`GpuVoxelizer::last_split`] reports the
+//! chunk's small/large split. On lavapipe the parameters live in a storage buffer: uniform
+//! values are inlined by Mesa's lavapipe, which recompiled the classification pass per batch.
+//!
 //! The overlap tests, clipping and attribute rules are those of `voxlod-voxelize` (see its crate
 //! docs), operation for operation; with `SHADER_F64` (lavapipe, most desktop Vulkan drivers) the
 //! shaders compute in f64 like the CPU, otherwise in f32. [`GpuMethod`] selects hybrid,
@@ -42,6 +53,14 @@
 //! assert_eq!(voxels.len(), 6); // columns (0,0) (1,0) (0,1) (1,1) (2,0) (0,2) at z = 2
 //! assert_eq!(voxels[0].pos(), [0, 0, 2]);
 //! assert_eq!(voxels[0].normal_f32(), [0.0, 0.0, 1.0]);
+//! // the same chunk streamed: the callback replays the chunk's triangles (here in one piece)
+//! let streamed = gpu
+//!     .voxelize_chunk_streamed([0, 0, 0], &mut |feed: &mut voxlod_gpu::Feed<'_>| {
+//!         feed(&[t]);
+//!         Ok::<(), voxlod_gpu::GpuError>(())
+//!     })
+//!     .unwrap();
+//! assert_eq!(streamed, voxels);
 //! assert_eq!(gpu.last_split(), (1, 0)); // small: voxelized in the classification pass
 //! ```
 
