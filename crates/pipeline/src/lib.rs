@@ -444,7 +444,7 @@ fn run(
         voxel_size: grid.voxel_size,
     };
     let writer = Writer::create(output, spec)?;
-    let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level);
+    let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &pool);
     let bar = Stage::items(s.progress, "lod+write", chunk_bins as u64);
     // The leaf log is read and decoded on a second thread, one leaf ahead of the merges and
     // parent encodes of this one (two decoded leaves in flight at most).
@@ -483,7 +483,7 @@ fn run(
         let mut n = 0u64;
         for leaf in rx.iter() {
             let (coord, voxels, enc) = leaf?;
-            octree.push_leaf(coord, voxels, enc.as_ref())?;
+            octree.push_leaf(coord, voxels, enc)?;
             n += 1;
             bar.set(n, chunk_bins as u64);
         }

@@ -1,10 +1,24 @@
 //! The streamed octree: leaves arrive in Morton order, each parent is built (sort-and-compact)
 //! and written as soon as its last child is done, so only the partial parents on the current
 //! Morton path are held in memory (at most eight children per level).
+//!
+//! Parents are merged here, in order (a grandparent needs its parents' voxels), but their
+//! payloads are compressed on the thread pool: nodes wait in a queue in post-order and are
+//! written as soon as the node at its head is encoded. The queue is bounded (node count and
+//! voxel bytes), so memory stays bounded; the file is the same bytes as with inline encoding.
+
+use std::collections::VecDeque;
+use std::sync::{mpsc, Arc};
 
 use anyhow::{Context, Result};
-use voxlod_format::{encode_node, Voxel, Writer};
+use voxlod_format::{encode_node, EncodedNode, Voxel, Writer};
 use voxlod_lod::MergeScratch;
+
+/// Most nodes waiting for their encode, and most voxel bytes they hold, before the writer
+/// waits for the oldest (the LOD stage runs after the voxelizers are gone, and this stays far
+/// inside their share of the memory plan).
+const QUEUE_NODES: usize = 16;
+const QUEUE_BYTES: u64 = 64 << 20;
 
 /// Voxel and node counts of one level.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -16,28 +30,51 @@ pub struct LevelStats {
 
 struct Pending {
     parent: [u32; 3],
-    children: [Vec<Voxel>; 8],
+    children: [Arc<Vec<Voxel>>; 8],
     mask: u8,
 }
 
+/// A node's payload: encoded already (leaves) or being encoded on the pool.
+enum Payload {
+    Ready(EncodedNode),
+    Encoding(mpsc::Receiver<Result<EncodedNode, voxlod_format::FormatError>>),
+}
+
+/// A node waiting in post-order for its payload.
+struct Queued {
+    level: u32,
+    coord: [u32; 3],
+    child_mask: u8,
+    payload: Payload,
+    /// Voxel bytes the encode holds (0 for ready payloads).
+    bytes: u64,
+}
+
 /// Receives leaf chunks in Morton order and writes leaves and parents in post-order.
-pub struct OctreeWriter {
+pub struct OctreeWriter<'p> {
     writer: Writer,
     levels: u32,
     zstd_level: i32,
+    pool: &'p rayon::ThreadPool,
     pending: Vec<Option<Pending>>,
+    queue: VecDeque<Queued>,
+    queued_bytes: u64,
     scratch: MergeScratch,
     last_leaf: Option<u64>,
     pub stats: Vec<LevelStats>,
 }
 
-impl OctreeWriter {
-    pub fn new(writer: Writer, levels: u32, zstd_level: i32) -> Self {
+impl<'p> OctreeWriter<'p> {
+    /// Parent payloads are compressed on `pool`.
+    pub fn new(writer: Writer, levels: u32, zstd_level: i32, pool: &'p rayon::ThreadPool) -> Self {
         OctreeWriter {
             writer,
             levels,
             zstd_level,
+            pool,
             pending: (0..levels).map(|_| None).collect(),
+            queue: VecDeque::new(),
+            queued_bytes: 0,
             scratch: MergeScratch::new(),
             last_leaf: None,
             stats: (0..levels)
@@ -56,7 +93,7 @@ impl OctreeWriter {
         &mut self,
         coord: [u32; 3],
         voxels: Vec<Voxel>,
-        encoded: Option<&voxlod_format::EncodedNode>,
+        encoded: Option<EncodedNode>,
     ) -> Result<()> {
         let m = voxlod_geom::morton3(coord[0], coord[1], coord[2]);
         anyhow::ensure!(
@@ -65,7 +102,9 @@ impl OctreeWriter {
         );
         self.last_leaf = Some(m);
         match encoded {
-            Some(enc) if !voxels.is_empty() => self.emit(0, coord, 0, voxels, enc),
+            Some(enc) if !voxels.is_empty() => {
+                self.emit(0, coord, 0, Arc::new(voxels), Payload::Ready(enc))
+            }
             None if voxels.is_empty() => Ok(()),
             _ => anyhow::bail!("leaf {coord:?}: voxels and encoded payload disagree"),
         }
@@ -78,8 +117,8 @@ impl OctreeWriter {
         level: u32,
         coord: [u32; 3],
         child_mask: u8,
-        voxels: Vec<Voxel>,
-        enc: &voxlod_format::EncodedNode,
+        voxels: Arc<Vec<Voxel>>,
+        payload: Payload,
     ) -> Result<()> {
         for l in level..self.levels.saturating_sub(1) {
             let shift = l + 1 - level;
@@ -91,9 +130,16 @@ impl OctreeWriter {
                 self.flush(l)?;
             }
         }
-        self.writer
-            .write_node(level, coord, child_mask, enc)
-            .with_context(|| format!("writing node level {level} {coord:?}"))?;
+        self.enqueue(Queued {
+            level,
+            coord,
+            child_mask,
+            bytes: match payload {
+                Payload::Ready(_) => 0,
+                Payload::Encoding(_) => (voxels.len() * std::mem::size_of::<Voxel>()) as u64,
+            },
+            payload,
+        })?;
         self.stats[level as usize].nodes += 1;
         self.stats[level as usize].voxels += voxels.len() as u64;
         if level + 1 < self.levels {
@@ -123,9 +169,67 @@ impl OctreeWriter {
         let mut merged = Vec::new();
         self.scratch.merge(&refs, &mut merged);
         drop(p.children);
-        let enc = encode_node(&merged, self.zstd_level)
-            .with_context(|| format!("encoding node level {} {:?}", level + 1, p.parent))?;
-        self.emit(level + 1, p.parent, p.mask, merged, &enc)
+        let merged = Arc::new(merged);
+        let (tx, rx) = mpsc::sync_channel(1);
+        let (voxels, zstd_level) = (Arc::clone(&merged), self.zstd_level);
+        self.pool.spawn(move || {
+            // the receiver is gone only if the build already failed
+            let _ = tx.send(encode_node(&voxels, zstd_level));
+        });
+        self.emit(level + 1, p.parent, p.mask, merged, Payload::Encoding(rx))
+    }
+
+    /// Appends a node to the write queue, then writes what is ready at its head (waiting for
+    /// the head while the queue is over its bounds).
+    fn enqueue(&mut self, q: Queued) -> Result<()> {
+        self.queued_bytes += q.bytes;
+        self.queue.push_back(q);
+        self.drain(false)
+    }
+
+    /// Writes queued nodes in order: those already encoded, all of them if `all`, and while
+    /// the queue is over its bounds.
+    fn drain(&mut self, all: bool) -> Result<()> {
+        loop {
+            let over = self.queue.len() > QUEUE_NODES || self.queued_bytes > QUEUE_BYTES;
+            let Some(head) = self.queue.front_mut() else {
+                break;
+            };
+            let enc = match &mut head.payload {
+                Payload::Ready(_) => None,
+                Payload::Encoding(rx) if all || over => Some(rx.recv().map_err(|_| {
+                    anyhow::anyhow!(
+                        "the encoder of node level {} {:?} stopped",
+                        head.level,
+                        head.coord
+                    )
+                })?),
+                Payload::Encoding(rx) => match rx.try_recv() {
+                    Ok(r) => Some(r),
+                    Err(mpsc::TryRecvError::Empty) => return Ok(()),
+                    Err(mpsc::TryRecvError::Disconnected) => anyhow::bail!(
+                        "the encoder of node level {} {:?} stopped",
+                        head.level,
+                        head.coord
+                    ),
+                },
+            };
+            if let Some(r) = enc {
+                let enc = r.with_context(|| {
+                    format!("encoding node level {} {:?}", head.level, head.coord)
+                })?;
+                head.payload = Payload::Ready(enc);
+            }
+            let q = self.queue.pop_front().expect("head exists");
+            self.queued_bytes -= q.bytes;
+            let Payload::Ready(enc) = &q.payload else {
+                unreachable!("the head was made ready above")
+            };
+            self.writer
+                .write_node(q.level, q.coord, q.child_mask, enc)
+                .with_context(|| format!("writing node level {} {:?}", q.level, q.coord))?;
+        }
+        Ok(())
     }
 
     /// Completes every pending parent up to the root and finishes the file.
@@ -137,6 +241,7 @@ impl OctreeWriter {
         for level in 0..self.levels {
             self.flush(level)?;
         }
+        self.drain(true)?;
         let stats = self.stats.clone();
         let size = self
             .writer
