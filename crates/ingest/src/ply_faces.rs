@@ -125,14 +125,16 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     // records that fit in the file at the uniform size (the rest, if any, is read sequentially
     // and reports the truncation as the sequential reader does)
     let fit = ((data.len() - off) as u64 / size).min(el.count);
-    let mut rec = 0u64;
-    while rec < fit {
-        let n = (PARALLEL_RECORDS * threads).min(fit - rec);
+    // one round: records [rec, rec + n) split between the threads, decoded in parallel
+    type Round = Vec<(u64, Result<(LocalBatch, Option<u64>), IngestError>)>;
+    let round_len = |rec: u64| (PARALLEL_RECORDS * threads).min(fit - rec);
+    let decode = |rec: u64| -> Round {
+        let n = round_len(rec);
         let parts: Vec<(u64, u64)> = (0..threads)
             .map(|t| (rec + n * t / threads, rec + n * (t + 1) / threads))
             .filter(|(a, b)| a < b)
             .collect();
-        let results: Vec<(u64, Result<(LocalBatch, Option<u64>), IngestError>)> = parts
+        parts
             .par_iter()
             .map(|&(a, b)| {
                 let mut src = SliceRecords::<BE>::new(path, data, at(a));
@@ -154,17 +156,39 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
                 );
                 (a, r.map(|stop| (lb, stop)))
             })
-            .collect();
-        for (a, r) in results {
-            match r {
-                Ok((lb, None)) => em.push_local(lb)?,
-                // a record that is not a triangle: the offsets from `a` on are unknown
-                Ok((_, Some(_))) => return sequential(a, at(a), em),
-                Err(e) => return Err(e),
+            .collect()
+    };
+    // Pipelined: while the triangles of round k go to `em` on this thread (the caller's
+    // callback, which need not be thread-safe), round k+1 is decoded on the pool. The order
+    // of triangles, counts and the first error is unchanged.
+    let mut rec = 0u64;
+    let mut current = (fit > 0).then(|| decode(0));
+    while let Some(results) = current.take() {
+        let n = round_len(rec);
+        let next_rec = rec + n;
+        let mut next: Option<Round> = None;
+        let handed: Result<Option<u64>, IngestError> = rayon::in_place_scope(|sc| {
+            if next_rec < fit {
+                let next = &mut next;
+                let decode = &decode;
+                sc.spawn(move |_| *next = Some(decode(next_rec)));
             }
+            for (a, r) in results {
+                match r {
+                    Ok((lb, None)) => em.push_local(lb)?,
+                    // a record that is not a triangle: the offsets from `a` on are unknown
+                    Ok((_, Some(_))) => return Ok(Some(a)),
+                    Err(e) => return Err(e),
+                }
+            }
+            Ok(None)
+        });
+        if let Some(a) = handed? {
+            return sequential(a, at(a), em);
         }
-        rec += n;
+        rec = next_rec;
         em.bytes_done = at(rec) as u64;
+        current = next;
     }
     if rec < el.count {
         return sequential(rec, at(rec), em);
