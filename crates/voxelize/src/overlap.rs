@@ -80,6 +80,16 @@ pub fn swizzle(axis: usize) -> [usize; 3] {
     }
 }
 
+/// The inverse of a [`swizzle`] permutation.
+#[inline]
+fn unswizzle_of(swz: [usize; 3]) -> [usize; 3] {
+    let mut inv = [0; 3];
+    for (k, &j) in swz.iter().enumerate() {
+        inv[j] = k;
+    }
+    inv
+}
+
 /// `(v1 − v0) × (v2 − v0)` in f64 (same formula as `Triangle::cross`).
 #[inline]
 pub(crate) fn cross_f64(v: &[[f64; 3]; 3]) -> [f64; 3] {
@@ -106,6 +116,8 @@ pub struct TriSetup {
     pub axis: usize,
     /// Swizzled axis `k` is original axis `swz[k]`; see [`swizzle`].
     pub swz: [usize; 3],
+    /// The inverse permutation: original axis `j` is swizzled axis `unswz[j]`.
+    unswz: [usize; 3],
     /// Swizzled vertices.
     pub v: [[f64; 3]; 3],
     /// Swizzled normal `(v1−v0)×(v2−v0)`, negated if needed so that `n[2] > 0`.
@@ -199,6 +211,7 @@ impl TriSetup {
             mode,
             axis,
             swz,
+            unswz: unswizzle_of(swz),
             v,
             n,
             ne,
@@ -219,11 +232,9 @@ impl TriSetup {
     /// Inverse of [`TriSetup::swizzle`].
     #[inline]
     pub fn unswizzle<T: Copy>(&self, p: [T; 3]) -> [T; 3] {
-        let mut o = p;
-        for k in 0..3 {
-            o[self.swz[k]] = p[k];
-        }
-        o
+        // a gather (dynamic loads, fixed stores) rather than a scatter: the caller reads the
+        // result as a whole, and stores at dynamic offsets would stall its loads
+        [p[self.unswz[0]], p[self.unswz[1]], p[self.unswz[2]]]
     }
 
     /// The appendix routine on swizzled coordinates: calls `emit(p, first)` for every overlapped
