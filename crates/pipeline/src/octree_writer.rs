@@ -254,3 +254,139 @@ impl<'p> OctreeWriter<'p> {
         self.writer.bytes_written()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeMap;
+    use std::path::Path;
+    use voxlod_format::voxel::pack_color;
+    use voxlod_format::FileSpec;
+    use voxlod_geom::morton3;
+    use voxlod_lod::merge_children;
+
+    fn spec(levels: u32) -> FileSpec {
+        FileSpec {
+            resolution: 256 << (levels - 1),
+            levels,
+            mode: 0,
+            origin: [0.0; 3],
+            voxel_size: 1.0,
+        }
+    }
+
+    /// Reference: the whole tree in memory, parents merged and encoded inline, nodes written
+    /// by a recursive post-order walk.
+    fn reference(path: &Path, levels: u32, leaves: &BTreeMap<u64, ([u32; 3], Vec<Voxel>)>) {
+        fn walk(
+            w: &mut Writer,
+            level: u32,
+            coord: [u32; 3],
+            leaves: &BTreeMap<u64, ([u32; 3], Vec<Voxel>)>,
+        ) -> Option<Vec<Voxel>> {
+            let (voxels, mask) = if level == 0 {
+                let (_, v) = leaves.get(&morton3(coord[0], coord[1], coord[2]))?;
+                (v.clone(), 0u8)
+            } else {
+                let mut kids: [Vec<Voxel>; 8] = Default::default();
+                let mut mask = 0u8;
+                for (o, kid) in kids.iter_mut().enumerate() {
+                    let o = o as u32;
+                    let c = [
+                        2 * coord[0] + (o & 1),
+                        2 * coord[1] + (o >> 1 & 1),
+                        2 * coord[2] + (o >> 2),
+                    ];
+                    if let Some(v) = walk(w, level - 1, c, leaves) {
+                        *kid = v;
+                        mask |= 1 << o;
+                    }
+                }
+                if mask == 0 {
+                    return None;
+                }
+                let refs: [&[Voxel]; 8] = std::array::from_fn(|o| kids[o].as_slice());
+                (merge_children(&refs), mask)
+            };
+            w.write_node(level, coord, mask, &encode_node(&voxels, 3).unwrap())
+                .unwrap();
+            Some(voxels)
+        }
+        let mut w = Writer::create(path, spec(levels)).unwrap();
+        walk(&mut w, levels - 1, [0; 3], leaves);
+        w.finish(&serde_json::json!({})).unwrap();
+    }
+
+    /// Many parents (far more than the queue holds), some large enough to pass its byte bound:
+    /// the pooled, queued writer gives the reference's bytes on 1 and 3 threads.
+    #[test]
+    fn pooled_encodes_write_the_reference_bytes() {
+        let levels = 4; // 8³ leaf chunks
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rng = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let mut leaves = BTreeMap::new();
+        for x in 0..8u32 {
+            for y in 0..8u32 {
+                for z in 0..8u32 {
+                    if rng() % 3 == 0 {
+                        continue;
+                    }
+                    // mostly small chunks, a few of ~1M voxels (12 MiB) to pass QUEUE_BYTES
+                    let n = if rng() % 40 == 0 {
+                        1 << 20
+                    } else {
+                        (rng() % 3000) as usize + 1
+                    };
+                    let mut codes: Vec<u32> = (0..n).map(|_| (rng() % (1 << 24)) as u32).collect();
+                    codes.sort_unstable();
+                    codes.dedup();
+                    let v: Vec<Voxel> = codes
+                        .iter()
+                        .map(|&m| {
+                            let p = voxlod_geom::demorton3(m as u64).map(|c| c as u8);
+                            let r = rng();
+                            Voxel::new(
+                                p,
+                                (r & 63) as u8,
+                                (r >> 8) as u32 & 0x3fff_ffff,
+                                pack_color([r as u8, (r >> 8) as u8, 7, 255]),
+                            )
+                        })
+                        .collect();
+                    leaves.insert(morton3(x, y, z), ([x, y, z], v));
+                }
+            }
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let want = dir.path().join("reference.voxlod");
+        reference(&want, levels, &leaves);
+        let want = std::fs::read(want).unwrap();
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let path = dir.path().join(format!("t{threads}.voxlod"));
+            let mut ow = OctreeWriter::new(
+                Writer::create(&path, spec(levels)).unwrap(),
+                levels,
+                3,
+                &pool,
+            );
+            for (coord, v) in leaves.values() {
+                let enc = encode_node(v, 3).unwrap();
+                ow.push_leaf(*coord, v.clone(), Some(enc)).unwrap();
+            }
+            ow.finish(|_| serde_json::json!({})).unwrap();
+            assert!(
+                std::fs::read(&path).unwrap() == want,
+                "{threads} threads: bytes differ from the reference"
+            );
+        }
+    }
+}
