@@ -2,11 +2,14 @@
 //! and written as soon as its last child is done, so only the partial parents on the current
 //! Morton path are held in memory (at most eight children per level).
 //!
-//! Parents are merged here, in order (a grandparent needs its parents' voxels), but their
-//! payloads are compressed on the thread pool: nodes wait in a queue in post-order and are
-//! written as soon as the node at its head is encoded. The queue is bounded (node count and
-//! voxel bytes), so memory stays bounded; the file is the same bytes as with inline encoding.
+//! Parents are merged and compressed on the thread pool: when a parent's last child is done,
+//! this thread waits for the merges of its children (if still running) and hands the parent's
+//! merge and encode to the pool. Nodes wait in a queue in post-order and are written as soon as
+//! the node at its head is encoded. The queue is bounded (node count and the bytes of the
+//! children its merges hold), so memory stays bounded; the file is the same bytes as with
+//! inline merges and encodes.
 
+use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::sync::{mpsc, Arc};
 
@@ -30,8 +33,19 @@ pub struct LevelStats {
 
 struct Pending {
     parent: [u32; 3],
-    children: [Arc<Vec<Voxel>>; 8],
+    children: [Option<Child>; 8],
     mask: u8,
+}
+
+/// A node's voxels, as its parent's merge needs them: known (leaves) or being merged on the pool.
+enum Child {
+    Done(Arc<Vec<Voxel>>),
+    Merging(mpsc::Receiver<Arc<Vec<Voxel>>>),
+}
+
+thread_local! {
+    /// Merge buffers of each pool thread.
+    static SCRATCH: RefCell<MergeScratch> = RefCell::new(MergeScratch::new());
 }
 
 /// A node's payload: encoded already (leaves) or being encoded on the pool.
@@ -46,7 +60,7 @@ struct Queued {
     coord: [u32; 3],
     child_mask: u8,
     payload: Payload,
-    /// Voxel bytes the encode holds (0 for ready payloads).
+    /// Voxel bytes the merge and encode hold (0 for ready payloads).
     bytes: u64,
 }
 
@@ -59,14 +73,18 @@ pub struct OctreeWriter<'p> {
     pending: Vec<Option<Pending>>,
     queue: VecDeque<Queued>,
     queued_bytes: u64,
-    scratch: MergeScratch,
     last_leaf: Option<u64>,
     pub stats: Vec<LevelStats>,
 }
 
 impl<'p> OctreeWriter<'p> {
-    /// Parent payloads are compressed on `pool`.
+    /// Parents are merged and compressed on `pool`. Precondition: the caller is not one of
+    /// `pool`'s threads (it waits for merges running there).
     pub fn new(writer: Writer, levels: u32, zstd_level: i32, pool: &'p rayon::ThreadPool) -> Self {
+        assert!(
+            pool.current_thread_index().is_none(),
+            "OctreeWriter must not run on a thread of the pool it hands merges to"
+        );
         OctreeWriter {
             writer,
             levels,
@@ -75,7 +93,6 @@ impl<'p> OctreeWriter<'p> {
             pending: (0..levels).map(|_| None).collect(),
             queue: VecDeque::new(),
             queued_bytes: 0,
-            scratch: MergeScratch::new(),
             last_leaf: None,
             stats: (0..levels)
                 .map(|level| LevelStats {
@@ -103,7 +120,8 @@ impl<'p> OctreeWriter<'p> {
         self.last_leaf = Some(m);
         match encoded {
             Some(enc) if !voxels.is_empty() => {
-                self.emit(0, coord, 0, Arc::new(voxels), Payload::Ready(enc))
+                let voxels = Child::Done(Arc::new(voxels));
+                self.emit(0, coord, 0, voxels, Payload::Ready(enc), 0)
             }
             None if voxels.is_empty() => Ok(()),
             _ => anyhow::bail!("leaf {coord:?}: voxels and encoded payload disagree"),
@@ -117,8 +135,9 @@ impl<'p> OctreeWriter<'p> {
         level: u32,
         coord: [u32; 3],
         child_mask: u8,
-        voxels: Arc<Vec<Voxel>>,
+        voxels: Child,
         payload: Payload,
+        bytes: u64,
     ) -> Result<()> {
         for l in level..self.levels.saturating_sub(1) {
             let shift = l + 1 - level;
@@ -134,14 +153,9 @@ impl<'p> OctreeWriter<'p> {
             level,
             coord,
             child_mask,
-            bytes: match payload {
-                Payload::Ready(_) => 0,
-                Payload::Encoding(_) => (voxels.len() * std::mem::size_of::<Voxel>()) as u64,
-            },
+            bytes,
             payload,
         })?;
-        self.stats[level as usize].nodes += 1;
-        self.stats[level as usize].voxels += voxels.len() as u64;
         if level + 1 < self.levels {
             let parent = [coord[0] >> 1, coord[1] >> 1, coord[2] >> 1];
             let octant = (coord[0] & 1 | (coord[1] & 1) << 1 | (coord[2] & 1) << 2) as usize;
@@ -154,7 +168,7 @@ impl<'p> OctreeWriter<'p> {
                 p.parent == parent && p.mask & (1 << octant) == 0,
                 "child pushed twice"
             );
-            p.children[octant] = voxels;
+            p.children[octant] = Some(voxels);
             p.mask |= 1 << octant;
         }
         Ok(())
@@ -165,18 +179,37 @@ impl<'p> OctreeWriter<'p> {
         let Some(p) = self.pending[level as usize].take() else {
             return Ok(());
         };
-        let refs: [&[Voxel]; 8] = std::array::from_fn(|o| p.children[o].as_slice());
-        let mut merged = Vec::new();
-        self.scratch.merge(&refs, &mut merged);
-        drop(p.children);
-        let merged = Arc::new(merged);
-        let (tx, rx) = mpsc::sync_channel(1);
-        let (voxels, zstd_level) = (Arc::clone(&merged), self.zstd_level);
+        // the children's voxels: wait for merges still running (this thread is not in the
+        // pool, and pool tasks never wait, so this cannot deadlock)
+        let mut kids: [Arc<Vec<Voxel>>; 8] = Default::default();
+        for (kid, child) in kids.iter_mut().zip(p.children) {
+            *kid = match child {
+                None => continue,
+                Some(Child::Done(v)) => v,
+                Some(Child::Merging(rx)) => rx.recv().map_err(|_| {
+                    anyhow::anyhow!("a merge below level {} {:?} stopped", level + 1, p.parent)
+                })?,
+            };
+        }
+        let bytes = kids
+            .iter()
+            .map(|k| k.len() * std::mem::size_of::<Voxel>())
+            .sum::<usize>();
+        let (vtx, vrx) = mpsc::sync_channel(1);
+        let (etx, erx) = mpsc::sync_channel(1);
+        let zstd_level = self.zstd_level;
         self.pool.spawn(move || {
-            // the receiver is gone only if the build already failed
-            let _ = tx.send(encode_node(&voxels, zstd_level));
+            let refs: [&[Voxel]; 8] = std::array::from_fn(|o| kids[o].as_slice());
+            let mut merged = Vec::new();
+            SCRATCH.with(|s| s.borrow_mut().merge(&refs, &mut merged));
+            drop(kids);
+            let merged = Arc::new(merged);
+            // a receiver is gone only if the build already failed
+            let _ = vtx.send(Arc::clone(&merged));
+            let _ = etx.send(encode_node(&merged, zstd_level));
         });
-        self.emit(level + 1, p.parent, p.mask, merged, Payload::Encoding(rx))
+        let (voxels, payload) = (Child::Merging(vrx), Payload::Encoding(erx));
+        self.emit(level + 1, p.parent, p.mask, voxels, payload, bytes as u64)
     }
 
     /// Appends a node to the write queue, then writes what is ready at its head (waiting for
@@ -225,6 +258,8 @@ impl<'p> OctreeWriter<'p> {
             let Payload::Ready(enc) = &q.payload else {
                 unreachable!("the head was made ready above")
             };
+            self.stats[q.level as usize].nodes += 1;
+            self.stats[q.level as usize].voxels += enc.voxel_count() as u64;
             self.writer
                 .write_node(q.level, q.coord, q.child_mask, enc)
                 .with_context(|| format!("writing node level {} {:?}", q.level, q.coord))?;
