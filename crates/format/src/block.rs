@@ -226,21 +226,18 @@ pub(crate) fn unshuffle(
     }
     out.clear();
     out.reserve(n);
-    let (pos, rest) = block.split_at(4 * n);
-    let (nor, col) = rest.split_at(4 * n);
-    let word = |planes: &[u8], j: usize| {
-        planes[j] as u32
-            | (planes[n + j] as u32) << 8
-            | (planes[2 * n + j] as u32) << 16
-            | (planes[3 * n + j] as u32) << 24
-    };
+    // the twelve byte planes, each n long
+    let plane = |k: usize| &block[k * n..(k + 1) * n];
+    let (p0, p1, p2, p3) = (plane(0), plane(1), plane(2), plane(3));
+    let (n0, n1, n2, n3) = (plane(4), plane(5), plane(6), plane(7));
+    let (c0, c1, c2, c3) = (plane(8), plane(9), plane(10), plane(11));
     let mut lo = [u8::MAX; 3];
     let mut hi = [0u8; 3];
     let mut m = 0u32;
     let mut normal = 0u32;
     let mut color = 0u32;
     for j in 0..n {
-        let w = word(pos, j);
+        let w = u32::from_le_bytes([p0[j], p1[j], p2[j], p3[j]]);
         let d = w & 0x00ff_ffff;
         if j > 0 && d == 0 {
             return Err(format!("voxel {j}: Morton delta 0 (duplicate position)"));
@@ -252,17 +249,26 @@ pub(crate) fn unshuffle(
         if w >> 30 != 0 {
             return Err(format!("voxel {j}: reserved position bits 30-31 set"));
         }
-        normal = byte_add(normal, word(nor, j));
+        normal = byte_add(normal, u32::from_le_bytes([n0[j], n1[j], n2[j], n3[j]]));
         if normal >> 30 != 0 {
             return Err(format!("voxel {j}: reserved normal bits 30-31 set"));
         }
-        color = byte_add(color, word(col, j));
-        let p = unmorton8(m);
+        color = byte_add(color, u32::from_le_bytes([c0[j], c1[j], c2[j], c3[j]]));
+        // the position as Voxel::pos_mask packs it (x | y << 8 | z << 16), by table
+        let pos = UNMORTON[0][(m & 0xff) as usize]
+            | UNMORTON[1][(m >> 8 & 0xff) as usize]
+            | UNMORTON[2][(m >> 16) as usize];
+        let p = pos.to_le_bytes();
         for a in 0..3 {
             lo[a] = lo[a].min(p[a]);
             hi[a] = hi[a].max(p[a]);
         }
-        out.push(Voxel::new(p, (w >> 24) as u8 & 0x3f, normal, color));
+        debug_assert_eq!([p[0], p[1], p[2]], unmorton8(m));
+        out.push(Voxel {
+            pos_mask: pos | (w >> 24 & 0x3f) << 24,
+            normal,
+            color,
+        });
     }
     Ok((lo, hi))
 }
@@ -275,12 +281,40 @@ fn byte_sub(a: u32, b: u32) -> u32 {
     }))
 }
 
-/// Bytewise wrapping `a + b`.
+/// Bytewise wrapping `a + b` (SWAR: the low seven bits of each lane add without carrying
+/// into the next lane, the top bit is their sum's top bit xor the lanes' top bits).
 #[inline]
 fn byte_add(a: u32, b: u32) -> u32 {
-    u32::from_le_bytes(std::array::from_fn(|k| {
-        a.to_le_bytes()[k].wrapping_add(b.to_le_bytes()[k])
-    }))
+    const LOW7: u32 = 0x7f7f_7f7f;
+    ((a & LOW7) + (b & LOW7)) ^ ((a ^ b) & !LOW7)
+}
+
+/// For byte `b` of a 24-bit Morton code (`b` = 0, 1, 2) and each of its 256 values, the
+/// coordinate bits it holds, packed as `x | y << 8 | z << 16`: Morton bit `i` is bit `i / 3` of
+/// axis `i % 3` ([`crate::voxel::morton8`]).
+static UNMORTON: [[u32; 256]; 3] = unmorton_tables();
+
+const fn unmorton_tables() -> [[u32; 256]; 3] {
+    let mut t = [[0u32; 256]; 3];
+    let mut b = 0;
+    while b < 3 {
+        let mut v = 0;
+        while v < 256 {
+            let mut w = 0u32;
+            let mut j = 0;
+            while j < 8 {
+                if v >> j & 1 == 1 {
+                    let i = 8 * b + j;
+                    w |= 1 << ((i % 3) * 8 + i / 3);
+                }
+                j += 1;
+            }
+            t[b][v] = w;
+            v += 1;
+        }
+        b += 1;
+    }
+    t
 }
 
 /// Inverse of [`morton8`].
@@ -301,6 +335,30 @@ pub(crate) fn unmorton8(m: u32) -> [u8; 3] {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn byte_add_and_unmorton_tables_match_their_plain_definitions() {
+        use super::*;
+        let mut s = 0x1234_5678_9abc_def1u64;
+        for _ in 0..200_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let (a, b) = (s as u32, (s >> 32) as u32);
+            let plain = u32::from_le_bytes(std::array::from_fn(|k| {
+                a.to_le_bytes()[k].wrapping_add(b.to_le_bytes()[k])
+            }));
+            assert_eq!(byte_add(a, b), plain, "{a:#x} + {b:#x}");
+        }
+        for m in (0..1u32 << 24).step_by(7) {
+            let pos = UNMORTON[0][(m & 0xff) as usize]
+                | UNMORTON[1][(m >> 8 & 0xff) as usize]
+                | UNMORTON[2][(m >> 16) as usize];
+            let p = unmorton8(m);
+            assert_eq!(pos, p[0] as u32 | (p[1] as u32) << 8 | (p[2] as u32) << 16);
+            assert_eq!(crate::voxel::morton8(p[0], p[1], p[2]), m);
+        }
+    }
+
     #[test]
     fn from_payload_rebuilds_the_same_node() {
         use crate::voxel::{pack_color, pack_normal};
