@@ -46,11 +46,15 @@ impl Poly {
     /// every vertex is inside the polygon is returned unchanged.
     #[inline]
     pub fn clip(&self, k: usize, b: f64, upper: bool) -> Poly {
+        assert!(k < 3, "clip axis {k} is not 0, 1 or 2");
         let mut out = Poly::EMPTY;
-        let clipped = if upper {
-            self.clip_into::<true>(k, b, &mut out)
-        } else {
-            self.clip_into::<false>(k, b, &mut out)
+        let clipped = match (k, upper) {
+            (0, false) => self.clip_into::<0, false>(b, &mut out),
+            (0, true) => self.clip_into::<0, true>(b, &mut out),
+            (1, false) => self.clip_into::<1, false>(b, &mut out),
+            (1, true) => self.clip_into::<1, true>(b, &mut out),
+            (_, false) => self.clip_into::<2, false>(b, &mut out),
+            (_, true) => self.clip_into::<2, true>(b, &mut out),
         };
         if clipped {
             out
@@ -59,17 +63,23 @@ impl Poly {
         }
     }
 
-    /// [`Poly::clip`] writing into `out` (no copy, no temporary): returns `false`, leaving `out`
-    /// untouched, when every vertex is inside (the result is `self`).
+    /// [`Poly::clip`] on axis `K` writing into `out` (no copy, no temporary): returns `false`,
+    /// leaving `out` untouched, when every vertex is inside (the result is `self`). The axis is
+    /// a constant so that the intersection point is built in registers: a store at a dynamic
+    /// offset into it stalls the load of the whole point that follows (store forwarding).
     #[inline(always)]
-    pub(crate) fn clip_into<const UPPER: bool>(&self, k: usize, b: f64, out: &mut Poly) -> bool {
+    pub(crate) fn clip_into<const K: usize, const UPPER: bool>(
+        &self,
+        b: f64,
+        out: &mut Poly,
+    ) -> bool {
         let mut d = [0.0f64; MAX_POLY];
         let mut all_in = true;
         for i in 0..self.len {
             d[i] = if UPPER {
-                b - self.p[i][k]
+                b - self.p[i][K]
             } else {
-                self.p[i][k] - b
+                self.p[i][K] - b
             };
             all_in &= d[i] >= 0.0;
         }
@@ -90,13 +100,14 @@ impl Poly {
                     (self.p[j], self.p[i], dc, da)
                 };
                 let t = din / (din - dout);
-                let mut q = [
-                    pin[0] + t * (pout[0] - pin[0]),
-                    pin[1] + t * (pout[1] - pin[1]),
-                    pin[2] + t * (pout[2] - pin[2]),
-                ];
-                q[k] = b;
-                out.push(q);
+                let at = |j: usize| {
+                    if j == K {
+                        b
+                    } else {
+                        pin[j] + t * (pout[j] - pin[j])
+                    }
+                };
+                out.push([at(0), at(1), at(2)]);
             }
         }
         true
@@ -112,12 +123,12 @@ impl Poly {
         t1: &mut Poly,
         t2: &mut Poly,
     ) -> (f64, Option<[f64; 3]>) {
-        let a = if self.clip_into::<false>(2, z, t1) {
+        let a = if self.clip_into::<2, false>(z, t1) {
             &*t1
         } else {
             self
         };
-        let b = if a.clip_into::<true>(2, z + 1.0, t2) {
+        let b = if a.clip_into::<2, true>(z + 1.0, t2) {
             &*t2
         } else {
             a
@@ -160,16 +171,16 @@ impl Poly {
     pub fn clip_column(&self, x: f64, y: f64) -> Poly {
         let mut out = *self;
         let mut t = Poly::EMPTY;
-        if out.clip_into::<false>(0, x, &mut t) {
+        if out.clip_into::<0, false>(x, &mut t) {
             out = t;
         }
-        if out.clip_into::<true>(0, x + 1.0, &mut t) {
+        if out.clip_into::<0, true>(x + 1.0, &mut t) {
             out = t;
         }
-        if out.clip_into::<false>(1, y, &mut t) {
+        if out.clip_into::<1, false>(y, &mut t) {
             out = t;
         }
-        if out.clip_into::<true>(1, y + 1.0, &mut t) {
+        if out.clip_into::<1, true>(y + 1.0, &mut t) {
             out = t;
         }
         out

@@ -79,33 +79,28 @@ pub(crate) struct Columns {
     whole: Option<(f64, Option<[f64; 3]>)>,
 }
 
-/// Clips `src` by the axis planes `(axis, bound, upper)` in order ([`Poly::clip`]), ping-ponging
-/// between `a` (0) and `b` (1) instead of copying; returns which holds the result, `None` if no
-/// plane cut anything (the result is `src`).
+/// Clips `src` to the slab `lo ≤ x[K] ≤ hi` ([`Poly::clip`] by `(K, lo, false)`, then
+/// `(K, hi, true)`), writing into `a` or `b` instead of copying; returns which holds the result
+/// (0 or 1), `None` if neither plane cut anything (the result is `src`).
 #[inline]
-fn clip_planes(
+fn clip_planes<const K: usize>(
     src: &Poly,
-    planes: [(usize, f64, bool); 2],
+    lo: f64,
+    hi: f64,
     a: &mut Poly,
     b: &mut Poly,
 ) -> Option<usize> {
-    let mut cur = None;
-    for (k, bound, upper) in planes {
-        let (from, to, next): (&Poly, &mut Poly, usize) = match cur {
-            None => (src, &mut *a, 0),
-            Some(0) => (&*a, &mut *b, 1),
-            _ => (&*b, &mut *a, 0),
-        };
-        let clipped = if upper {
-            from.clip_into::<true>(k, bound, to)
+    if src.clip_into::<K, false>(lo, a) {
+        if a.clip_into::<K, true>(hi, b) {
+            Some(1)
         } else {
-            from.clip_into::<false>(k, bound, to)
-        };
-        if clipped {
-            cur = Some(next);
+            Some(0)
         }
+    } else if src.clip_into::<K, true>(hi, a) {
+        Some(0)
+    } else {
+        None
     }
-    cur
 }
 
 /// `bufs[i]` and the two other buffers.
@@ -200,14 +195,14 @@ impl Columns {
         if x != self.slab_x {
             self.slab_x = x;
             let [s0, s1] = &mut self.slab;
-            self.slab_at = clip_planes(&self.tri, [(0, x, false), (0, x + 1.0, true)], s0, s1);
+            self.slab_at = clip_planes::<0>(&self.tri, x, x + 1.0, s0, s1);
         }
         let src = match self.slab_at {
             None => &self.tri,
             Some(i) => &self.slab[i],
         };
         let [b0, b1, _] = &mut self.bufs;
-        self.col = match clip_planes(src, [(1, y, false), (1, y + 1.0, true)], b0, b1) {
+        self.col = match clip_planes::<1>(src, y, y + 1.0, b0, b1) {
             Some(i) => i,
             None => {
                 self.bufs[0] = *src;
