@@ -165,7 +165,8 @@ pub struct ChunkVoxelizer {
     blocks: Vec<u32>,
     acc: Vec<Acc>,
     skipped: u64,
-    fast: bool,
+    /// the column clipping state, reused from triangle to triangle
+    cols: Columns,
 }
 
 impl ChunkVoxelizer {
@@ -178,7 +179,7 @@ impl ChunkVoxelizer {
             blocks: Vec::new(),
             acc: Vec::new(),
             skipped: 0,
-            fast: true,
+            cols: Columns::idle(true),
         }
     }
 
@@ -187,7 +188,7 @@ impl ChunkVoxelizer {
     /// of [`crate::column`](mod@crate::column) where they apply (equal up to rounding, so
     /// the records are equal except where opposite normals cancel; see the crate docs).
     pub fn set_fast_paths(&mut self, on: bool) {
-        self.fast = on;
+        self.cols = Columns::idle(on);
     }
 
     /// The voxelization mode.
@@ -233,7 +234,8 @@ impl ChunkVoxelizer {
             let attrs = Attrs::new(t);
             let tri_centroid =
                 [0, 1, 2].map(|k| (t.v[0][k] as f64 + t.v[1][k] as f64 + t.v[2][k] as f64) / 3.0);
-            let mut cols = Columns::new(&s, self.fast);
+            let cols = &mut self.cols;
+            cols.set(&s);
             let bricks = &mut self.bricks;
             let blocks = &mut self.blocks;
             let acc = &mut self.acc;

@@ -117,28 +117,24 @@ fn split3(bufs: &mut [Poly; 3], i: usize) -> (&Poly, &mut Poly, &mut Poly) {
 impl Columns {
     /// The clipping state of a triangle; `fast == false` turns the Square fast path off.
     pub(crate) fn new(s: &TriSetup, fast: bool) -> Columns {
-        let tri = Poly::triangle(&s.v);
-        let (tmin, tmax) = tri.bounds();
-        let n = s.n;
-        debug_assert!(n[2] > 0.0);
-        let (gx, gy) = (-n[0] / n[2], -n[1] / n[2]);
-        // the triangle's own edge functions (not the mode-dependent ones of the overlap test)
-        let mut edge = [[0.0; 3]; 3];
-        for (i, e) in edge.iter_mut().enumerate() {
-            let [a, b] = s.ne[0][i];
-            let v = s.v[i];
-            *e = [a, b, -(a * v[0] + b * v[1]) + a.min(0.0) + b.min(0.0)];
-        }
+        let mut c = Columns::idle(fast);
+        c.set(s);
+        c
+    }
+
+    /// A state with no triangle yet, to be [`Columns::set`] (and reused, so that the polygon
+    /// buffers are not cleared for every triangle).
+    pub(crate) fn idle(fast: bool) -> Columns {
         Columns {
             fast,
-            tri,
-            tmin,
-            tmax,
-            scale: area_scale(n),
-            v0: s.v[0],
-            gx,
-            gy,
-            edge,
+            tri: Poly::EMPTY,
+            tmin: [0.0; 3],
+            tmax: [0.0; 3],
+            scale: 0.0,
+            v0: [0.0; 3],
+            gx: 0.0,
+            gy: 0.0,
+            edge: [[0.0; 3]; 3],
             kind: Kind::General,
             x: 0.0,
             y: 0.0,
@@ -147,11 +143,40 @@ impl Columns {
             slab_at: None,
             bufs: [Poly::EMPTY; 3],
             col: 0,
-            zlo: tmin[2],
-            zhi: tmax[2],
+            zlo: 0.0,
+            zhi: 0.0,
             corner_z: [0.0; 4],
             whole: None,
         }
+    }
+
+    /// Starts triangle `s`. Every field a column reads is set here or by [`Columns::begin`];
+    /// the buffers' old contents are never read (a clip writes its length first).
+    #[inline]
+    pub(crate) fn set(&mut self, s: &TriSetup) {
+        self.tri.len = 3;
+        self.tri.p[..3].copy_from_slice(&s.v);
+        let (tmin, tmax) = self.tri.bounds();
+        let n = s.n;
+        debug_assert!(n[2] > 0.0);
+        // the triangle's own edge functions (not the mode-dependent ones of the overlap test)
+        for (i, e) in self.edge.iter_mut().enumerate() {
+            let [a, b] = s.ne[0][i];
+            let v = s.v[i];
+            *e = [a, b, -(a * v[0] + b * v[1]) + a.min(0.0) + b.min(0.0)];
+        }
+        self.tmin = tmin;
+        self.tmax = tmax;
+        self.scale = area_scale(n);
+        self.v0 = s.v[0];
+        (self.gx, self.gy) = (-n[0] / n[2], -n[1] / n[2]);
+        self.kind = Kind::General;
+        self.slab_x = f64::NAN;
+        self.slab_at = None;
+        self.col = 0;
+        self.zlo = tmin[2];
+        self.zhi = tmax[2];
+        self.whole = None;
     }
 
     /// Starts the column `[x, x+1] × [y, y+1]` (swizzled).
