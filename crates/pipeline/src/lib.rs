@@ -278,15 +278,18 @@ fn run(
     let rec = layout.bytes() as u64;
 
     // Temporary disk: the bins (the triangles plus those that straddle chunk borders, at most
-    // about 1.5× for fine meshes), and the spool if one is written, which exists during the
-    // scatter pass too.
+    // about 1.5× for fine meshes; faces counted twice in case they are quads), and the spool if
+    // one is written, which exists during the scatter pass too. This is an upper bound: the
+    // build is refused here only if even one record per face cannot fit, and the exact size of
+    // the bins is checked once the count pass knows it (before anything is written to them).
     let input_len = std::fs::metadata(input).map(|m| m.len()).unwrap_or(0);
-    let est_triangles = if info.faces > 0 {
-        info.faces * 2
+    let (est_triangles, min_triangles) = if info.faces > 0 {
+        (info.faces * 2, info.faces)
     } else {
-        input_len / 12
+        (input_len / 12, input_len / 50)
     };
     let temp_disk = est_triangles * rec * if spooled { 5 } else { 3 } / 2;
+    let min_disk = min_triangles * rec * if spooled { 2 } else { 1 };
     if let Some(free) = system::free_disk(work.path()) {
         if s.progress {
             eprintln!(
@@ -302,13 +305,21 @@ fn run(
                 }
             );
         }
-        if temp_disk > free {
+        if min_disk > free {
             bail!(
-                "not enough disk space for the temporary files: about {} needed in {}, {} free (choose another folder with --tmp)",
-                format_size(temp_disk),
+                "not enough disk space for the temporary files: at least {} needed in {}, {} free (choose another folder with --tmp)",
+                format_size(min_disk),
                 work.path().display(),
                 format_size(free)
             );
+        }
+        if temp_disk > free {
+            warnings.push(format!(
+                "the temporary files may need up to about {} in {}, {} free: the exact size is checked after the count pass",
+                format_size(temp_disk),
+                work.path().display(),
+                format_size(free)
+            ));
         }
     }
 
@@ -624,6 +635,28 @@ fn tile_and_voxelize(
             bar.finish();
             if interrupted() {
                 return Err(interrupted_error(work.path()));
+            }
+            // the exact size of the bins, now known
+            let rec = layout.bytes() as u64;
+            let bins_bytes = counts.total() * rec;
+            if let Some(free) = system::free_disk(work.path()) {
+                if bins_bytes > free {
+                    bail!(
+                        "not enough disk space for the chunk bins: {} needed in {} ({} records of {} bytes), {} free (choose another folder with --tmp)",
+                        format_size(bins_bytes),
+                        work.path().display(),
+                        counts.total(),
+                        rec,
+                        format_size(free)
+                    );
+                }
+            }
+            if s.progress {
+                eprintln!(
+                    "chunk bins: {} ({} triangle records)",
+                    format_size(bins_bytes),
+                    counts.total()
+                );
             }
             let bar = Stage::items(s.progress, "scatter", marker.count);
             let bins = pool.install(|| {
