@@ -126,17 +126,19 @@ fn color(hue: f64, p: [f32; 3]) -> [u8; 3] {
     })
 }
 
-/// Writes `triangles` triangles (copies of `base`) to `out` as binary little-endian PLY with
-/// per-vertex colours. Returns (vertices, triangles, copies).
+/// Writes `triangles` triangles (copies of `base`) to `out` as binary little-endian PLY, with
+/// per-vertex colours if `colors` (positions only otherwise, like most raw scans). Returns
+/// (vertices, triangles, copies).
 pub fn generate(
     base_path: &Path,
     out: &Path,
     triangles: u64,
     seed: u64,
+    colors: bool,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<(u64, u64, u64)> {
     let tmp = out.with_extension("ply.tmp");
-    let r = write(base_path, out, &tmp, triangles, seed, progress);
+    let r = write(base_path, out, &tmp, triangles, seed, colors, progress);
     if r.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
@@ -149,6 +151,7 @@ fn write(
     tmp: &Path,
     triangles: u64,
     seed: u64,
+    colors: bool,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<(u64, u64, u64)> {
     if triangles == 0 {
@@ -168,10 +171,14 @@ fn write(
     write!(
         w,
         "ply\nformat binary_little_endian 1.0\ncomment voxlod gen: {copies} copies of {} (seed {seed})\n\
-         element vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n\
-         property uchar red\nproperty uchar green\nproperty uchar blue\n\
+         element vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n{}\
          element face {triangles}\nproperty list uchar uint vertex_indices\nend_header\n",
-        base_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default()
+        base_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
+        if colors {
+            "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+        } else {
+            ""
+        }
     )
     .map_err(werr)?;
     let total = vertices + triangles;
@@ -187,7 +194,9 @@ fn write(
                     + c.rot[k][2] * p[2] as f64;
                 rec.extend_from_slice(&((v * c.scale + c.offset[k]) as f32).to_le_bytes());
             }
-            rec.extend_from_slice(&color(c.hue, *p));
+            if colors {
+                rec.extend_from_slice(&color(c.hue, *p));
+            }
             w.write_all(&rec).map_err(werr)?;
         }
         done += base.positions.len() as u64;

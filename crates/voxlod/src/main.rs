@@ -61,6 +61,10 @@ struct GenArgs {
     /// Seed of the layout; the same arguments give the same bytes.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Positions only, no vertex colours (like most raw scans; 20 % smaller, and the build's
+    /// triangle records shrink from 52 to 40 bytes).
+    #[arg(long)]
+    no_colors: bool,
     /// No progress bar.
     #[arg(short, long)]
     quiet: bool,
@@ -322,10 +326,17 @@ fn run_gen(a: GenArgs) -> Result<()> {
         .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     bar.set_prefix("gen");
-    let (v, t, c) = gen::generate(&base, &a.output, a.triangles, a.seed, &mut |d, n| {
-        bar.set_length(n);
-        bar.set_position(d);
-    })?;
+    let (v, t, c) = gen::generate(
+        &base,
+        &a.output,
+        a.triangles,
+        a.seed,
+        !a.no_colors,
+        &mut |d, n| {
+            bar.set_length(n);
+            bar.set_position(d);
+        },
+    )?;
     bar.finish_and_clear();
     let bytes = std::fs::metadata(&a.output).map(|m| m.len()).unwrap_or(0);
     println!(
