@@ -966,7 +966,10 @@ fn gen_without_colors_has_the_same_geometry() {
     let (c, nc) = (&tris[0], &tris[1]);
     assert_eq!(c.len(), nc.len());
     assert!(c.len() >= 29_000, "{} triangles", c.len());
-    assert!(c.iter().zip(nc).all(|(a, b)| a.0 == b.0), "positions differ");
+    assert!(
+        c.iter().zip(nc).all(|(a, b)| a.0 == b.0),
+        "positions differ"
+    );
     assert!(c.iter().all(|t| t.2 & voxlod_geom::TRI_HAS_COLORS != 0));
     assert!(nc.iter().all(|t| t.2 & voxlod_geom::TRI_HAS_COLORS == 0));
     // the coloured copies are not all one colour

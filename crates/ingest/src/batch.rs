@@ -1,6 +1,7 @@
 //! Batching of triangles for the caller: every reader pushes triangles here one by one;
 //! degenerate ones are counted and dropped, the rest are handed on in batches of
-//! [`BATCH`] triangles, with a progress report per batch.
+//! [`BATCH`] triangles, with a progress report per batch. The parallel PLY reader hands on
+//! each worker's share as a batch of its own instead.
 
 use crate::ply_faces::LocalBatch;
 use crate::{IngestError, IngestStats};
@@ -85,22 +86,24 @@ impl<'a> Emitter<'a> {
     }
 
     /// Takes the triangles of a [`LocalBatch`] (already checked for zero area) and its counts,
-    /// batching them exactly as [`Emitter::push`] would.
+    /// and hands them on as one batch, without copying them (after any partial batch of
+    /// [`Emitter::push`], so the order is kept). Batch boundaries carry no meaning for the
+    /// callers: only the order of the triangles does.
     pub fn push_local(&mut self, lb: LocalBatch) -> Result<(), IngestError> {
         self.stats.polygons += lb.polygons;
         self.stats.degenerate_skipped += lb.degenerate + lb.repeated;
         self.stats.repeated_index += lb.repeated;
-        let mut rest = &lb.tris[..];
-        while !rest.is_empty() {
-            let take = (BATCH - self.batch.len()).min(rest.len());
-            self.batch.extend_from_slice(&rest[..take]);
-            rest = &rest[take..];
-            self.stats.triangles += take as u64;
-            self.added(take as u32);
-            if self.batch.len() == BATCH {
-                self.flush()?;
-            }
+        if lb.tris.is_empty() {
+            return Ok(());
         }
+        if !self.batch.is_empty() {
+            self.flush()?;
+        }
+        let n = lb.tris.len();
+        self.stats.triangles += n as u64;
+        (self.f)(&lb.tris)?;
+        (self.progress)(self.bytes_done.min(self.bytes_total), self.bytes_total);
+        self.added(n.min(u32::MAX as usize) as u32);
         Ok(())
     }
 

@@ -60,20 +60,29 @@ impl Sink for LocalBatch {
     }
     #[inline]
     fn push(&mut self, t: Triangle) -> Result<(), IngestError> {
-        // the same test as `Emitter::push`
-        if t.is_degenerate() {
-            self.degenerate += 1;
-        } else {
-            self.tris.push(t);
-        }
+        self.add(t);
         Ok(())
     }
     #[inline]
     fn bytes_done(&mut self, _: u64) {}
 }
 
-/// Face records per worker and round of [`stream_triangles_parallel`].
+impl LocalBatch {
+    /// Keeps `t` unless it has zero area (the same test as `Emitter::push`).
+    #[inline]
+    fn add(&mut self, t: Triangle) {
+        if t.is_degenerate() {
+            self.degenerate += 1;
+        } else {
+            self.tris.push(t);
+        }
+    }
+}
+
+/// Face records per worker and round of [`stream_triangles_parallel`]. Each worker's share is
+/// handed on as one batch, so it must not exceed the batch size the callers are promised.
 const PARALLEL_RECORDS: u64 = 16 * 1024;
+const _: () = assert!(PARALLEL_RECORDS as usize <= crate::batch::BATCH);
 
 /// Bytes of one record of a `face` element if it holds a triangle: every property a scalar
 /// except the index list, whose count is 3. `None` if another property is a list.
@@ -122,6 +131,18 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
         _ => return sequential(0, off, em),
     };
     let at = |rec: u64| off + (rec * size) as usize;
+    // `property list uchar int|uint vertex_indices` and nothing else: what nearly every writer
+    // produces, decoded by `plain_triangles`
+    let plain = match (el.props.len(), el.props[list].kind) {
+        (
+            1,
+            Kind::List {
+                count: Scalar::U8 | Scalar::I8,
+                item: item @ (Scalar::I32 | Scalar::U32),
+            },
+        ) => Some(item),
+        _ => None,
+    };
     // records that fit in the file at the uniform size (the rest, if any, is read sequentially
     // and reports the truncation as the sequential reader does)
     let fit = ((data.len() - off) as u64 / size).min(el.count);
@@ -137,23 +158,37 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
         parts
             .par_iter()
             .map(|&(a, b)| {
-                let mut src = SliceRecords::<BE>::new(path, data, at(a));
                 let mut lb = LocalBatch {
                     tris: Vec::with_capacity((b - a) as usize),
                     ..Default::default()
                 };
-                let r = stream_faces(
-                    path,
-                    &mut src,
-                    el,
-                    list,
-                    false,
-                    verts,
-                    flags,
-                    &mut lb,
-                    a..b,
-                    true,
-                );
+                // the usual record in its own loop; from the first record it cannot take on,
+                // the general reader, which then gives the same triangles, counts and errors
+                let from = match plain {
+                    Some(item) => {
+                        let n = (b - a) as usize * PLAIN_RECORD;
+                        let recs = &data[at(a)..at(a) + n];
+                        plain_triangles::<BE, V>(recs, a, item, verts, flags, &mut lb)
+                    }
+                    None => a,
+                };
+                let r = if from < b {
+                    let mut src = SliceRecords::<BE>::new(path, data, at(from));
+                    stream_faces(
+                        path,
+                        &mut src,
+                        el,
+                        list,
+                        false,
+                        verts,
+                        flags,
+                        &mut lb,
+                        from..b,
+                        true,
+                    )
+                } else {
+                    Ok(None)
+                };
                 (a, r.map(|stop| (lb, stop)))
             })
             .collect()
@@ -194,6 +229,69 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
         return sequential(rec, at(rec), em);
     }
     Ok(())
+}
+
+/// Bytes of a plain triangle record: the count 3 and three 32-bit indices.
+const PLAIN_RECORD: usize = 13;
+
+/// Decodes plain triangle records (`recs`, [`PLAIN_RECORD`] bytes each, the first being record
+/// `first`) into `lb` as [`stream_faces`] would, without its per-property dispatch. Stops at the
+/// first record it does not take on (a count other than 3, an index out of range, a vertex
+/// that is not finite) and returns its index, for the general reader to continue there with
+/// the same results and errors; returns the index after the last record if it took all.
+fn plain_triangles<const BE: bool, V: VertexSource>(
+    recs: &[u8],
+    first: u64,
+    item: Scalar,
+    verts: &V,
+    flags: u32,
+    lb: &mut LocalBatch,
+) -> u64 {
+    debug_assert!(recs.len() % PLAIN_RECORD == 0);
+    let nv = verts.count();
+    let index = |b: &[u8]| -> u64 {
+        let a = [b[0], b[1], b[2], b[3]];
+        let v = if BE {
+            u32::from_be_bytes(a)
+        } else {
+            u32::from_le_bytes(a)
+        };
+        // a negative int reads as ≥ 2³¹, which is never below `nv` for an int index
+        if item == Scalar::I32 && v > i32::MAX as u32 {
+            u64::MAX
+        } else {
+            v as u64
+        }
+    };
+    for (r, rec) in recs.chunks_exact(PLAIN_RECORD).enumerate() {
+        let i = [index(&rec[1..5]), index(&rec[5..9]), index(&rec[9..13])];
+        if rec[0] != 3 || i.iter().any(|&i| i >= nv) {
+            return first + r as u64;
+        }
+        lb.polygon();
+        let tri = i.map(|i| i as usize);
+        if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+            lb.repeated_index();
+            continue;
+        }
+        let mut t = Triangle {
+            v: [[0.0; 3]; 3],
+            n: [[0.0; 3]; 3],
+            c: [DEFAULT_COLOR; 3],
+            flags,
+        };
+        for (k, &vi) in tri.iter().enumerate() {
+            let c = verts.corner(vi);
+            if !(c.p[0].is_finite() && c.p[1].is_finite() && c.p[2].is_finite()) {
+                return first + r as u64;
+            }
+            t.v[k] = c.p;
+            t.n[k] = c.n;
+            t.c[k] = c.c;
+        }
+        lb.add(t);
+    }
+    first + (recs.len() / PLAIN_RECORD) as u64
 }
 
 /// Streams the records `range` of element `el` (a `face` or `tristrips` element whose vertex

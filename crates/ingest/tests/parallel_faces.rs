@@ -8,10 +8,22 @@ use common::{ply, El, TempDir, V};
 use voxlod_geom::Triangle;
 use voxlod_ingest::{IngestStats, MeshSource};
 
+/// What is wrong with face `bad_at` of [`mesh`].
+#[derive(Clone, Copy)]
+enum Bad {
+    /// an index past the last vertex
+    OutOfRange,
+    /// the index -1
+    Negative,
+    /// a corner whose vertex has a NaN coordinate
+    NaN,
+}
+
 /// A mesh of `n` faces over a wavy grid: triangles, with an extra `uchar flags` property after
-/// the list, degenerate ones (repeated index, collinear), a quad at `quad_at` (breaks the
-/// uniform record size) and, if given, an out-of-range index at `bad_at`.
-fn mesh(n: usize, quad_at: Option<usize>, bad_at: Option<usize>) -> Vec<El> {
+/// the list unless `plain` (then the faces are the usual `list uchar int` records alone, which
+/// have their own decoding loop), degenerate ones (repeated index, collinear), a quad at
+/// `quad_at` (breaks the uniform record size) and, if given, a bad face at `bad_at`.
+fn mesh(n: usize, plain: bool, quad_at: Option<usize>, bad_at: Option<(usize, Bad)>) -> Vec<El> {
     let side = 400usize;
     let mut vrows = Vec::new();
     for y in 0..side {
@@ -44,11 +56,23 @@ fn mesh(n: usize, quad_at: Option<usize>, bad_at: Option<usize>) -> Vec<El> {
         if Some(f) == quad_at {
             idx = vec![v, v + 1.0, v + s + 1.0, v + s];
         }
-        if Some(f) == bad_at {
-            idx[1] = (side * side + 3) as f64;
+        match bad_at {
+            Some((at, Bad::OutOfRange)) if at == f => idx[1] = (side * side + 3) as f64,
+            Some((at, Bad::Negative)) if at == f => idx[1] = -1.0,
+            Some((at, Bad::NaN)) if at == f => vrows[idx[1] as usize][2] = V::S(f64::NAN),
+            _ => {}
         }
-        frows.push(vec![V::L(idx), V::S((f % 200) as f64)]);
+        if plain {
+            frows.push(vec![V::L(idx)]);
+        } else {
+            frows.push(vec![V::L(idx), V::S((f % 200) as f64)]);
+        }
     }
+    let face_props = if plain {
+        vec!["list uchar int vertex_indices"]
+    } else {
+        vec!["list uchar int vertex_indices", "uchar flags"]
+    };
     vec![
         El {
             name: "vertex",
@@ -57,7 +81,7 @@ fn mesh(n: usize, quad_at: Option<usize>, bad_at: Option<usize>) -> Vec<El> {
         },
         El {
             name: "face",
-            props: vec!["list uchar int vertex_indices", "uchar flags"],
+            props: face_props,
             rows: frows,
         },
     ]
@@ -91,8 +115,13 @@ fn read_with(
 fn parallel_equals_sequential_and_ascii() {
     let dir = TempDir::new("parallel");
     // several rounds of 16 Ki records per thread, a quad late in the file, none
-    for (name, quad) in [("tris", None), ("quad", Some(61_234))] {
-        let els = mesh(100_000, quad, None);
+    for (name, plain, quad) in [
+        ("tris", false, None),
+        ("quad", false, Some(61_234)),
+        ("plain", true, None),
+        ("plain_quad", true, Some(61_234)),
+    ] {
+        let els = mesh(100_000, plain, quad, None);
         let bin = dir.write(&format!("{name}.ply"), ply("binary_little_endian", &els));
         let be = dir.write(&format!("{name}_be.ply"), ply("binary_big_endian", &els));
         let ascii = dir.write(&format!("{name}_ascii.ply"), ply("ascii", &els));
@@ -116,16 +145,38 @@ fn parallel_equals_sequential_and_ascii() {
 #[test]
 fn parallel_reports_the_first_error_as_sequential_does() {
     let dir = TempDir::new("parallel_err");
-    // an out-of-range index in the second round, and one after a quad
-    for (name, quad, bad) in [
-        ("late", None, Some(70_001)),
-        ("after_quad", Some(40_000), Some(40_010)),
-    ] {
-        let els = mesh(100_000, quad, bad);
+    // an out-of-range index in the second round, and one after a quad; in plain records also
+    // a negative index and a NaN vertex
+    const REF: &str = "refers to vertex";
+    const NEG: &str = "refers to vertex -1";
+    let cases = [
+        ("late", false, None, (70_001, Bad::OutOfRange), REF),
+        (
+            "after_quad",
+            false,
+            Some(40_000),
+            (40_010, Bad::OutOfRange),
+            REF,
+        ),
+        ("plain_late", true, None, (70_001, Bad::OutOfRange), REF),
+        ("plain_negative", true, None, (50_003, Bad::Negative), NEG),
+        ("plain_nan", true, None, (33_333, Bad::NaN), "NaN"),
+        (
+            "plain_after_quad",
+            true,
+            Some(40_000),
+            (40_010, Bad::Negative),
+            NEG,
+        ),
+    ];
+    for (name, plain, quad, bad, says) in cases {
+        let els = mesh(100_000, plain, quad, Some(bad));
         let bin = dir.write(&format!("{name}.ply"), ply("binary_little_endian", &els));
         let seq = read_with(1, &bin).unwrap_err();
-        assert!(seq.contains("refers to vertex"), "{seq}");
-        assert!(seq.contains(&format!("{}", bad.unwrap())), "{seq}");
+        assert!(seq.contains(says), "{name}: {seq}");
+        if !matches!(bad.1, Bad::NaN) {
+            assert!(seq.contains(&format!("face {}", bad.0)), "{name}: {seq}");
+        }
         for threads in [2, 3] {
             assert_eq!(
                 read_with(threads, &bin).unwrap_err(),
@@ -135,12 +186,15 @@ fn parallel_reports_the_first_error_as_sequential_does() {
         }
     }
     // truncated inside the face list: the same truncation message
-    let els = mesh(100_000, None, None);
-    let mut data = ply("binary_little_endian", &els);
-    data.truncate(data.len() - 3 * 14 - 5);
-    let cut = dir.write("cut.ply", &data);
-    let seq = read_with(1, &cut).unwrap_err();
-    for threads in [2, 3] {
-        assert_eq!(read_with(threads, &cut).unwrap_err(), seq);
+    for (plain, rec) in [(false, 14), (true, 13)] {
+        let els = mesh(100_000, plain, None, None);
+        let mut data = ply("binary_little_endian", &els);
+        data.truncate(data.len() - 3 * rec - 5);
+        let cut = dir.write("cut.ply", &data);
+        let seq = read_with(1, &cut).unwrap_err();
+        assert!(seq.contains("truncated"), "{seq}");
+        for threads in [2, 3] {
+            assert_eq!(read_with(threads, &cut).unwrap_err(), seq);
+        }
     }
 }

@@ -377,7 +377,9 @@ fn batches_and_callback_errors() {
         )
         .unwrap();
     assert_eq!(st.triangles, 80_000);
-    assert_eq!(sizes, vec![BATCH, 80_000 - BATCH]);
+    // batches of up to BATCH triangles (the parallel reader hands on each worker's share)
+    assert!(sizes.iter().all(|&n| n > 0 && n <= BATCH), "{sizes:?}");
+    assert_eq!(sizes.iter().sum::<usize>(), 80_000);
     // the consumer's error stops the stream
     let mut calls = 0;
     let e = src
