@@ -270,26 +270,14 @@ fn plain_triangles<const BE: bool, V: VertexSource>(
         }
         lb.polygon();
         let tri = i.map(|i| i as usize);
-        if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+        if repeats(tri) {
             lb.repeated_index();
             continue;
         }
-        let mut t = Triangle {
-            v: [[0.0; 3]; 3],
-            n: [[0.0; 3]; 3],
-            c: [DEFAULT_COLOR; 3],
-            flags,
-        };
-        for (k, &vi) in tri.iter().enumerate() {
-            let c = verts.corner(vi);
-            if !(c.p[0].is_finite() && c.p[1].is_finite() && c.p[2].is_finite()) {
-                return first + r as u64;
-            }
-            t.v[k] = c.p;
-            t.n[k] = c.n;
-            t.c[k] = c.c;
+        match gather(verts, tri, flags) {
+            Ok(t) => lb.add(t),
+            Err(_) => return first + r as u64,
         }
-        lb.add(t);
     }
     first + (recs.len() / PLAIN_RECORD) as u64
 }
@@ -382,10 +370,29 @@ fn emit<R: Records, V: VertexSource, S: Sink>(
     flags: u32,
     em: &mut S,
 ) -> Result<(), IngestError> {
-    if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+    if repeats(tri) {
         em.repeated_index();
         return Ok(());
     }
+    match gather(verts, tri, flags) {
+        Ok(t) => em.push(t),
+        Err((vi, p)) => Err(non_finite(path, src.location(), vi as u64, p)),
+    }
+}
+
+/// A corner index repeated: the triangle has zero area.
+#[inline]
+fn repeats(tri: [usize; 3]) -> bool {
+    tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]
+}
+
+/// The triangle of vertices `tri`, or the first vertex with a non-finite position.
+#[inline]
+fn gather<V: VertexSource>(
+    verts: &V,
+    tri: [usize; 3],
+    flags: u32,
+) -> Result<Triangle, (usize, [f32; 3])> {
     // filled corner by corner: `array::map` here compiled to slow copies
     let mut t = Triangle {
         v: [[0.0; 3]; 3],
@@ -396,11 +403,11 @@ fn emit<R: Records, V: VertexSource, S: Sink>(
     for (k, &vi) in tri.iter().enumerate() {
         let c = verts.corner(vi);
         if !(c.p[0].is_finite() && c.p[1].is_finite() && c.p[2].is_finite()) {
-            return Err(non_finite(path, src.location(), vi as u64, c.p));
+            return Err((vi, c.p));
         }
         t.v[k] = c.p;
         t.n[k] = c.n;
         t.c[k] = c.c;
     }
-    em.push(t)
+    Ok(t)
 }
