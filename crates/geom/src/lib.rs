@@ -230,12 +230,26 @@ impl Grid {
     /// triangle's bounding box, clamped to the grid. This is a superset of the voxels either
     /// voxelization mode marks, so binning by it loses nothing.
     pub fn chunk_range(&self, t: &Triangle) -> Option<([u32; 3], [u32; 3])> {
+        let (mn, mx) = corners(&t.v);
+        self.box_chunk_range(mn, mx)
+    }
+
+    /// [`Grid::chunk_range`] of a triangle given in world coordinates, exactly as of the
+    /// triangle moved to the grid (`to_grid` of each vertex), without moving it: `to_grid` is
+    /// monotonic per axis (a subtraction and a multiplication by a positive factor, each
+    /// rounded, then a rounding to f32), so the grid box is `to_grid` of the world box.
+    pub fn world_chunk_range(&self, t: &Triangle) -> Option<([u32; 3], [u32; 3])> {
+        let (mn, mx) = corners(&t.v);
+        self.box_chunk_range(self.to_grid(mn), self.to_grid(mx))
+    }
+
+    /// The chunk range of the box `[mn, mx]` (grid coordinates).
+    fn box_chunk_range(&self, mn: [f32; 3], mx: [f32; 3]) -> Option<([u32; 3], [u32; 3])> {
         let r = self.resolution as f32;
         let mut lo = [0u32; 3];
         let mut hi = [0u32; 3];
         for a in 0..3 {
-            let mn = t.v[0][a].min(t.v[1][a]).min(t.v[2][a]);
-            let mx = t.v[0][a].max(t.v[1][a]).max(t.v[2][a]);
+            let (mn, mx) = (mn[a], mx[a]);
             if !(mx >= 0.0 && mn <= r) {
                 return None;
             }
@@ -246,6 +260,14 @@ impl Grid {
         }
         Some((lo, hi))
     }
+}
+
+/// The per-axis minimum and maximum of three points.
+#[inline]
+fn corners(v: &[[f32; 3]; 3]) -> ([f32; 3], [f32; 3]) {
+    let mn = [0, 1, 2].map(|a| v[0][a].min(v[1][a]).min(v[2][a]));
+    let mx = [0, 1, 2].map(|a| v[0][a].max(v[1][a]).max(v[2][a]));
+    (mn, mx)
 }
 
 /// Spreads the low 21 bits of `v` so there are two zero bits between each.
@@ -323,6 +345,34 @@ mod tests {
         assert!(Grid::new([0.0; 3], 0.0, 256).is_err());
         assert!(Grid::new([0.0; 3], f64::NAN, 256).is_err());
         assert_eq!(Grid::new([0.0; 3], 1.0, 4096).unwrap().levels(), 5);
+    }
+
+    #[test]
+    fn world_chunk_range_is_that_of_the_moved_triangle() {
+        // an awkward grid: origin and voxel size not representable in binary
+        let g = Grid::new([-3.7, 0.1, 12.3], 7.3, 4096).unwrap();
+        let mut s = 0x1234_5678_9abc_def0u64;
+        let mut unit = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut touched_borders = 0;
+        for i in 0..200_000 {
+            // mostly tiny triangles, some large ones, some reaching outside the grid
+            let size = if i % 10 == 0 { 3.0 } else { 0.004 };
+            let c = [0, 1, 2].map(|a| g.origin[a] as f32 + (unit() * 1.2 - 0.1) * 7.3);
+            let t = Triangle::new([0, 1, 2].map(|_| [0, 1, 2].map(|a| c[a] + unit() * size)));
+            let moved = Triangle::new(t.v.map(|p| g.to_grid(p)));
+            let want = g.chunk_range(&moved);
+            assert_eq!(g.world_chunk_range(&t), want, "triangle {t:?}");
+            if let Some((lo, hi)) = want {
+                touched_borders += (lo != hi) as u32;
+            }
+        }
+        // the cases that matter, triangles across chunk borders, did occur
+        assert!(touched_borders > 1000, "{touched_borders}");
     }
 
     #[test]

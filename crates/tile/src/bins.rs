@@ -21,7 +21,8 @@ pub fn count(
     let total = src.count();
     src.for_each_batch(&mut |tris| {
         for t in tris {
-            if let Some((lo, hi)) = grid.chunk_range(&to_grid(grid, t)) {
+            // the chunk range of the triangle moved to the grid, without moving it
+            if let Some((lo, hi)) = grid.world_chunk_range(t) {
                 counts.add_range(lo, hi);
             }
         }
