@@ -10,8 +10,9 @@
 use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, pack_normal, Voxel};
 use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
 
+use crate::clip::{area_scale, triangle_area_centroid};
 use crate::column::Columns;
-use crate::overlap::{to_f64, TriSetup};
+use crate::overlap::{cross_f64, dominant_axis, interior_voxel, swizzle, to_f64, TriSetup};
 use crate::Mode;
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
@@ -222,6 +223,15 @@ impl ChunkVoxelizer {
         let lo = o.map(|c| c.min(i32::MAX as i64) as i32);
         let hi = o.map(|c| (c + CHUNK as i64 - 1).min(i32::MAX as i64) as i32);
         for t in tris {
+            // a triangle inside one voxel's interior (most of a scan's): that voxel, the whole
+            // triangle's area and centroid, no overlap test, no clipping
+            if self.mode == Mode::Conservative {
+                if let Some(p) = interior_voxel(&t.v) {
+                    if (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]) && self.add_interior(t, p) {
+                        continue;
+                    }
+                }
+            }
             let Some(s) = TriSetup::new(&t.v, self.mode) else {
                 self.skipped += 1;
                 continue;
@@ -253,20 +263,51 @@ impl ChunkVoxelizer {
                 let local = [0, 1, 2].map(|k| (g[k] as i64 - o[k]) as u32);
                 debug_assert!(local.iter().all(|&c| c < CHUNK));
                 let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
-                let b = &mut bricks[(idx >> 9) as usize];
-                if *b == 0 {
-                    blocks.resize(blocks.len() + BRICK, 0);
-                    *b = (blocks.len() / BRICK) as u32;
-                }
-                let sl = &mut blocks[(*b as usize - 1) * BRICK + (idx as usize & (BRICK - 1))];
-                if *sl == 0 {
-                    acc.push(Acc::first(idx, w, n, col));
-                    *sl = acc.len() as u32;
-                } else {
-                    acc[*sl as usize - 1].add(w, n, col);
-                }
+                accumulate(bricks, blocks, acc, idx, w, n, col);
             });
         }
+    }
+
+    /// [`ChunkVoxelizer::add`] for a triangle inside the interior of voxel `p` (grid coordinates,
+    /// inside this chunk): the same contribution as the general path, bit for bit (its Triangle
+    /// column in one voxel: [`triangle_area_centroid`] of the swizzled triangle). `false` (and
+    /// nothing added) for a triangle that the general path skips (zero or non-finite normal).
+    #[inline]
+    fn add_interior(&mut self, t: &Triangle, p: [i32; 3]) -> bool {
+        let o = to_f64(&t.v);
+        let n = cross_f64(&o);
+        if n == [0.0; 3] || !n.iter().all(|c| c.is_finite()) {
+            return false;
+        }
+        let swz = swizzle(dominant_axis(n));
+        let sw = |q: [f64; 3]| [q[swz[0]], q[swz[1]], q[swz[2]]];
+        let (w, c) = triangle_area_centroid(&[sw(o[0]), sw(o[1]), sw(o[2])], area_scale(sw(n)));
+        let q = match c {
+            Some(c) => {
+                let mut u = [0.0; 3];
+                for k in 0..3 {
+                    u[swz[k]] = c[k];
+                }
+                u
+            }
+            None => {
+                [0, 1, 2].map(|k| (t.v[0][k] as f64 + t.v[1][k] as f64 + t.v[2][k] as f64) / 3.0)
+            }
+        };
+        let (normal, col) = Attrs::new(t).at(q);
+        let local = [0, 1, 2].map(|k| (p[k] as i64 - self.origin[k] as i64) as u32);
+        debug_assert!(local.iter().all(|&c| c < CHUNK));
+        let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
+        accumulate(
+            &mut self.bricks,
+            &mut self.blocks,
+            &mut self.acc,
+            idx,
+            w,
+            normal,
+            col,
+        );
+        true
     }
 
     /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
@@ -293,6 +334,32 @@ impl ChunkVoxelizer {
     /// Triangles skipped (zero area or non-finite) since this voxelizer was made.
     pub fn skipped(&self) -> u64 {
         self.skipped
+    }
+}
+
+/// Adds one contribution to the voxel with in-chunk Morton code `idx`, making its slot (and its
+/// brick's block of slots) on first touch.
+#[inline]
+fn accumulate(
+    bricks: &mut [u32],
+    blocks: &mut Vec<u32>,
+    acc: &mut Vec<Acc>,
+    idx: u32,
+    w: f64,
+    n: [f64; 3],
+    c: [f64; 4],
+) {
+    let b = &mut bricks[(idx >> 9) as usize];
+    if *b == 0 {
+        blocks.resize(blocks.len() + BRICK, 0);
+        *b = (blocks.len() / BRICK) as u32;
+    }
+    let sl = &mut blocks[(*b as usize - 1) * BRICK + (idx as usize & (BRICK - 1))];
+    if *sl == 0 {
+        acc.push(Acc::first(idx, w, n, c));
+        *sl = acc.len() as u32;
+    } else {
+        acc[*sl as usize - 1].add(w, n, c);
     }
 }
 

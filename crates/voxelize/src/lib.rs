@@ -45,7 +45,11 @@
 //!
 //! # How the chunk voxelizer computes this quickly
 //!
-//! The weights and centroids are computed column by column ([`column`](mod@column)): the triangle's part
+//! In conservative mode a triangle inside the open interior of one voxel (most triangles of a
+//! scan voxelized coarser than its triangles, [`overlap::interior_voxel`]) marks only that voxel,
+//! with the whole triangle's area and centroid: no overlap test, no clipping, and bit for bit
+//! what the general path gives it. Other triangles:
+//! the weights and centroids are computed column by column ([`column`](mod@column)): the triangle's part
 //! above a column of its dominant projection is clipped once, each voxel of the column only
 //! clips that part to its depth slab, and a column part lying in one voxel is measured once.
 //! Where the column's square lies inside the triangle's projection (most columns of a large

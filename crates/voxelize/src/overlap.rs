@@ -107,6 +107,29 @@ pub(crate) fn to_f64(v: &[[f32; 3]; 3]) -> [[f64; 3]; 3] {
     v.map(|p| p.map(|c| c as f64))
 }
 
+/// The voxel whose open interior `(p, p+1)³` contains the whole triangle, if there is one (every
+/// coordinate finite, and on every axis the triangle's extent strictly between two consecutive
+/// integers). Such a triangle meets no other closed voxel box, so its conservative voxel set is
+/// exactly `{p}`, without the overlap test (on scans, where triangles are much smaller than
+/// voxels, most triangles are such). Not so for thin voxelization: the triangle may miss the
+/// diamond inscribed in `p`.
+#[inline]
+pub fn interior_voxel(v: &[[f32; 3]; 3]) -> Option<[i32; 3]> {
+    let mut p = [0i32; 3];
+    for k in 0..3 {
+        // in f64, so that `f + 1.0` is exact; every comparison is false for a NaN, and one
+        // is for an infinity
+        let c = [v[0][k] as f64, v[1][k] as f64, v[2][k] as f64];
+        let f = c[0].floor();
+        let inside = c.iter().all(|&c| c > f && c < f + 1.0);
+        if !(inside && f >= i32::MIN as f64 && f < i32::MAX as f64) {
+            return None;
+        }
+        p[k] = f as i32;
+    }
+    Some(p)
+}
+
 /// Per-triangle setup of the factored overlap test (paper 3.1.2). All vectors are in swizzled
 /// coordinates (depth axis last).
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -10,6 +10,19 @@ use voxlod_voxelize::{clipped_area, voxelize_grid, voxelize_triangle, ChunkVoxel
 
 const RES: u32 = 512;
 
+/// Random vertex normals on every third triangle `i`, random colours on every second.
+fn with_attributes(rng: &mut Rng, mut tri: Triangle, i: usize) -> Triangle {
+    if i % 3 == 0 {
+        tri.flags |= TRI_HAS_NORMALS;
+        tri.n = [0, 1, 2].map(|_| rng.point(-1.0, 1.0).map(|x| x as f32));
+    }
+    if i % 2 == 0 {
+        tri.flags |= TRI_HAS_COLORS;
+        tri.c = [0, 1, 2].map(|_| [0, 1, 2, 3].map(|_| rng.int(0, 255) as u8));
+    }
+    tri
+}
+
 fn triangles(seed: u64) -> (Vec<Triangle>, u64) {
     let mut rng = Rng(seed);
     let mut out = Vec::new();
@@ -25,16 +38,7 @@ fn triangles(seed: u64) -> (Vec<Triangle>, u64) {
                 rng.point(0.0, 511.9),
             ];
         }
-        let mut tri = Triangle::new(f32tri(t));
-        if i % 3 == 0 {
-            tri.flags |= TRI_HAS_NORMALS;
-            tri.n = [0, 1, 2].map(|_| rng.point(-1.0, 1.0).map(|x| x as f32));
-        }
-        if i % 2 == 0 {
-            tri.flags |= TRI_HAS_COLORS;
-            tri.c = [0, 1, 2].map(|_| [0, 1, 2, 3].map(|_| rng.int(0, 255) as u8));
-        }
-        out.push(tri);
+        out.push(with_attributes(&mut rng, Triangle::new(f32tri(t)), i));
     }
     // large ones are slow to brute-force: keep only 6 of them
     let mut large = 0;
@@ -49,6 +53,20 @@ fn triangles(seed: u64) -> (Vec<Triangle>, u64) {
         large += big as usize;
         !big || large <= 6
     });
+    // tiny, as in a scan voxelized coarser than its triangles: inside one voxel's interior (the
+    // conservative interior path), some in voxels at the chunk boundaries, and some with a
+    // corner on a face of their voxel (not interior: the general path)
+    for i in 0..120 {
+        let c = rng.point(253.0, 259.0).map(|x| x.floor());
+        let mut t = [0, 1, 2].map(|_| {
+            let p = rng.point(0.02, 0.98);
+            [0, 1, 2].map(|k| c[k] + p[k])
+        });
+        if i % 6 == 5 {
+            t[1][i % 3] = c[i % 3] + (i % 2) as f64;
+        }
+        out.push(with_attributes(&mut rng, Triangle::new(f32tri(t)), i + 1));
+    }
     // exactly on the chunk boundary planes
     out.push(Triangle::new([
         [256.0, 250.0, 250.0],
