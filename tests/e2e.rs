@@ -532,8 +532,8 @@ fn config_file_with_flag_overrides() {
 
 /// The sample's triangles as an unindexed ASCII PLY (an input that is not memory-mapped, so
 /// the build spools it).
-fn ascii_copy_of_sample(dir: &Path) -> PathBuf {
-    use std::fmt::Write as _;
+/// The bundled sample's triangles, as the reader gives them.
+fn sample_triangles() -> Vec<voxlod_geom::Triangle> {
     let src = voxlod_ingest::MeshSource::open(&sample()).unwrap();
     let mut tris = Vec::new();
     src.stream(
@@ -544,6 +544,12 @@ fn ascii_copy_of_sample(dir: &Path) -> PathBuf {
         &mut |_, _| {},
     )
     .unwrap();
+    tris
+}
+
+fn ascii_copy_of_sample(dir: &Path) -> PathBuf {
+    use std::fmt::Write as _;
+    let tris = sample_triangles();
     let mut t = format!(
         "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
         tris.len() * 3,
@@ -1003,4 +1009,74 @@ fn gen_without_colors_has_the_same_geometry() {
     }
     assert!(!positions[0].is_empty());
     assert_eq!(positions[0], positions[1], "voxel positions differ");
+}
+
+/// The sample's triangles as a binary PLY (three vertices per triangle, in order), followed by
+/// `extra` vertices that no face uses.
+fn binary_copy_of_sample(dir: &Path, name: &str, extra: &[[f32; 3]]) -> PathBuf {
+    let tris = sample_triangles();
+    let mut out = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        tris.len() * 3 + extra.len(),
+        tris.len()
+    )
+    .into_bytes();
+    for p in tris.iter().flat_map(|t| t.v.iter()).chain(extra) {
+        for c in p {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for i in 0..tris.len() as i32 {
+        out.push(3);
+        for k in 0..3 {
+            out.extend_from_slice(&(3 * i + k).to_le_bytes());
+        }
+    }
+    let p = dir.join(name);
+    std::fs::write(&p, out).unwrap();
+    p
+}
+
+/// Counting the chunks during the ingest pass (the grid known from the vertex list's bounds)
+/// gives what the separate count pass gives: the same triangles with an unused vertex inside
+/// the bounds are counted during ingest, with one outside the bounds (another grid) or a NaN
+/// one (no vertex bounds) by the count pass, and every node of all three files equals the
+/// sample's (the files differ only in the manifest, which names the input).
+#[test]
+fn counting_during_ingest_changes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let build = |input: &Path, name: &str| {
+        let out = d.join(name);
+        let a = build_args(input, &out, &["-r", "1024", "--json"]);
+        let o = Command::new(BIN).args(&a).current_dir(d).output().unwrap();
+        ok(&o);
+        let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        (summary, read_nodes(&out).1)
+    };
+    let (s0, want) = build(&sample(), "sample.voxlod");
+    assert_eq!(
+        s0["counted_during_ingest"], true,
+        "the sample is a binary PLY"
+    );
+    let (lo, hi) = {
+        let src = voxlod_ingest::MeshSource::open(&sample()).unwrap();
+        let b = src.vertex_bounds().unwrap();
+        (b.min.map(|c| c as f32), b.max.map(|c| c as f32))
+    };
+    let mid = [0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k]));
+    let outside = [lo[0] - (hi[0] - lo[0]), mid[1], mid[2]];
+    for (name, extra, early) in [
+        ("inside.ply", mid, true),
+        ("outside.ply", outside, false),
+        ("nan.ply", [mid[0], f32::NAN, mid[2]], false),
+    ] {
+        let input = binary_copy_of_sample(d, name, &[extra]);
+        let (s, got) = build(&input, &format!("{name}.voxlod"));
+        assert_eq!(s["counted_during_ingest"], early, "{name}");
+        assert_eq!(s["tile_source"], "input", "{name}");
+        assert_eq!(s["binned_triangles"], s0["binned_triangles"], "{name}");
+        assert_eq!(got.len(), want.len(), "{name}: node count");
+        assert!(got == want, "{name}: nodes differ from the sample's");
+    }
 }

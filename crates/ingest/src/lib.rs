@@ -57,7 +57,7 @@ pub use error::{IngestError, Location};
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use voxlod_geom::Triangle;
+use voxlod_geom::{Bounds, Triangle};
 
 /// What [`MeshSource::open`] learnt about a mesh before reading its body.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -209,6 +209,18 @@ impl MeshSource {
             Reader::Ply(p) => p.is_mapped(),
             Reader::Stl(s) => s.is_mapped(),
             Reader::Obj(_) => false,
+        }
+    }
+
+    /// The bounds of all vertex positions, if the input has a vertex list that can be read
+    /// cheaply before the faces (a memory-mapped binary PLY with fixed-size vertex records), all
+    /// of them finite; `None` otherwise. The bounds of the streamed triangles lie inside it, and
+    /// equal it when every vertex is used by a non-degenerate triangle (the usual case): a
+    /// caller can then set up what depends on the bounds (the grid) before the first pass.
+    pub fn vertex_bounds(&self) -> Option<Bounds> {
+        match &self.reader {
+            Reader::Ply(p) => p.vertex_bounds(),
+            Reader::Stl(_) | Reader::Obj(_) => None,
         }
     }
 

@@ -18,7 +18,7 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
-use voxlod_geom::{TRI_HAS_COLORS, TRI_HAS_NORMALS};
+use voxlod_geom::{Bounds, TRI_HAS_COLORS, TRI_HAS_NORMALS};
 
 pub(crate) struct PlySource {
     path: PathBuf,
@@ -161,6 +161,38 @@ impl PlySource {
                 self.faces_from_map::<BE, _>(data, &verts, em)
             }
         }
+    }
+
+    /// The bounds of every vertex position, for a memory-mapped file with fixed-size vertex
+    /// records (read straight from the map); `None` otherwise or if a position is not finite.
+    pub fn vertex_bounds(&self) -> Option<Bounds> {
+        match self.header.encoding {
+            Encoding::BinaryBe => self.vertex_bounds_mapped::<true>(),
+            _ => self.vertex_bounds_mapped::<false>(),
+        }
+    }
+
+    fn vertex_bounds_mapped<const BE: bool>(&self) -> Option<Bounds> {
+        let data: &[u8] = self.map.as_ref()?;
+        let l = &self.header.layout;
+        let vel = &self.header.elements[l.vertex];
+        let stride = vel.fixed_size()?;
+        let voff = self.offsets[l.vertex]?;
+        // element_offsets checked that the vertex records lie inside the file
+        let end = voff + vel.count as usize * stride;
+        let verts = MappedVertices::<BE>::new(&data[voff..end], vel, l);
+        // in rounds of 32 MiB of records, the pages read released after each: the resident
+        // share of the map stays bounded, as in `stream`
+        let round = ((32u64 << 20) / stride as u64).max(1);
+        let mut b = Bounds::default();
+        let mut first = 0;
+        while first < vel.count {
+            let part = verts.bounds(first..first.saturating_add(round));
+            self.release_pages();
+            b.merge(&part?);
+            first = first.saturating_add(round);
+        }
+        Some(b)
     }
 
     fn faces_from_map<const BE: bool, V: VertexSource + Sync>(

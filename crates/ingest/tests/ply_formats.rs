@@ -394,3 +394,84 @@ fn batches_and_callback_errors() {
     assert_eq!(calls, 1);
     assert!(matches!(e, IngestError::Callback(ref m) if m == "disk full"));
 }
+
+/// `vertex_bounds`: the bounds of every vertex (used or not) for a memory-mapped binary PLY
+/// with fixed-size vertex records, computed in parallel parts of 65,536 vertices; `None` for
+/// ASCII, gzip, a list property in the vertex, or a non-finite vertex.
+#[test]
+fn vertex_bounds_of_mapped_binary_ply() {
+    let dir = TempDir::new("vb");
+    // variant A: the bounds of P (vertices 5 and 6 are only used by a collinear face)
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in &P {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k] as f64);
+            hi[k] = hi[k].max(p[k] as f64);
+        }
+    }
+    for (enc, gz) in ENCODINGS {
+        let src = MeshSource::open(&write_ply(&dir, "a", enc, gz, &variant_a())).unwrap();
+        let b = src.vertex_bounds();
+        if enc == "ascii" || gz {
+            assert!(b.is_none(), "{enc} gz={gz}: not read in place");
+        } else {
+            let b = b.unwrap_or_else(|| panic!("{enc}: no vertex bounds"));
+            assert_eq!((b.min, b.max), (lo, hi), "{enc}");
+        }
+    }
+    let src = MeshSource::open(&write_ply(
+        &dir,
+        "b",
+        "binary_little_endian",
+        false,
+        &variant_b(&C),
+    ))
+    .unwrap();
+    assert!(
+        src.vertex_bounds().is_none(),
+        "vertex records of varying size"
+    );
+
+    // many vertices, the extremes in different parts, one of them unused
+    let n = 200_000usize;
+    let coord = |i: usize, k: usize| (((i * (2 * k + 3) * 7919) % 100_003) as f64 - 50_000.0) * 0.5;
+    let mut rows: Vec<Vec<V>> = (0..n)
+        .map(|i| (0..3).map(|k| V::S(coord(i, k))).collect())
+        .collect();
+    rows[150_001] = vec![V::S(-1e6), V::S(2e6), V::S(0.0)];
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for r in &rows {
+        for k in 0..3 {
+            let V::S(c) = r[k] else { unreachable!() };
+            lo[k] = lo[k].min(c as f32 as f64);
+            hi[k] = hi[k].max(c as f32 as f64);
+        }
+    }
+    let els = |rows: Vec<Vec<V>>| {
+        vec![
+            El {
+                name: "vertex",
+                props: vec!["float x", "float y", "float z"],
+                rows,
+            },
+            El {
+                name: "face",
+                props: vec!["list uchar int vertex_indices"],
+                rows: vec![vec![V::L(vec![0.0, 1.0, 2.0])]],
+            },
+        ]
+    };
+    for enc in ["binary_little_endian", "binary_big_endian"] {
+        let src =
+            MeshSource::open(&write_ply(&dir, "many", enc, false, &els(rows.clone()))).unwrap();
+        let b = src.vertex_bounds().unwrap();
+        assert_eq!((b.min, b.max), (lo, hi), "{enc}");
+    }
+    // an unused NaN vertex: the mesh reads, but it has no vertex bounds
+    rows[70_000][1] = V::S(f64::NAN);
+    let path = write_ply(&dir, "nan", "binary_little_endian", false, &els(rows));
+    assert!(MeshSource::open(&path).unwrap().vertex_bounds().is_none());
+    assert_eq!(read(&path).unwrap().0.len(), 1);
+}

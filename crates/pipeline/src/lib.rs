@@ -37,7 +37,7 @@ use serde::{Deserialize, Serialize};
 use voxlod_format::{encode_node, EncodedNode, FileSpec, Voxel, Writer};
 use voxlod_geom::{Bounds, Grid};
 use voxlod_ingest::{IngestError, MeshSource};
-use voxlod_tile::{Bins, ChunkBin, Passes, RecordLayout, Spool, Spooler, TileError};
+use voxlod_tile::{Bins, ChunkBin, ChunkCounts, Passes, RecordLayout, Spool, Spooler, TileError};
 use voxlod_voxelize::Mode;
 
 use leaf_log::LeafLog;
@@ -139,6 +139,10 @@ pub struct BuildSummary {
     /// How the tile stage read the triangles: `"input"` (passes over the memory-mapped input,
     /// no spool) or `"spool"` (the input was parsed once into a spool).
     pub tile_source: &'static str,
+    /// True if the chunk counts were taken during the ingest pass (the grid was known from the
+    /// bounds of the vertex list before it, see [`MeshSource::vertex_bounds`]), so the tile
+    /// stage had no count pass.
+    pub counted_during_ingest: bool,
     /// Bytes of one triangle record in the spool and bins (40–88: only the attributes the
     /// mesh has).
     pub record_bytes: usize,
@@ -334,6 +338,10 @@ fn run(
     } else {
         work.marker("bins.json")
     };
+    // The chunk counts of the tile stage, taken during this pass when the grid is known before
+    // it: from the vertex list's bounds, which are the triangles' bounds unless some vertex is
+    // unused (checked below, when the triangles' bounds are known). Saves the count pass.
+    let mut early_counts: Option<ChunkCounts> = None;
     let marker: SpoolMarker = match work.marker::<SpoolMarker>("spool.json") {
         Some(m)
             if m.spooled == spooled
@@ -355,6 +363,12 @@ fn run(
             };
             let mut count = 0u64;
             let mut bounds = Bounds::default();
+            if !spooled && bins_marker.is_none() && leaves_done.is_none() {
+                early_counts = pool
+                    .install(|| source.vertex_bounds())
+                    .and_then(|vb| Grid::fit(&vb, s.resolution).ok())
+                    .and_then(|g| ChunkCounts::new(&g).ok());
+            }
             // (inside the pool: a mapped binary PLY is decoded on its threads)
             let stats = pool.install(|| {
                 source.stream(
@@ -367,6 +381,9 @@ fn run(
                             None => {
                                 count += tris.len() as u64;
                                 tris.iter().for_each(|t| bounds.add_triangle(t));
+                                if let Some(c) = &mut early_counts {
+                                    c.add_triangles(tris);
+                                }
                                 Ok(())
                             }
                         }
@@ -414,6 +431,9 @@ fn run(
     };
     let grid = Grid::fit(&bounds, s.resolution)
         .with_context(|| format!("{}: fitting the grid", input.display()))?;
+    // counts on the vertex list's grid serve if it is the grid of the triangles' bounds
+    let early_counts = early_counts.filter(|c| *c.grid() == grid);
+    let mut counted_during_ingest = false;
 
     let mut backend_used = String::from("(voxelized by the interrupted run)");
     let mut gpu_split = None;
@@ -433,6 +453,8 @@ fn run(
             work,
             &marker,
             bounds,
+            early_counts,
+            &mut counted_during_ingest,
             &mut stages,
             &mut backend_used,
             &mut gpu_split,
@@ -554,6 +576,7 @@ fn run(
         peak_rss: system::peak_rss(),
         temp_disk,
         tile_source: if spooled { "spool" } else { "input" },
+        counted_during_ingest,
         record_bytes: layout.bytes(),
         resumed,
         stages,
@@ -574,6 +597,8 @@ fn tile_and_voxelize(
     work: &WorkDir,
     marker: &SpoolMarker,
     bounds: Bounds,
+    early_counts: Option<ChunkCounts>,
+    counted_during_ingest: &mut bool,
     stages: &mut Vec<StageTime>,
     backend_used: &mut String,
     gpu_split: &mut Option<[u64; 2]>,
@@ -629,10 +654,19 @@ fn tile_and_voxelize(
                 &input
             };
             let src = passes::Interruptible(src);
-            let bar = Stage::items(s.progress, "count", marker.count);
-            let counts =
-                pool.install(|| voxlod_tile::count(&src, grid, &mut |d, n| bar.set(d, n)))?;
-            bar.finish();
+            let counts = match early_counts {
+                Some(c) => {
+                    *counted_during_ingest = true;
+                    c
+                }
+                None => {
+                    let bar = Stage::items(s.progress, "count", marker.count);
+                    let c =
+                        pool.install(|| voxlod_tile::count(&src, grid, &mut |d, n| bar.set(d, n)))?;
+                    bar.finish();
+                    c
+                }
+            };
             if interrupted() {
                 return Err(interrupted_error(work.path()));
             }

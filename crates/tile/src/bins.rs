@@ -20,12 +20,7 @@ pub fn count(
     let mut done = 0u64;
     let total = src.count();
     src.for_each_batch(&mut |tris| {
-        for t in tris {
-            // the chunk range of the triangle moved to the grid, without moving it
-            if let Some((lo, hi)) = grid.world_chunk_range(t) {
-                counts.add_range(lo, hi);
-            }
-        }
+        counts.add_triangles(tris);
         done += tris.len() as u64;
         progress(done, total);
         Ok(())
@@ -45,6 +40,11 @@ pub fn scatter(
     buffer_bytes: u64,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<Bins, TileError> {
+    assert_eq!(
+        counts.grid(),
+        grid,
+        "scatter: the counts were made on another grid"
+    );
     let mut sc = Scatter::create(grid, counts, path, layout, buffer_bytes)?;
     let mut done = 0u64;
     let total = src.count();
@@ -60,13 +60,17 @@ pub fn scatter(
     sc.finish()
 }
 
-/// Triangle counts per leaf chunk, dense over the grid's `(R/256)³` chunks.
+/// Triangle counts per leaf chunk of one grid, dense over its `(R/256)³` chunks: what the count
+/// pass ([`count`]) makes, or a caller that already passes over the triangles (e.g. the ingest
+/// pass, when the grid is known before it) with [`ChunkCounts::add_triangles`].
 pub struct ChunkCounts {
+    grid: Grid,
     n: u32,
     counts: Vec<u64>,
 }
 
 impl ChunkCounts {
+    /// Zero counts over `grid`'s chunks; refused if there are more than 2³² chunks.
     pub fn new(grid: &Grid) -> Result<ChunkCounts, TileError> {
         let n = grid.chunks_per_axis();
         let total = (n as u64).pow(3);
@@ -74,9 +78,26 @@ impl ChunkCounts {
             return Err(TileError::TooManyChunks(total));
         }
         Ok(ChunkCounts {
+            grid: *grid,
             n,
             counts: vec![0; total as usize],
         })
+    }
+
+    /// The grid the counts are over.
+    pub fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    /// Counts triangles (world coordinates) into every chunk of their chunk range
+    /// ([`Grid::world_chunk_range`], the range of the triangle moved to the grid, without moving
+    /// it). Adding all of a pass's triangles, in any batches, gives what [`count`] gives.
+    pub fn add_triangles(&mut self, tris: &[Triangle]) {
+        for t in tris {
+            if let Some((lo, hi)) = self.grid.world_chunk_range(t) {
+                self.add_range(lo, hi);
+            }
+        }
     }
 
     #[inline]

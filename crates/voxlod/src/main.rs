@@ -267,8 +267,16 @@ fn print_summary(s: &BuildSummary) {
         );
     }
     println!(
-        "  chunk bins   {} ({} triangle records of {} bytes, tiled from the {})",
-        s.chunk_bins, s.binned_triangles, s.record_bytes, s.tile_source
+        "  chunk bins   {} ({} triangle records of {} bytes, tiled from the {}{})",
+        s.chunk_bins,
+        s.binned_triangles,
+        s.record_bytes,
+        s.tile_source,
+        if s.counted_during_ingest {
+            ", counted during ingest"
+        } else {
+            ""
+        }
     );
     println!("  level  nodes      voxels");
     for l in &s.levels {
