@@ -1040,8 +1040,9 @@ fn binary_copy_of_sample(dir: &Path, name: &str, extra: &[[f32; 3]]) -> PathBuf 
 /// Counting the chunks during the ingest pass (the grid known from the vertex list's bounds)
 /// gives what the separate count pass gives: the same triangles with an unused vertex inside
 /// the bounds are counted during ingest, with one outside the bounds (another grid) or a NaN
-/// one (no vertex bounds) by the count pass, and every node of all three files equals the
-/// sample's (the files differ only in the manifest, which names the input).
+/// one (no vertex bounds) by the count pass, a binary STL copy during ingest, and every node of
+/// all these files equals the sample's (the files differ only in the manifest, which names the
+/// input).
 #[test]
 fn counting_during_ingest_changes_nothing() {
     let dir = tempfile::tempdir().unwrap();
@@ -1079,4 +1080,20 @@ fn counting_during_ingest_changes_nothing() {
         assert_eq!(got.len(), want.len(), "{name}: node count");
         assert!(got == want, "{name}: nodes differ from the sample's");
     }
+    // a binary STL: its facet corners give the grid before the pass
+    let mut stl = vec![b' '; 80];
+    let tris = sample_triangles();
+    stl.extend_from_slice(&(tris.len() as u32).to_le_bytes());
+    for t in &tris {
+        stl.extend_from_slice(&[0u8; 12]);
+        for c in t.v.iter().flatten() {
+            stl.extend_from_slice(&c.to_le_bytes());
+        }
+        stl.extend_from_slice(&[0u8; 2]);
+    }
+    let input = d.join("copy.stl");
+    std::fs::write(&input, stl).unwrap();
+    let (s, got) = build(&input, "copy.stl.voxlod");
+    assert_eq!(s["counted_during_ingest"], true, "binary STL");
+    assert!(got == want, "binary STL: nodes differ from the sample's");
 }

@@ -43,6 +43,7 @@
 //! ```
 
 mod batch;
+mod bounds;
 mod error;
 mod obj;
 mod ply;
@@ -212,15 +213,16 @@ impl MeshSource {
         }
     }
 
-    /// The bounds of all vertex positions, if the input has a vertex list that can be read
-    /// cheaply before the faces (a memory-mapped binary PLY with fixed-size vertex records), all
-    /// of them finite; `None` otherwise. The bounds of the streamed triangles lie inside it, and
+    /// The bounds of all vertex positions, if they can be read cheaply before the faces (a
+    /// memory-mapped binary PLY with fixed-size vertex records: its vertex list; a binary STL:
+    /// every facet corner), all of them finite; `None` otherwise. The bounds of the streamed triangles lie inside it, and
     /// equal it when every vertex is used by a non-degenerate triangle (the usual case): a
     /// caller can then set up what depends on the bounds (the grid) before the first pass.
     pub fn vertex_bounds(&self) -> Option<Bounds> {
         match &self.reader {
             Reader::Ply(p) => p.vertex_bounds(),
-            Reader::Stl(_) | Reader::Obj(_) => None,
+            Reader::Stl(s) => s.vertex_bounds(),
+            Reader::Obj(_) => None,
         }
     }
 

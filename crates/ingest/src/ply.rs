@@ -4,6 +4,7 @@
 //! in a second pass over the file.
 
 use crate::batch::Emitter;
+use crate::bounds::parallel_bounds;
 use crate::ply_faces::{stream_faces, stream_triangles_parallel};
 use crate::ply_header::{parse_header, Element, Encoding, Header};
 use crate::ply_records::{
@@ -181,18 +182,13 @@ impl PlySource {
         // element_offsets checked that the vertex records lie inside the file
         let end = voff + vel.count as usize * stride;
         let verts = MappedVertices::<BE>::new(&data[voff..end], vel, l);
-        // in rounds of 32 MiB of records, the pages read released after each: the resident
-        // share of the map stays bounded, as in `stream`
-        let round = ((32u64 << 20) / stride as u64).max(1);
-        let mut b = Bounds::default();
-        let mut first = 0;
-        while first < vel.count {
-            let part = verts.bounds(first..first.saturating_add(round));
-            self.release_pages();
-            b.merge(&part?);
-            first = first.saturating_add(round);
-        }
-        Some(b)
+        // in rounds of 32 MiB of records, the pages read released after each
+        let round = (32u64 << 20) / stride as u64;
+        parallel_bounds(vel.count, round, &|| self.release_pages(), &|i, b| {
+            let p = verts.position(i as usize);
+            b.add_point(p);
+            p.iter().all(|c| c.is_finite())
+        })
     }
 
     fn faces_from_map<const BE: bool, V: VertexSource + Sync>(

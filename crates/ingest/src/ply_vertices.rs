@@ -7,7 +7,7 @@ use crate::ply_header::{Element, Kind, Layout, Role, Scalar};
 use crate::ply_records::{decode_f32, decode_f64, Records};
 use crate::{IngestError, Location};
 use std::path::Path;
-use voxlod_geom::{Bounds, DEFAULT_COLOR};
+use voxlod_geom::DEFAULT_COLOR;
 
 /// One vertex's attributes as a triangle corner.
 #[derive(Clone, Copy, Debug)]
@@ -164,34 +164,6 @@ impl<const BE: bool> MappedVertices<'_, BE> {
             None => 0.0,
         };
         [f(0), f(1), f(2)]
-    }
-
-    /// The bounds of the positions of vertices `range`, `None` if one is not finite. In
-    /// parallel on the current rayon pool, in parts of 65,536 vertices; min and max do not
-    /// depend on the order, so neither does the result.
-    pub fn bounds(&self, range: std::ops::Range<u64>) -> Option<Bounds> {
-        use rayon::prelude::*;
-        const PART: u64 = 1 << 16;
-        let end = range.end.min(self.count);
-        let parts = end.saturating_sub(range.start).div_ceil(PART);
-        (0..parts)
-            .into_par_iter()
-            .map(|k| {
-                let mut b = Bounds::default();
-                let first = range.start + k * PART;
-                for i in first..(first + PART).min(end) {
-                    let p = self.position(i as usize);
-                    if !p.iter().all(|c| c.is_finite()) {
-                        return None;
-                    }
-                    b.add_point(p);
-                }
-                Some(b)
-            })
-            .try_reduce(Bounds::default, |mut a, b| {
-                a.merge(&b);
-                Some(a)
-            })
     }
 }
 

@@ -396,8 +396,9 @@ fn batches_and_callback_errors() {
 }
 
 /// `vertex_bounds`: the bounds of every vertex (used or not) for a memory-mapped binary PLY
-/// with fixed-size vertex records, computed in parallel parts of 65,536 vertices; `None` for
-/// ASCII, gzip, a list property in the vertex, or a non-finite vertex.
+/// with fixed-size vertex records and of every facet corner for a binary STL, computed in
+/// parallel parts of 65,536; `None` for ASCII, gzip, a list property in the vertex, or a
+/// non-finite vertex.
 #[test]
 fn vertex_bounds_of_mapped_binary_ply() {
     let dir = TempDir::new("vb");
@@ -474,4 +475,23 @@ fn vertex_bounds_of_mapped_binary_ply() {
     let path = write_ply(&dir, "nan", "binary_little_endian", false, &els(rows));
     assert!(MeshSource::open(&path).unwrap().vertex_bounds().is_none());
     assert_eq!(read(&path).unwrap().0.len(), 1);
+
+    // binary STL: every facet corner (a zero-area facet's too); ASCII STL: none
+    let mut tris: Vec<[[f32; 3]; 3]> = (0..70_000)
+        .map(|i| [0, 1, 2].map(|k| [0, 1, 2].map(|a| coord(3 * i + k, a) as f32)))
+        .collect();
+    tris[69_999] = [[5e5, 0.0, 0.0], [5e5, 0.0, 0.0], [0.0, -4e5, 0.0]];
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in tris.iter().flatten() {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k] as f64);
+            hi[k] = hi[k].max(p[k] as f64);
+        }
+    }
+    let stl = dir.write("many.stl", stl_binary(&tris, b"binary"));
+    let b = MeshSource::open(&stl).unwrap().vertex_bounds().unwrap();
+    assert_eq!((b.min, b.max), (lo, hi), "binary STL");
+    let stl = dir.write("few.stl", stl_ascii(&tris[..10]));
+    assert!(MeshSource::open(&stl).unwrap().vertex_bounds().is_none());
 }
