@@ -16,6 +16,15 @@ use std::path::{Path, PathBuf};
 use std::rc::Rc;
 use voxlod_geom::{Bounds, Triangle};
 
+/// The three corners of binary facet `i` (its record at byte `84 + 50 i`; bytes 0..12 hold the
+/// facet normal, ignored).
+#[inline]
+fn facet_corners(data: &[u8], i: usize) -> [[f32; 3]; 3] {
+    let rec = &data[84 + 50 * i..][..50];
+    let f = |o: usize| f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]]);
+    [0, 1, 2].map(|k| [f(12 + 12 * k), f(16 + 12 * k), f(20 + 12 * k)])
+}
+
 pub(crate) struct StlSource {
     path: PathBuf,
     /// The mapped file and its facet count, for binary STL.
@@ -144,27 +153,17 @@ impl StlSource {
         let (map, n) = self.binary.as_ref()?;
         let data: &[u8] = map;
         parallel_bounds(*n, (32 << 20) / 50, &|| self.release_pages(), &|i, b| {
-            let rec = &data[84 + 50 * i as usize..][..50];
-            let f = |o: usize| f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]]);
-            let mut finite = true;
-            for k in 0..3 {
-                let p = [f(12 + 12 * k), f(16 + 12 * k), f(20 + 12 * k)];
-                finite &= p.iter().all(|c| c.is_finite());
-                b.add_point(p);
-            }
-            finite
+            let v = facet_corners(data, i as usize);
+            v.iter().for_each(|&p| b.add_point(p));
+            v.iter().flatten().all(|c| c.is_finite())
         })
     }
 
     fn stream_binary(&self, data: &[u8], n: u64, em: &mut Emitter) -> Result<(), IngestError> {
         for i in 0..n as usize {
             let off = 84 + 50 * i;
-            let rec = &data[off..off + 50];
-            let f = |o: usize| f32::from_le_bytes([rec[o], rec[o + 1], rec[o + 2], rec[o + 3]]);
-            // bytes 0..12 hold the facet normal, ignored
-            let mut v = [[0f32; 3]; 3];
-            for (k, vk) in v.iter_mut().enumerate() {
-                *vk = [f(12 + 12 * k), f(16 + 12 * k), f(20 + 12 * k)];
+            let v = facet_corners(data, i);
+            for (k, vk) in v.iter().enumerate() {
                 if !vk.iter().all(|x| x.is_finite()) {
                     return Err(IngestError::NonFinite {
                         path: self.path.clone(),

@@ -432,8 +432,9 @@ fn run(
     let grid = Grid::fit(&bounds, s.resolution)
         .with_context(|| format!("{}: fitting the grid", input.display()))?;
     // counts on the vertex list's grid serve if it is the grid of the triangles' bounds
+    // (taken only when this run ingests and has no bins yet, so the tile stage will use them)
     let early_counts = early_counts.filter(|c| *c.grid() == grid);
-    let mut counted_during_ingest = false;
+    let counted_during_ingest = early_counts.is_some();
 
     let mut backend_used = String::from("(voxelized by the interrupted run)");
     let mut gpu_split = None;
@@ -454,7 +455,6 @@ fn run(
             &marker,
             bounds,
             early_counts,
-            &mut counted_during_ingest,
             &mut stages,
             &mut backend_used,
             &mut gpu_split,
@@ -598,7 +598,6 @@ fn tile_and_voxelize(
     marker: &SpoolMarker,
     bounds: Bounds,
     early_counts: Option<ChunkCounts>,
-    counted_during_ingest: &mut bool,
     stages: &mut Vec<StageTime>,
     backend_used: &mut String,
     gpu_split: &mut Option<[u64; 2]>,
@@ -655,10 +654,7 @@ fn tile_and_voxelize(
             };
             let src = passes::Interruptible(src);
             let counts = match early_counts {
-                Some(c) => {
-                    *counted_during_ingest = true;
-                    c
-                }
+                Some(c) => c,
                 None => {
                     let bar = Stage::items(s.progress, "count", marker.count);
                     let c =

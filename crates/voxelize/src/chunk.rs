@@ -12,7 +12,9 @@ use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
 
 use crate::clip::{area_scale, triangle_area_centroid};
 use crate::column::Columns;
-use crate::overlap::{cross_f64, dominant_axis, interior_voxel, swizzle, to_f64, TriSetup};
+use crate::overlap::{
+    cross_f64, dominant_axis, interior_voxel, swizzle, to_f64, unswizzle, TriSetup,
+};
 use crate::Mode;
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
@@ -282,19 +284,7 @@ impl ChunkVoxelizer {
         let swz = swizzle(dominant_axis(n));
         let sw = |q: [f64; 3]| [q[swz[0]], q[swz[1]], q[swz[2]]];
         let (w, c) = triangle_area_centroid(&[sw(o[0]), sw(o[1]), sw(o[2])], area_scale(sw(n)));
-        let q = match c {
-            Some(c) => {
-                let mut u = [0.0; 3];
-                for k in 0..3 {
-                    u[swz[k]] = c[k];
-                }
-                u
-            }
-            None => {
-                [0, 1, 2].map(|k| (t.v[0][k] as f64 + t.v[1][k] as f64 + t.v[2][k] as f64) / 3.0)
-            }
-        };
-        let (normal, col) = Attrs::new(t).at(q);
+        let (normal, col) = Attrs::new(t).at(unswizzle(swz, c));
         let local = [0, 1, 2].map(|k| (p[k] as i64 - self.origin[k] as i64) as u32);
         debug_assert!(local.iter().all(|&c| c < CHUNK));
         let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);

@@ -7,7 +7,7 @@
 //! triangle is swizzled to its dominant axis (as in [`crate::TriSetup`]) and clipped against
 //! `x ≥ p_x`, `x ≤ p_x+1`, `y ≥ p_y`, `y ≤ p_y+1`, `z ≥ p_z`, `z ≤ p_z+1` in swizzled coordinates.
 
-use crate::overlap::{cross_f64, dominant_axis, swizzle, to_f64};
+use crate::overlap::{cross_f64, dominant_axis, swizzle, to_f64, unswizzle};
 
 /// Most vertices a triangle clipped by six planes can have.
 pub const MAX_POLY: usize = 9;
@@ -234,11 +234,9 @@ impl Poly {
 
 /// [`Poly::area_centroid`] of the triangle `v` as a polygon (`Poly::triangle(v)`), with the same
 /// operations in the same order, so bit-identical to it, without building the 224-byte polygon.
+/// A triangle always has a centroid (the mean of its vertices if its area is zero).
 #[inline]
-pub(crate) fn triangle_area_centroid(
-    v: &[[f64; 3]; 3],
-    area_scale: f64,
-) -> (f64, Option<[f64; 3]>) {
+pub(crate) fn triangle_area_centroid(v: &[[f64; 3]; 3], area_scale: f64) -> (f64, [f64; 3]) {
     let [p0, p1, p2] = *v;
     let u = [p1[0] - p0[0], p1[1] - p0[1]];
     let w = [p2[0] - p0[0], p2[1] - p0[1]];
@@ -248,14 +246,13 @@ pub(crate) fn triangle_area_centroid(
     let c = [0, 1, 2].map(|k| 0.0 + ai * (p0[k] + p1[k] + p2[k]));
     if a2 != 0.0 {
         let s = 1.0 / (3.0 * a2);
-        (
-            0.5 * a2.abs() * area_scale,
-            Some([c[0] * s, c[1] * s, c[2] * s]),
-        )
+        (0.5 * a2.abs() * area_scale, [c[0] * s, c[1] * s, c[2] * s])
     } else {
         let inv = 1.0 / 3.0;
-        let m = [0, 1, 2].map(|k| 0.0 + p0[k] * inv + p1[k] * inv + p2[k] * inv);
-        (0.0, Some(m))
+        (
+            0.0,
+            [0, 1, 2].map(|k| 0.0 + p0[k] * inv + p1[k] * inv + p2[k] * inv),
+        )
     }
 }
 
@@ -287,13 +284,7 @@ pub fn clipped_area(v: &[[f32; 3]; 3], voxel: [i32; 3]) -> (f64, [f64; 3]) {
     let poly = tri.clip_column(p[0], p[1]).clip_depth(p[2]);
     let (area, c) = poly.area_centroid(area_scale(sw(n)));
     match c {
-        Some(c) => {
-            let mut u = [0.0; 3];
-            for k in 0..3 {
-                u[swz[k]] = c[k];
-            }
-            (area, u)
-        }
+        Some(c) => (area, unswizzle(swz, c)),
         None => (0.0, tri_centroid),
     }
 }
@@ -323,8 +314,8 @@ mod tests {
             let (a, c) = triangle_area_centroid(&v, scale);
             let (pa, pc) = Poly::triangle(&v).area_centroid(scale);
             assert_eq!(a.to_bits(), pa.to_bits(), "{v:?}");
-            let bits = |c: Option<[f64; 3]>| c.map(|c| c.map(f64::to_bits));
-            assert_eq!(bits(c), bits(pc), "{v:?}");
+            let pc = pc.expect("a triangle has a centroid");
+            assert_eq!(c.map(f64::to_bits), pc.map(f64::to_bits), "{v:?}");
         }
     }
 }

@@ -80,6 +80,14 @@ pub fn swizzle(axis: usize) -> [usize; 3] {
     }
 }
 
+/// Point `p` in swizzled coordinates (swizzle `swz`) back in original ones, as
+/// [`TriSetup::unswizzle`] does.
+#[inline]
+pub(crate) fn unswizzle<T: Copy>(swz: [usize; 3], p: [T; 3]) -> [T; 3] {
+    let inv = unswizzle_of(swz);
+    [p[inv[0]], p[inv[1]], p[inv[2]]]
+}
+
 /// The inverse of a [`swizzle`] permutation.
 #[inline]
 fn unswizzle_of(swz: [usize; 3]) -> [usize; 3] {
