@@ -126,6 +126,54 @@ pub(crate) struct MappedVertices<'a, const BE: bool> {
     attr: [Option<(usize, Scalar)>; 10],
     has_normals: bool,
     has_colors: bool,
+    /// The usual record, decoded without per-property dispatch, if this is one.
+    packed: Option<Packed>,
+}
+
+/// The record layout nearly every writer produces: `float x, y, z` side by side, and if present
+/// `float nx, ny, nz` side by side and `uchar red, green, blue[, alpha]` side by side (byte
+/// offsets in the record).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Packed {
+    p: usize,
+    n: Option<usize>,
+    /// offset of red and the number of channels (3 or 4)
+    c: Option<(usize, usize)>,
+}
+
+impl Packed {
+    /// The packed form of `attr`, if it has one.
+    fn of(
+        attr: &[Option<(usize, Scalar)>; 10],
+        has_normals: bool,
+        has_colors: bool,
+    ) -> Option<Self> {
+        // `ty` channels `from..from + n` at consecutive offsets of `step` bytes: the first's offset
+        let run = |from: usize, n: usize, ty: Scalar| -> Option<usize> {
+            let (o, _) = attr[from]?;
+            (0..n)
+                .all(|k| attr[from + k] == Some((o + k * ty.size(), ty)))
+                .then_some(o)
+        };
+        Some(Packed {
+            p: run(0, 3, Scalar::F32)?,
+            n: if has_normals {
+                Some(run(3, 3, Scalar::F32)?)
+            } else {
+                None
+            },
+            c: if has_colors {
+                let o = run(6, 3, Scalar::U8)?;
+                match attr[9] {
+                    None => Some((o, 3)),
+                    Some(a) if a == (o + 3, Scalar::U8) => Some((o, 4)),
+                    Some(_) => return None,
+                }
+            } else {
+                None
+            },
+        })
+    }
 }
 
 impl<'a, const BE: bool> MappedVertices<'a, BE> {
@@ -150,6 +198,7 @@ impl<'a, const BE: bool> MappedVertices<'a, BE> {
             attr,
             has_normals: layout.has_normals,
             has_colors: layout.has_colors,
+            packed: Packed::of(&attr, layout.has_normals, layout.has_colors),
         }
     }
 }
@@ -159,6 +208,9 @@ impl<const BE: bool> MappedVertices<'_, BE> {
     #[inline]
     pub fn position(&self, i: usize) -> [f32; 3] {
         let rec = &self.data[i * self.stride..(i + 1) * self.stride];
+        if let Some(pk) = self.packed {
+            return packed_f32s::<BE>(rec, pk.p);
+        }
         let f = |s: usize| match self.attr[s] {
             Some((o, ty)) => decode_f32::<BE>(&rec[o..], ty),
             None => 0.0,
@@ -174,6 +226,9 @@ impl<const BE: bool> VertexSource for MappedVertices<'_, BE> {
     #[inline]
     fn corner(&self, i: usize) -> Corner {
         let rec = &self.data[i * self.stride..(i + 1) * self.stride];
+        if let Some(pk) = self.packed {
+            return packed_corner::<BE>(rec, pk);
+        }
         let f = |s: usize| match self.attr[s] {
             Some((o, ty)) => decode_f32::<BE>(&rec[o..], ty),
             None => 0.0,
@@ -201,6 +256,35 @@ impl<const BE: bool> VertexSource for MappedVertices<'_, BE> {
     }
 }
 
+/// [`VertexSource::corner`] of a record in the [`Packed`] layout: what the general decoding gives.
+#[inline]
+fn packed_corner<const BE: bool>(rec: &[u8], pk: Packed) -> Corner {
+    let f32s = |o: usize| packed_f32s::<BE>(rec, o);
+    let mut c = DEFAULT_COLOR;
+    if let Some((o, n)) = pk.c {
+        c[..n].copy_from_slice(&rec[o..o + n]);
+    }
+    Corner {
+        p: f32s(pk.p),
+        n: pk.n.map_or([0.0; 3], f32s),
+        c,
+    }
+}
+
+/// Three `float`s side by side at byte `o` of `rec`.
+#[inline]
+fn packed_f32s<const BE: bool>(rec: &[u8], o: usize) -> [f32; 3] {
+    let b = &rec[o..o + 12];
+    [0, 4, 8].map(|k| {
+        let a = [b[k], b[k + 1], b[k + 2], b[k + 3]];
+        if BE {
+            f32::from_be_bytes(a)
+        } else {
+            f32::from_le_bytes(a)
+        }
+    })
+}
+
 /// Error for a face that uses a vertex with a NaN or infinite coordinate (mapped vertices
 /// are only checked when used).
 pub(crate) fn non_finite(path: &Path, at: Location, vertex: u64, p: [f32; 3]) -> IngestError {
@@ -214,8 +298,70 @@ pub(crate) fn non_finite(path: &Path, at: Location, vertex: u64, p: [f32; 3]) ->
 
 #[cfg(test)]
 mod tests {
-    use super::color_byte;
-    use crate::ply_header::Scalar;
+    use super::{color_byte, MappedVertices, VertexSource};
+    use crate::ply_header::{parse_header, Scalar};
+
+    /// Vertices of `props` (PLY property lines) from pseudo-random bytes, read with and without
+    /// the packed decoding: the same bits. Returns whether the packed form was taken.
+    fn packed_equals_general<const BE: bool>(props: &str) -> bool {
+        let head = format!(
+            "ply\nformat {} 1.0\nelement vertex 300\n{props}element face 0\nproperty list uchar int vertex_indices\nend_header\n",
+            if BE { "binary_big_endian" } else { "binary_little_endian" }
+        );
+        let h = parse_header(std::path::Path::new("t.ply"), &mut head.as_bytes()).unwrap();
+        let el = &h.elements[h.layout.vertex];
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let data: Vec<u8> = (0..300 * el.fixed_size().unwrap())
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (s >> 56) as u8
+            })
+            .collect();
+        let packed = MappedVertices::<BE>::new(&data, el, &h.layout);
+        let mut general = MappedVertices::<BE>::new(&data, el, &h.layout);
+        general.packed = None;
+        for i in 0..300 {
+            let (a, b) = (packed.corner(i), general.corner(i));
+            let bits = |c: super::Corner| (c.p.map(f32::to_bits), c.n.map(f32::to_bits), c.c);
+            assert_eq!(bits(a), bits(b), "{props} vertex {i}");
+            assert_eq!(
+                packed.position(i).map(f32::to_bits),
+                general.position(i).map(f32::to_bits)
+            );
+        }
+        packed.packed.is_some()
+    }
+
+    #[test]
+    fn packed_vertices_decode_as_the_general_reader() {
+        let xyz = "property float x\nproperty float y\nproperty float z\n";
+        let nrm = "property float nx\nproperty float ny\nproperty float nz\n";
+        let rgb = "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+        let a = "property uchar alpha\n";
+        for props in [
+            xyz.to_string(),
+            format!("{xyz}{rgb}"),
+            format!("{xyz}{rgb}{a}"),
+            format!("{xyz}{nrm}{rgb}{a}"),
+            format!("property uchar flags\n{xyz}property short q\n{nrm}{rgb}"),
+        ] {
+            assert!(packed_equals_general::<false>(&props), "{props}");
+            assert!(packed_equals_general::<true>(&props), "{props}");
+        }
+        // not the packed layout: the general decoding only
+        for props in [
+            "property double x\nproperty double y\nproperty double z\n".to_string(),
+            "property float y\nproperty float x\nproperty float z\n".to_string(),
+            format!("{xyz}property float red\nproperty float green\nproperty float blue\n"),
+            format!("{xyz}property uchar red\nproperty uchar green\nproperty uchar q\nproperty uchar blue\n"),
+            format!("{xyz}{rgb}property float alpha\n"),
+            format!("{xyz}property float nx\nproperty float ny\nproperty double nz\n"),
+        ] {
+            assert!(!packed_equals_general::<false>(&props), "{props}");
+        }
+    }
 
     #[test]
     fn colour_channels_to_bytes() {
