@@ -1,11 +1,24 @@
 //! Batching of triangles for the caller: every reader pushes triangles here one by one;
 //! degenerate ones are counted and dropped, the rest are handed on in batches of
 //! [`BATCH`] triangles, with a progress report per batch. The parallel PLY reader hands on
-//! each worker's share as a batch of its own instead.
+//! each worker's share as a batch of its own instead, prepared on the worker.
+//!
+//! Each batch goes through the caller's `prepare` step first (see
+//! [`MeshSource::stream_prepared`](crate::MeshSource::stream_prepared)), then to its callback
+//! with what `prepare` returned.
+
+use std::any::Any;
 
 use crate::ply_faces::LocalBatch;
 use crate::{IngestError, IngestStats};
 use voxlod_geom::Triangle;
+
+/// What the caller's `prepare` step made of one batch, type-erased inside the readers.
+pub(crate) type Prepared = Box<dyn Any + Send>;
+/// The caller's `prepare` step, type-erased.
+pub(crate) type Prepare<'a> = &'a (dyn Fn(&mut [Triangle]) -> Prepared + Sync);
+/// The caller's callback, type-erased.
+pub(crate) type Callback<'a> = &'a mut dyn FnMut(&[Triangle], Prepared) -> Result<(), IngestError>;
 
 /// Triangles per batch handed to the caller's callback (64 Ki triangles = 5.5 MiB).
 pub const BATCH: usize = 1 << 16;
@@ -16,7 +29,9 @@ pub const RELEASE_EVERY: u32 = 8192;
 
 pub(crate) struct Emitter<'a> {
     batch: Vec<Triangle>,
-    f: &'a mut dyn FnMut(&[Triangle]) -> Result<(), IngestError>,
+    /// Run on each batch before `f`: on the worker that decoded it, for a parallel reader.
+    pub prepare: Prepare<'a>,
+    f: Callback<'a>,
     progress: &'a mut dyn FnMut(u64, u64),
     pub stats: IngestStats,
     /// Input bytes consumed so far; readers update it, the emitter reports it.
@@ -30,12 +45,14 @@ pub(crate) struct Emitter<'a> {
 
 impl<'a> Emitter<'a> {
     pub fn new(
-        f: &'a mut dyn FnMut(&[Triangle]) -> Result<(), IngestError>,
+        prepare: Prepare<'a>,
+        f: Callback<'a>,
         progress: &'a mut dyn FnMut(u64, u64),
         bytes_total: u64,
     ) -> Self {
         Emitter {
             batch: Vec::with_capacity(BATCH),
+            prepare,
             f,
             progress,
             stats: IngestStats::default(),
@@ -85,11 +102,11 @@ impl<'a> Emitter<'a> {
         Ok(())
     }
 
-    /// Takes the triangles of a [`LocalBatch`] (already checked for zero area) and its counts,
-    /// and hands them on as one batch, without copying them (after any partial batch of
-    /// [`Emitter::push`], so the order is kept). Batch boundaries carry no meaning for the
-    /// callers: only the order of the triangles does.
-    pub fn push_local(&mut self, lb: LocalBatch) -> Result<(), IngestError> {
+    /// Takes the triangles of a [`LocalBatch`] (already checked for zero area, and prepared if
+    /// its `prepared` is set) and its counts, and hands them on as one batch, without copying
+    /// them (after any partial batch of [`Emitter::push`], so the order is kept). Batch
+    /// boundaries carry no meaning for the callers: only the order of the triangles does.
+    pub fn push_local(&mut self, mut lb: LocalBatch) -> Result<(), IngestError> {
         self.stats.polygons += lb.polygons;
         self.stats.degenerate_skipped += lb.degenerate + lb.repeated;
         self.stats.repeated_index += lb.repeated;
@@ -101,7 +118,11 @@ impl<'a> Emitter<'a> {
         }
         let n = lb.tris.len();
         self.stats.triangles += n as u64;
-        (self.f)(&lb.tris)?;
+        let prepared = match lb.prepared.take() {
+            Some(p) => p,
+            None => (self.prepare)(&mut lb.tris),
+        };
+        (self.f)(&lb.tris, prepared)?;
         (self.progress)(self.bytes_done.min(self.bytes_total), self.bytes_total);
         self.added(n.min(u32::MAX as usize) as u32);
         Ok(())
@@ -121,7 +142,8 @@ impl<'a> Emitter<'a> {
 
     fn flush(&mut self) -> Result<(), IngestError> {
         if !self.batch.is_empty() {
-            (self.f)(&self.batch)?;
+            let prepared = (self.prepare)(&mut self.batch);
+            (self.f)(&self.batch, prepared)?;
             self.batch.clear();
         }
         (self.progress)(self.bytes_done.min(self.bytes_total), self.bytes_total);

@@ -236,6 +236,38 @@ impl MeshSource {
         f: &mut dyn FnMut(&[Triangle]) -> Result<(), IngestError>,
         progress: &mut dyn FnMut(u64, u64),
     ) -> Result<IngestStats, IngestError> {
+        self.stream_prepared(&|_| (), &mut |tris, ()| f(tris), progress)
+    }
+
+    /// [`MeshSource::stream`] with a step `prepare` run on each batch before `f`, on the thread
+    /// that decoded the batch: for a memory-mapped binary PLY, a worker of the current rayon
+    /// pool, while `f` takes the batch before on the calling thread; for the other readers,
+    /// the calling thread. `prepare` may change the triangles (`f` sees them changed) and
+    /// returns what `f` gets with them: work that does not depend on the order of the batches
+    /// belongs in `prepare`, so that it runs in parallel with `f`.
+    ///
+    /// ```no_run
+    /// # fn main() -> Result<(), voxlod_ingest::IngestError> {
+    /// // the bounds of each batch on the workers; their union on the calling thread
+    /// let src = voxlod_ingest::MeshSource::open(std::path::Path::new("scan.ply"))?;
+    /// let mut bounds = voxlod_geom::Bounds::default();
+    /// src.stream_prepared(
+    ///     &|tris| {
+    ///         let mut b = voxlod_geom::Bounds::default();
+    ///         tris.iter().for_each(|t| b.add_triangle(t));
+    ///         b
+    ///     },
+    ///     &mut |_tris, b| Ok(bounds.merge(&b)),
+    ///     &mut |_, _| {},
+    /// )?;
+    /// # Ok(()) }
+    /// ```
+    pub fn stream_prepared<P: Send + 'static>(
+        &self,
+        prepare: &(dyn Fn(&mut [Triangle]) -> P + Sync),
+        f: &mut dyn FnMut(&[Triangle], P) -> Result<(), IngestError>,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<IngestStats, IngestError> {
         let total = match &self.reader {
             Reader::Ply(p) => p.progress_total(),
             _ => self.file_len,
@@ -245,7 +277,15 @@ impl MeshSource {
             Reader::Stl(s) => s.release_pages(),
             Reader::Obj(_) => {}
         };
-        let mut em = batch::Emitter::new(f, progress, total).with_release(Some(&release));
+        let erased = |tris: &mut [Triangle]| -> batch::Prepared { Box::new(prepare(tris)) };
+        let mut g = |tris: &[Triangle], p: batch::Prepared| {
+            let p = p
+                .downcast::<P>()
+                .expect("the emitter hands on what prepare returned");
+            f(tris, *p)
+        };
+        let mut em =
+            batch::Emitter::new(&erased, &mut g, progress, total).with_release(Some(&release));
         match &self.reader {
             Reader::Ply(p) => p.stream(&mut em)?,
             Reader::Obj(o) => o.stream(&mut em)?,

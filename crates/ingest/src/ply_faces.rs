@@ -3,7 +3,7 @@
 //! Indices are read one at a time and only the last two are kept, so a polygon or strip
 //! of any length needs no buffer.
 
-use crate::batch::Emitter;
+use crate::batch::{Emitter, Prepared};
 use crate::ply_header::{Element, Kind, Scalar};
 use crate::ply_records::{Records, SliceRecords};
 use crate::ply_vertices::{non_finite, VertexSource};
@@ -47,6 +47,8 @@ pub(crate) struct LocalBatch {
     pub polygons: u64,
     pub degenerate: u64,
     pub repeated: u64,
+    /// The emitter's `prepare` step run on `tris` by the worker, once they are complete.
+    pub prepared: Option<Prepared>,
 }
 
 impl Sink for LocalBatch {
@@ -101,8 +103,9 @@ fn triangle_record_bytes(el: &Element, list: usize) -> Option<usize> {
 /// Streams a memory-mapped binary `face` element (not strips) starting at byte `off` of
 /// `data`, decoding in parallel on the current rayon pool while every record is a triangle
 /// (so that record `r` starts at `off + r · size`): rounds of [`PARALLEL_RECORDS`] records per
-/// thread are decoded into [`LocalBatch`]es and handed to `em` in record order, so the
-/// triangles, counts and the first error are those of the sequential reader. At the first
+/// thread are decoded into [`LocalBatch`]es, prepared (`em.prepare`) on the same thread, and
+/// handed to `em` in record order, so the triangles, counts and the first error are those of
+/// the sequential reader. At the first
 /// record that is not a triangle, the rest is read sequentially.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
@@ -116,6 +119,7 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     em: &mut Emitter,
 ) -> Result<(), IngestError> {
     use rayon::prelude::*;
+    let prepare = em.prepare;
     // the sequential reader from record `first`, which starts at byte `at`
     let sequential = |first: u64, at: usize, em: &mut Emitter| {
         let mut src = SliceRecords::<BE>::new(path, data, at);
@@ -189,6 +193,12 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
                 } else {
                     Ok(None)
                 };
+                // the caller's prepare step here, on the worker, for a part that is complete
+                if let Ok(None) = r {
+                    if !lb.tris.is_empty() {
+                        lb.prepared = Some(prepare(&mut lb.tris));
+                    }
+                }
                 (a, r.map(|stop| (lb, stop)))
             })
             .collect()

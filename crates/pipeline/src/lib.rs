@@ -35,7 +35,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use voxlod_format::{encode_node, EncodedNode, FileSpec, Voxel, Writer};
-use voxlod_geom::{Bounds, Grid};
+use voxlod_geom::{Bounds, Grid, Triangle};
 use voxlod_ingest::{IngestError, MeshSource};
 use voxlod_tile::{Bins, ChunkBin, ChunkCounts, Passes, RecordLayout, Spool, Spooler, TileError};
 use voxlod_voxelize::Mode;
@@ -369,10 +369,22 @@ fn run(
                     .and_then(|vb| Grid::fit(&vb, s.resolution).ok())
                     .and_then(|g| ChunkCounts::new(&g).ok());
             }
-            // (inside the pool: a mapped binary PLY is decoded on its threads)
+            // Inside the pool: a mapped binary PLY is decoded on its threads, and each batch's
+            // bounds and chunk keys are taken there too (`prepare`); the callback, on this
+            // thread, only adds them up (or spools the batch).
+            let keys = early_counts.as_ref().map(|c| c.keys());
+            let prepare = |tris: &mut [Triangle]| {
+                let mut b = Bounds::default();
+                if spooled {
+                    return (b, None);
+                }
+                tris.iter().for_each(|t| b.add_triangle(t));
+                (b, keys.map(|k| k.of_world(tris)))
+            };
             let stats = pool.install(|| {
-                source.stream(
-                    &mut |tris| {
+                source.stream_prepared(
+                    &prepare,
+                    &mut |tris, (b, k)| {
                         if interrupted() {
                             return Err(IngestError::Callback("interrupted".into()));
                         }
@@ -380,9 +392,9 @@ fn run(
                             Some(sp) => sp.push(tris).map_err(tile_err),
                             None => {
                                 count += tris.len() as u64;
-                                tris.iter().for_each(|t| bounds.add_triangle(t));
-                                if let Some(c) = &mut early_counts {
-                                    c.add_triangles(tris);
+                                bounds.merge(&b);
+                                if let (Some(c), Some(k)) = (&mut early_counts, k) {
+                                    c.add_keyed(tris, &k);
                                 }
                                 Ok(())
                             }

@@ -16,14 +16,16 @@ pub(crate) struct InputPasses<'a> {
 }
 
 impl Passes for InputPasses<'_> {
-    fn for_each_batch(
+    fn for_each_prepared(
         &self,
-        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+        prepare: &(dyn Fn(&mut [Triangle]) -> Vec<u32> + Sync),
+        f: &mut dyn FnMut(&[Triangle], Vec<u32>) -> Result<(), TileError>,
     ) -> Result<(), TileError> {
         let mut inner: Option<TileError> = None;
-        let r = self.source.stream(
-            &mut |tris| {
-                f(tris).map_err(|e| {
+        let r = self.source.stream_prepared(
+            prepare,
+            &mut |tris, p| {
+                f(tris, p).map_err(|e| {
                     let m = e.to_string();
                     inner = Some(e);
                     IngestError::Callback(m)
@@ -52,15 +54,16 @@ impl Passes for InputPasses<'_> {
 pub(crate) struct Interruptible<'a>(pub &'a dyn Passes);
 
 impl Passes for Interruptible<'_> {
-    fn for_each_batch(
+    fn for_each_prepared(
         &self,
-        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+        prepare: &(dyn Fn(&mut [Triangle]) -> Vec<u32> + Sync),
+        f: &mut dyn FnMut(&[Triangle], Vec<u32>) -> Result<(), TileError>,
     ) -> Result<(), TileError> {
-        self.0.for_each_batch(&mut |tris| {
+        self.0.for_each_prepared(prepare, &mut |tris, p| {
             if interrupted() {
                 return Err(TileError::Callback("interrupted".into()));
             }
-            f(tris)
+            f(tris, p)
         })
     }
 

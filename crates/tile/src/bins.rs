@@ -17,10 +17,12 @@ pub fn count(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<ChunkCounts, TileError> {
     let mut counts = ChunkCounts::new(grid)?;
+    let keys = counts.keys();
     let mut done = 0u64;
     let total = src.count();
-    src.for_each_batch(&mut |tris| {
-        counts.add_triangles(tris);
+    // the chunk ranges where the triangles are read, the counting here
+    src.for_each_prepared(&|tris| keys.of_world(tris), &mut |tris, k| {
+        counts.add_keyed(tris, &k);
         done += tris.len() as u64;
         progress(done, total);
         Ok(())
@@ -46,13 +48,18 @@ pub fn scatter(
         "scatter: the counts were made on another grid"
     );
     let mut sc = Scatter::create(grid, counts, path, layout, buffer_bytes)?;
+    let keys = counts.keys();
     let mut done = 0u64;
     let total = src.count();
-    let mut gtris = Vec::new();
-    src.for_each_batch(&mut |tris| {
-        gtris.clear();
-        gtris.extend(tris.iter().map(|t| to_grid(grid, t)));
-        sc.push(&gtris)?;
+    // the move to the grid and the chunk ranges where the triangles are read, the binning here
+    let prepare = |tris: &mut [Triangle]| {
+        for t in tris.iter_mut() {
+            *t = to_grid(grid, t);
+        }
+        keys.of_grid(tris)
+    };
+    src.for_each_prepared(&prepare, &mut |tris, k| {
+        sc.push_keyed(tris, &k)?;
         done += tris.len() as u64;
         progress(done, total);
         Ok(())
@@ -97,6 +104,27 @@ impl ChunkCounts {
             if let Some((lo, hi)) = self.grid.world_chunk_range(t) {
                 self.add_range(lo, hi);
             }
+        }
+    }
+
+    /// Counts triangles (world coordinates) given their [`ChunkKeys::of_world`]: what
+    /// [`ChunkCounts::add_triangles`] counts.
+    pub fn add_keyed(&mut self, tris: &[Triangle], keys: &[u32]) {
+        assert_eq!(tris.len(), keys.len(), "one key per triangle");
+        for (t, &k) in tris.iter().zip(keys) {
+            if k != SPANS {
+                self.counts[k as usize] += 1;
+            } else if let Some((lo, hi)) = self.grid.world_chunk_range(t) {
+                self.add_range(lo, hi);
+            }
+        }
+    }
+
+    /// The keys of this grid's chunks.
+    pub fn keys(&self) -> ChunkKeys {
+        ChunkKeys {
+            grid: self.grid,
+            n: self.n,
         }
     }
 
@@ -153,6 +181,45 @@ impl ChunkCounts {
             start += c.count;
         }
         chunks
+    }
+}
+
+/// The key of a triangle whose chunk range ([`Grid::chunk_range`]) is more than one chunk, or
+/// none: such a triangle's range is worked out again where the key is used (rare: most
+/// triangles lie in one chunk).
+pub const SPANS: u32 = u32::MAX;
+
+/// A triangle's chunk range as one number, worked out where the triangles are read (in a
+/// pass's prepare step, see [`Passes::for_each_prepared`]) and used where they are counted or
+/// binned: the linear index `(z·n + y)·n + x` of its chunk if the range is that one chunk,
+/// [`SPANS`] otherwise. Made by [`ChunkCounts::keys`], which holds fewer than 2³² chunks.
+#[derive(Clone, Copy, Debug)]
+pub struct ChunkKeys {
+    grid: Grid,
+    n: u32,
+}
+
+impl ChunkKeys {
+    #[inline]
+    fn key(&self, range: Option<([u32; 3], [u32; 3])>) -> u32 {
+        match range {
+            Some((lo, hi)) if lo == hi => (lo[2] * self.n + lo[1]) * self.n + lo[0],
+            _ => SPANS,
+        }
+    }
+
+    /// Keys of triangles in world coordinates ([`Grid::world_chunk_range`]).
+    pub fn of_world(&self, tris: &[Triangle]) -> Vec<u32> {
+        tris.iter()
+            .map(|t| self.key(self.grid.world_chunk_range(t)))
+            .collect()
+    }
+
+    /// Keys of triangles in grid coordinates ([`Grid::chunk_range`]).
+    pub fn of_grid(&self, tris: &[Triangle]) -> Vec<u32> {
+        tris.iter()
+            .map(|t| self.key(self.grid.chunk_range(t)))
+            .collect()
     }
 }
 
@@ -255,10 +322,14 @@ impl<'g> Scatter<'g> {
         })
     }
 
-    /// Bins a batch of grid-space triangles.
-    pub(crate) fn push(&mut self, tris: &[Triangle]) -> Result<(), TileError> {
-        let rec = self.layout.bytes();
-        for t in tris {
+    /// Bins a batch of grid-space triangles given their [`ChunkKeys::of_grid`].
+    pub(crate) fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
+        assert_eq!(tris.len(), keys.len(), "one key per triangle");
+        for (t, &k) in tris.iter().zip(keys) {
+            if k != SPANS {
+                self.put(t, k as usize)?;
+                continue;
+            }
             let Some((lo, hi)) = self.grid.chunk_range(t) else {
                 continue;
             };
@@ -267,23 +338,32 @@ impl<'g> Scatter<'g> {
                     for x in lo[0]..=hi[0] {
                         let li = ((z as usize * self.n as usize) + y as usize) * self.n as usize
                             + x as usize;
-                        let s = self.slot[li];
-                        if s == u32::MAX {
-                            return Err(TileError::Callback(format!(
-                                "chunk {:?} received a triangle but none was counted: the input changed between passes",
-                                [x, y, z]
-                            )));
-                        }
-                        let s = s as usize;
-                        let at = (self.slice_start[s] + self.slice_len[s] as u64) as usize * rec;
-                        self.layout.encode_into(t, &mut self.arena[at..at + rec])?;
-                        self.slice_len[s] += 1;
-                        if self.slice_len[s] == self.slice_cap[s] {
-                            self.write_slice(s)?;
-                        }
+                        self.put(t, li)?;
                     }
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// Adds triangle `t` to the slice of the chunk of linear index `li`.
+    #[inline]
+    fn put(&mut self, t: &Triangle, li: usize) -> Result<(), TileError> {
+        let rec = self.layout.bytes();
+        let s = self.slot[li];
+        if s == u32::MAX {
+            let n = self.n as usize;
+            return Err(TileError::Callback(format!(
+                "chunk {:?} received a triangle but none was counted: the input changed between passes",
+                [li % n, li / n % n, li / (n * n)]
+            )));
+        }
+        let s = s as usize;
+        let at = (self.slice_start[s] + self.slice_len[s] as u64) as usize * rec;
+        self.layout.encode_into(t, &mut self.arena[at..at + rec])?;
+        self.slice_len[s] += 1;
+        if self.slice_len[s] == self.slice_cap[s] {
+            self.write_slice(s)?;
         }
         Ok(())
     }
@@ -481,6 +561,18 @@ mod tests {
         );
         let grid = Grid::fit(&spool.bounds, 1024).unwrap();
         let counts = count(&spool, &grid, &mut |_, _| {}).unwrap();
+        // the keyed counting (one key per single-chunk triangle) counts what the chunk ranges do
+        let mut direct = ChunkCounts::new(&grid).unwrap();
+        direct.add_triangles(&tris);
+        assert_eq!(counts.counts, direct.counts);
+        let keys = counts.keys().of_world(&tris);
+        let spans = keys.iter().filter(|&&k| k == SPANS).count();
+        assert!(
+            spans > 50 && spans < 2900,
+            "{spans} triangles over several chunks"
+        );
+        let moved: Vec<Triangle> = tris.iter().map(|t| crate::to_grid(&grid, t)).collect();
+        assert_eq!(counts.keys().of_grid(&moved), keys);
         let mut previous: Option<Vec<Vec<Triangle>>> = None;
         // small budget (many flushes) and large (one), compact and full records
         for (budget, layout) in [

@@ -41,7 +41,7 @@ mod bins;
 mod record;
 mod spool;
 
-pub use bins::{count, scatter, Bins, ChunkBin, ChunkCounts};
+pub use bins::{count, scatter, Bins, ChunkBin, ChunkCounts, ChunkKeys, SPANS};
 pub use record::RecordLayout;
 pub use spool::{Spool, Spooler};
 
@@ -55,11 +55,22 @@ pub const READ_BATCH: usize = 96 * 1024;
 /// The same triangles, in the same order, as many times as asked: a spool, or an input that is
 /// cheap to parse again.
 pub trait Passes: Sync {
+    /// Calls `f` with every triangle (world coordinates), in batches, in a fixed order, after
+    /// `prepare` on each batch, run where the batch was read: for a source decoded on several
+    /// threads, on the thread that decoded it, while `f` takes the batch before. `prepare` may
+    /// change the triangles (`f` sees them changed); `f` gets the values it returns.
+    fn for_each_prepared(
+        &self,
+        prepare: &(dyn Fn(&mut [Triangle]) -> Vec<u32> + Sync),
+        f: &mut dyn FnMut(&[Triangle], Vec<u32>) -> Result<(), TileError>,
+    ) -> Result<(), TileError>;
     /// Calls `f` with every triangle (world coordinates), in batches, in a fixed order.
     fn for_each_batch(
         &self,
         f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
-    ) -> Result<(), TileError>;
+    ) -> Result<(), TileError> {
+        self.for_each_prepared(&|_| Vec::new(), &mut |tris, _| f(tris))
+    }
     /// Triangles one pass yields (for progress).
     fn count(&self) -> u64;
 }

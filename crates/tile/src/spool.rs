@@ -119,10 +119,12 @@ impl Spool {
 }
 
 impl Passes for Spool {
-    /// Reads the spool sequentially through a fixed buffer of [`READ_BATCH`] records.
-    fn for_each_batch(
+    /// Reads the spool sequentially through a fixed buffer of [`READ_BATCH`] records (and
+    /// prepares each batch on the calling thread).
+    fn for_each_prepared(
         &self,
-        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+        prepare: &(dyn Fn(&mut [Triangle]) -> Vec<u32> + Sync),
+        f: &mut dyn FnMut(&[Triangle], Vec<u32>) -> Result<(), TileError>,
     ) -> Result<(), TileError> {
         let mut file = File::open(&self.path).map_err(TileError::io("open", &self.path))?;
         let len = file
@@ -145,7 +147,8 @@ impl Passes for Spool {
             file.read_exact(&mut raw[..n * rec])
                 .map_err(TileError::io("read", &self.path))?;
             self.layout.decode_all(&raw[..n * rec], &mut tris);
-            f(&tris)?;
+            let p = prepare(&mut tris);
+            f(&tris, p)?;
             left -= n as u64;
         }
         Ok(())
