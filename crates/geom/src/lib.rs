@@ -109,10 +109,19 @@ impl Default for Bounds {
 }
 
 impl Bounds {
+    // Strict comparisons throughout (not `f64::min`, which may return either of -0 and +0): the
+    // first of equal values stays, so the bounds of a sequence are the same bits however it is
+    // cut into batches and merged in order (the ingest pass merges per-thread batches).
+    // NaN is never taken.
     pub fn add_point(&mut self, p: [f32; 3]) {
         for a in 0..3 {
-            self.min[a] = self.min[a].min(p[a] as f64);
-            self.max[a] = self.max[a].max(p[a] as f64);
+            let x = p[a] as f64;
+            if x < self.min[a] {
+                self.min[a] = x;
+            }
+            if x > self.max[a] {
+                self.max[a] = x;
+            }
         }
     }
     pub fn add_triangle(&mut self, t: &Triangle) {
@@ -120,10 +129,36 @@ impl Bounds {
             self.add_point(*v);
         }
     }
+    /// [`Bounds::add_triangle`] of each of `tris`, with the comparisons in f32 (the same
+    /// result: the values are f32 values either way), which is faster.
+    pub fn add_triangles(&mut self, tris: &[Triangle]) {
+        let mut b = [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]];
+        for t in tris {
+            for v in &t.v {
+                for a in 0..3 {
+                    if v[a] < b[0][a] {
+                        b[0][a] = v[a];
+                    }
+                    if v[a] > b[1][a] {
+                        b[1][a] = v[a];
+                    }
+                }
+            }
+        }
+        self.merge(&Bounds {
+            min: b[0].map(|x| x as f64),
+            max: b[1].map(|x| x as f64),
+        });
+    }
+    /// Adds the bounds `o` of points that come after those of `self`.
     pub fn merge(&mut self, o: &Bounds) {
         for a in 0..3 {
-            self.min[a] = self.min[a].min(o.min[a]);
-            self.max[a] = self.max[a].max(o.max[a]);
+            if o.min[a] < self.min[a] {
+                self.min[a] = o.min[a];
+            }
+            if o.max[a] > self.max[a] {
+                self.max[a] = o.max[a];
+            }
         }
     }
     pub fn is_empty(&self) -> bool {
@@ -373,6 +408,49 @@ mod tests {
         }
         // the cases that matter, triangles across chunk borders, did occur
         assert!(touched_borders > 1000, "{touched_borders}");
+    }
+
+    #[test]
+    fn bounds_of_many_triangles_are_those_of_each() {
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut f = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            f32::from_bits(s as u32)
+        };
+        let bits = |b: &Bounds| (b.min.map(f64::to_bits), b.max.map(f64::to_bits));
+        // any bit patterns: huge, tiny, negative, infinite and NaN coordinates
+        let tris: Vec<Triangle> = (0..5000)
+            .map(|_| Triangle::new([0, 1, 2].map(|_| [f(), f(), f()])))
+            .collect();
+        // and a mesh on the plane z = 0 whose zeros come as -0 and +0 (`f64::min` may return
+        // either of the two; these bounds must not depend on how the triangles are batched)
+        let zeros: Vec<Triangle> = (0..999)
+            .map(|i| {
+                let z = if (i / 3) % 2 == 0 { -0.0 } else { 0.0 };
+                Triangle::new([[0.0, 0.0, z], [1.0, 0.0, -z], [0.0, 1.0, z]])
+            })
+            .collect();
+        for tris in [&tris, &zeros] {
+            let mut one = Bounds::default();
+            tris.iter().for_each(|t| one.add_triangle(t));
+            for cut in [1, 7, 100, 5000] {
+                let mut all = Bounds::default();
+                let mut merged = Bounds::default();
+                for part in tris.chunks(cut) {
+                    all.add_triangles(part);
+                    let mut b = Bounds::default();
+                    b.add_triangles(part);
+                    merged.merge(&b);
+                }
+                assert_eq!(bits(&one), bits(&all), "batches of {cut}");
+                assert_eq!(bits(&one), bits(&merged), "batches of {cut}");
+            }
+        }
+        let mut none = Bounds::default();
+        none.add_triangles(&[]);
+        assert!(none.is_empty());
     }
 
     #[test]

@@ -18,6 +18,9 @@
 //! +4 with colours): O(vertices) memory, freed when [`MeshSource::stream`] returns. ASCII
 //! STL needs no vertex array. OBJ is loaded whole by `tobj`: O(file size) memory.
 //!
+//! [`MeshSource::stream_prepared`] runs a caller's step on each batch on the thread that
+//! decoded it (in parallel, for a memory-mapped binary PLY) before the callback gets it.
+//!
 //! Triangles of exactly zero area (repeated vertex index or [`Triangle::is_degenerate`]) are
 //! skipped and counted in [`IngestStats`]. NaN or infinite vertex coordinates are refused
 //! with an error naming the vertex.

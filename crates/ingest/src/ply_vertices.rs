@@ -261,8 +261,11 @@ impl<const BE: bool> VertexSource for MappedVertices<'_, BE> {
 fn packed_corner<const BE: bool>(rec: &[u8], pk: Packed) -> Corner {
     let f32s = |o: usize| packed_f32s::<BE>(rec, o);
     let mut c = DEFAULT_COLOR;
-    if let Some((o, n)) = pk.c {
-        c[..n].copy_from_slice(&rec[o..o + n]);
+    // fixed lengths: a copy of `n` bytes would be a call to memmove per corner
+    match pk.c {
+        Some((o, 3)) => c[..3].copy_from_slice(&rec[o..o + 3]),
+        Some((o, _)) => c.copy_from_slice(&rec[o..o + 4]),
+        None => {}
     }
     Corner {
         p: f32s(pk.p),

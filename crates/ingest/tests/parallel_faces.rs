@@ -198,3 +198,74 @@ fn parallel_reports_the_first_error_as_sequential_does() {
         }
     }
 }
+
+/// `stream_prepared`: the callback gets each batch as `prepare` changed it, with what `prepare`
+/// returned for it, in the order of `stream`. With several threads on a binary input, `prepare`
+/// runs in parallel with the callback: while the callback holds the first batch, the next
+/// round's batches are prepared (on the worker that decodes them). An input read sequentially
+/// (ASCII) is prepared on the calling thread.
+#[test]
+fn prepare_runs_where_the_batch_was_decoded() {
+    use std::sync::atomic::{AtomicUsize, Ordering::SeqCst};
+    let dir = TempDir::new("prepared");
+    let els = mesh(100_000, true, Some(81_000), None);
+    let bin = dir.write("p.ply", ply("binary_little_endian", &els));
+    let ascii = dir.write("p_ascii.ply", ply("ascii", &els));
+    let (want, want_st) = read_with(1, &ascii).unwrap();
+    let moved: Vec<Triangle> = want
+        .iter()
+        .map(|t| {
+            let mut t = *t;
+            t.v[0][0] += 1000.0;
+            t
+        })
+        .collect();
+    for (path, threads) in [(&bin, 1), (&bin, 2), (&bin, 3), (&ascii, 2)] {
+        let parallel = threads > 1 && path == &bin;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let prepares = AtomicUsize::new(0);
+        let (got, st) = pool.install(|| {
+            let src = MeshSource::open(path).unwrap();
+            let mut got: Vec<Triangle> = Vec::new();
+            let prepare = |tris: &mut [Triangle]| {
+                prepares.fetch_add(1, SeqCst);
+                for t in tris.iter_mut() {
+                    t.v[0][0] += 1000.0;
+                }
+                (tris.len(), tris[0])
+            };
+            let st = src
+                .stream_prepared(
+                    &prepare,
+                    &mut |tris, (n, first)| {
+                        assert_eq!((n, first), (tris.len(), tris[0]));
+                        if parallel && got.is_empty() {
+                            // hold the first batch until another batch is prepared meanwhile
+                            let at = prepares.load(SeqCst);
+                            let t = std::time::Instant::now();
+                            while prepares.load(SeqCst) == at {
+                                assert!(
+                                    t.elapsed().as_secs() < 20,
+                                    "{threads} threads: nothing prepared while the callback ran"
+                                );
+                                std::thread::sleep(std::time::Duration::from_millis(1));
+                            }
+                        }
+                        got.extend_from_slice(tris);
+                        Ok(())
+                    },
+                    &mut |_, _| {},
+                )
+                .unwrap();
+            (got, st)
+        });
+        assert_eq!(st, want_st);
+        assert!(
+            got == moved,
+            "{path:?}, {threads} threads: triangles differ"
+        );
+    }
+}

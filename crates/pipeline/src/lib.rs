@@ -378,7 +378,7 @@ fn run(
                 if spooled {
                     return (b, None);
                 }
-                tris.iter().for_each(|t| b.add_triangle(t));
+                b.add_triangles(tris);
                 (b, keys.map(|k| k.of_world(tris)))
             };
             let stats = pool.install(|| {

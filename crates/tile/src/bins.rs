@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use voxlod_geom::{morton3, Grid, Triangle};
 
-use crate::{to_grid, Passes, RecordLayout, TileError};
+use crate::{Passes, RecordLayout, TileError};
 
 /// Pass 2: counts, per leaf chunk, the triangles of `src` whose chunk range (see
 /// [`Grid::chunk_range`]) includes it. `progress(done, total)` is in triangles.
@@ -54,7 +54,10 @@ pub fn scatter(
     // the move to the grid and the chunk ranges where the triangles are read, the binning here
     let prepare = |tris: &mut [Triangle]| {
         for t in tris.iter_mut() {
-            *t = to_grid(grid, t);
+            // `to_grid` in place
+            for v in &mut t.v {
+                *v = grid.to_grid(*v);
+            }
         }
         keys.of_grid(tris)
     };

@@ -15,6 +15,11 @@
 //!    records ([`RecordLayout`]: only the attributes the mesh has), buffered in memory up to a
 //!    fixed budget and flushed to their regions with positioned writes.
 //!
+//! Per-triangle work that does not depend on the order (the move to grid coordinates, the
+//! chunk ranges as [`ChunkKeys`]) runs in each pass's prepare step
+//! ([`Passes::for_each_prepared`]), on the threads that read the triangles; the counting and
+//! binning, which need the order, on the calling thread.
+//!
 //! Memory is bounded by design: the passes read through fixed-size buffers, the scatter buffer
 //! has a byte budget, and [`Bins::read_chunk`] hands a chunk's triangles out in fixed-size
 //! batches. Only the per-chunk counters grow with the grid (8 bytes per chunk).
