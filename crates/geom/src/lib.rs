@@ -279,20 +279,20 @@ impl Grid {
     }
 
     /// The chunk range of the box `[mn, mx]` (grid coordinates).
+    ///
+    /// The voxels are `floor(mn) - 1 ..= floor(mx)` clamped to the grid (the one before `mn`
+    /// because a box starting exactly on a voxel face touches the voxel below it); computed as
+    /// `trunc(max(mn - 1, 0))` and `trunc(mx)`, the same integers: `mn - 1` is exact for the
+    /// `mn ≤ R < 2²⁴` that get here, and both are non-negative.
+    #[inline]
     fn box_chunk_range(&self, mn: [f32; 3], mx: [f32; 3]) -> Option<([u32; 3], [u32; 3])> {
         let r = self.resolution as f32;
-        let mut lo = [0u32; 3];
-        let mut hi = [0u32; 3];
-        for a in 0..3 {
-            let (mn, mx) = (mn[a], mx[a]);
-            if !(mx >= 0.0 && mn <= r) {
-                return None;
-            }
-            let vlo = (mn.floor() - 1.0).clamp(0.0, r - 1.0) as u32;
-            let vhi = mx.floor().clamp(0.0, r - 1.0) as u32;
-            lo[a] = vlo / CHUNK;
-            hi[a] = vhi / CHUNK;
+        if !(0..3).all(|a| mx[a] >= 0.0 && mn[a] <= r) {
+            return None;
         }
+        let last = self.resolution - 1;
+        let lo = mn.map(|m| ((m - 1.0).max(0.0) as u32).min(last) / CHUNK);
+        let hi = mx.map(|m| (m as u32).min(last) / CHUNK);
         Some((lo, hi))
     }
 }
@@ -451,6 +451,71 @@ mod tests {
         let mut none = Bounds::default();
         none.add_triangles(&[]);
         assert!(none.is_empty());
+    }
+
+    /// The chunk range against its definition, `floor(mn) - 1 ..= floor(mx)` clamped, on
+    /// random boxes and the edge values (integers, ±0, just below and above 1 and R, outside,
+    /// infinities, NaN).
+    #[test]
+    fn box_chunk_range_is_its_definition() {
+        fn reference(g: &Grid, mn: [f32; 3], mx: [f32; 3]) -> Option<([u32; 3], [u32; 3])> {
+            let r = g.resolution as f32;
+            let mut lo = [0u32; 3];
+            let mut hi = [0u32; 3];
+            for a in 0..3 {
+                if !(mx[a] >= 0.0 && mn[a] <= r) {
+                    return None;
+                }
+                lo[a] = (mn[a].floor() - 1.0).clamp(0.0, r - 1.0) as u32 / CHUNK;
+                hi[a] = mx[a].floor().clamp(0.0, r - 1.0) as u32 / CHUNK;
+            }
+            Some((lo, hi))
+        }
+        let mut s = 0x853c_49e6_748f_ea9bu64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 33) as u32
+        };
+        for res in [256u32, 1024, 16384] {
+            let g = Grid::new([0.0; 3], res as f64, res).unwrap();
+            let r = res as f32;
+            let edges = [
+                0.0,
+                -0.0,
+                1.0,
+                0.99999994,
+                1.0000001,
+                255.0,
+                256.0,
+                256.5,
+                257.0,
+                r - 1.0,
+                r - 0.5,
+                r,
+                r + 1.0,
+                -1.0,
+                -0.5,
+                1e30,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                f32::NAN,
+            ];
+            for _ in 0..200_000 {
+                let mut v = || match next() % 4 {
+                    0 => edges[next() as usize % edges.len()],
+                    1 => (next() % (res + 3)) as f32 - 1.0,
+                    _ => (next() as f32 / u32::MAX as f32) * (r + 4.0) - 2.0,
+                };
+                let (mn, mx) = ([v(), v(), v()], [v(), v(), v()]);
+                assert_eq!(
+                    g.box_chunk_range(mn, mx),
+                    reference(&g, mn, mx),
+                    "{mn:?} {mx:?}"
+                );
+            }
+        }
     }
 
     #[test]
