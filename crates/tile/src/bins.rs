@@ -72,7 +72,8 @@ pub fn scatter(
 
 /// Triangle counts per leaf chunk of one grid, dense over its `(R/256)³` chunks: what the count
 /// pass ([`count`]) makes, or a caller that already passes over the triangles (e.g. the ingest
-/// pass, when the grid is known before it) with [`ChunkCounts::add_triangles`].
+/// pass, when the grid is known before it) with [`ChunkCounts::add_triangles`], or with
+/// [`ChunkCounts::add_keyed`] and keys taken on the threads that read the triangles.
 pub struct ChunkCounts {
     grid: Grid,
     n: u32,
