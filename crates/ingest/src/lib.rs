@@ -218,9 +218,10 @@ impl MeshSource {
 
     /// The bounds of all vertex positions, if they can be read cheaply before the faces (a
     /// memory-mapped binary PLY with fixed-size vertex records: its vertex list; a binary STL:
-    /// every facet corner), all of them finite; `None` otherwise. The bounds of the streamed triangles lie inside it, and
-    /// equal it when every vertex is used by a non-degenerate triangle (the usual case): a
-    /// caller can then set up what depends on the bounds (the grid) before the first pass.
+    /// every facet corner), all of them finite; `None` otherwise. The bounds of the streamed
+    /// triangles lie inside it, and equal it when every vertex is used by a non-degenerate
+    /// triangle (the usual case): a caller can then set up what depends on the bounds (the
+    /// grid) before the first pass.
     pub fn vertex_bounds(&self) -> Option<Bounds> {
         match &self.reader {
             Reader::Ply(p) => p.vertex_bounds(),

@@ -105,8 +105,8 @@ fn triangle_record_bytes(el: &Element, list: usize) -> Option<usize> {
 /// (so that record `r` starts at `off + r · size`): rounds of [`PARALLEL_RECORDS`] records per
 /// thread are decoded into [`LocalBatch`]es, prepared (`em.prepare`) on the same thread, and
 /// handed to `em` in record order, so the triangles, counts and the first error are those of
-/// the sequential reader. At the first
-/// record that is not a triangle, the rest is read sequentially.
+/// the sequential reader. At the first record that is not a triangle, the rest is read
+/// sequentially.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     path: &Path,
