@@ -32,18 +32,50 @@ fn request(backends: Option<wgpu::Backends>) -> Result<wgpu::Adapter, String> {
     .map_err(|e| e.to_string())
 }
 
-pub(crate) fn open() -> Result<Gpu, GpuError> {
-    let adapter = if std::env::var_os("WGPU_BACKEND").is_some() {
-        request(None).map_err(GpuError::NoAdapter)?
+/// The adapter [`open`] uses: `WGPU_BACKEND` if set, else Vulkan, else GL.
+fn find_adapter() -> Result<wgpu::Adapter, GpuError> {
+    if std::env::var_os("WGPU_BACKEND").is_some() {
+        request(None).map_err(GpuError::NoAdapter)
     } else {
         match request(Some(wgpu::Backends::VULKAN)) {
-            Ok(a) => a,
+            Ok(a) => Ok(a),
             Err(vk) => request(Some(wgpu::Backends::GL))
-                .map_err(|gl| GpuError::NoAdapter(format!("Vulkan: {vk}; GL: {gl}")))?,
+                .map_err(|gl| GpuError::NoAdapter(format!("Vulkan: {vk}; GL: {gl}"))),
         }
-    };
+    }
+}
+
+fn adapter_name(info: &wgpu::AdapterInfo) -> String {
+    format!("{} ({:?}, {})", info.name, info.backend, info.driver_info)
+}
+
+/// The adapter a [`crate::GpuVoxelizer`] would run on, found without creating a device or
+/// compiling a shader.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AdapterProbe {
+    /// Name, backend and driver, as [`crate::GpuVoxelizer::adapter_name`] gives them.
+    pub name: String,
+    /// A CPU-emulated device (lavapipe, llvmpipe, WARP): correct but slower than the CPU
+    /// voxelizer, so `--backend auto` does not pick it.
+    pub software: bool,
+}
+
+/// Finds the adapter [`crate::GpuVoxelizer::new`] would open, without opening it: what
+/// `--backend auto` needs to decide. On a machine without a GPU this costs the Vulkan
+/// instance and adapter enumeration only (tens of milliseconds on lavapipe), not the device and
+/// pipeline creation (half a second of shader compilation by llvmpipe).
+pub fn probe_adapter() -> Result<AdapterProbe, GpuError> {
+    let info = find_adapter()?.get_info();
+    Ok(AdapterProbe {
+        name: adapter_name(&info),
+        software: info.device_type == wgpu::DeviceType::Cpu,
+    })
+}
+
+pub(crate) fn open() -> Result<Gpu, GpuError> {
+    let adapter = find_adapter()?;
     let info = adapter.get_info();
-    let name = format!("{} ({:?}, {})", info.name, info.backend, info.driver_info);
+    let name = adapter_name(&info);
     let wanted = wgpu::Features::SHADER_F64;
     let features = wanted & adapter.features();
     let limits = adapter.limits();

@@ -69,6 +69,7 @@ mod encode;
 pub mod shaders;
 mod voxelizer;
 
+pub use device::{probe_adapter, AdapterProbe};
 pub use voxelizer::{Feed, GpuVoxelizer};
 
 use std::fmt;

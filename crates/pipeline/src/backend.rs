@@ -168,6 +168,27 @@ impl Voxelizers {
                     Cutoff::Fixed(c) => c,
                     Cutoff::Auto => DEFAULT_CUTOFF,
                 };
+                if backend == Backend::Auto {
+                    // decide from the adapter alone: creating the device and its pipelines
+                    // costs half a second on lavapipe, for an adapter auto would not use
+                    match voxlod_gpu::probe_adapter() {
+                        Err(e) => {
+                            let (v, d) = cpu();
+                            return Ok((v, format!("{d}; no GPU: {e}")));
+                        }
+                        Ok(a) if a.software => {
+                            let (v, d) = cpu();
+                            return Ok((
+                                v,
+                                format!(
+                                    "{d}; skipped the software GPU adapter {} (--backend gpu forces it)",
+                                    a.name
+                                ),
+                            ));
+                        }
+                        Ok(_) => {}
+                    }
+                }
                 let gpu = match voxlod_gpu::GpuVoxelizer::new(mode, method, fixed) {
                     Ok(g) => g,
                     Err(e) if backend == Backend::Auto => {
@@ -176,16 +197,6 @@ impl Voxelizers {
                     }
                     Err(e) => return Err(e).context("--backend gpu"),
                 };
-                if backend == Backend::Auto && gpu.is_software() {
-                    let (v, d) = cpu();
-                    return Ok((
-                        v,
-                        format!(
-                            "{d}; skipped the software GPU adapter {} (--backend gpu forces it)",
-                            gpu.adapter_name()
-                        ),
-                    ));
-                }
                 let mut gpu = gpu;
                 let mut desc = format!("gpu {} ({method}", gpu.adapter_name());
                 if method == voxlod_gpu::GpuMethod::Hybrid {
