@@ -30,8 +30,16 @@
 //!
 //! The overlap tests, clipping and attribute rules are those of `voxlod-voxelize` (see its crate
 //! docs), operation for operation; with `SHADER_F64` (lavapipe, most desktop Vulkan drivers) the
-//! shaders compute in f64 like the CPU, otherwise in f32. [`GpuMethod`] selects hybrid,
-//! triangle-only or fragment-only voxelization (same voxels, different speed).
+//! shaders compute in f64 like the CPU's fast path, otherwise in f32. [`GpuMethod`] selects
+//! hybrid, triangle-only or fragment-only voxelization (same voxels, different speed).
+//!
+//! **Not yet exact.** The CPU voxelizer decides every overlap exactly (an f64 filter with a
+//! proven error bound and exact predicates inside it, `voxlod_voxelize::overlap`); the shaders
+//! still take the plain f64 (or f32) sign, so where a value lies inside that rounding band (about
+//! one voxel in a few hundred thousand on scans, more at exact ties with FMA contraction) the GPU
+//! can miss or add a voxel the CPU does not. The f32 shaders are not conservative either. The
+//! planned fix (the shaders evaluate the same bounds, mark uncertain decisions and flag the
+//! chunk, the host re-voxelizes flagged chunks on the CPU) is not implemented.
 //!
 //! # Example
 //!

@@ -6,6 +6,10 @@
 //!   ([`Mode::Conservative`], 26-separating: every voxel the closed triangle touches;
 //!   [`Mode::Thin`], 6-separating: the naive digital plane restricted to the triangle). The exact
 //!   definitions, and where they differ from the paper's pseudocode, are in that module's docs.
+//!   Every overlap decision is exact for the f32 input: f64 evaluation with a proven error bound
+//!   per triangle, and Shewchuk's adaptive exact predicates ([`predicates`]) inside that bound
+//!   (`tests/exact.rs` compares the voxel sets with a big-integer reference).
+//! * [`predicates`]: exact orient2d / orient3d signs (the `robust` crate).
 //! * [`clip`]: [`clipped_area`], the triangle's area inside a voxel and its centroid (the
 //!   definition of the weights).
 //! * [`column`](mod@column): [`voxel_areas`], the same areas and centroids for all the voxels of a triangle,
@@ -96,6 +100,7 @@ pub mod clip;
 pub mod column;
 pub mod grid;
 pub mod overlap;
+pub mod predicates;
 
 pub use chunk::ChunkVoxelizer;
 pub use clip::clipped_area;
