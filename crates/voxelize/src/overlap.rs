@@ -352,6 +352,69 @@ impl TriSetup {
             }
         }
     }
+
+    // ---- The three per-voxel predicates (issue 13). A voxel `p` of the bounding box
+    // `[bmin, bmax]` is marked iff `column_inside(p_x, p_y)`, `p_z` lies in `column_depth(p_x,
+    // p_y, ..)` and `side_inside(p)`: the set `scan` enumerates. `crate::scanline` decides
+    // membership only through these. This block is the f64 evaluation of `scan`, expression by
+    // expression (same rounding, so the same sets); it is meant to be replaced by exact versions
+    // (filtered f64 with an exact fallback).
+
+    /// Dominant-projection (XY) edge tests of column `(x, y)` (swizzled).
+    #[inline]
+    pub fn column_inside(&self, x: i32, y: i32) -> bool {
+        let (x, y) = (x as f64, y as f64);
+        let xy = &self.ne[0];
+        let dxy = &self.de[0];
+        xy[0][0] * x + xy[0][1] * y + dxy[0] >= 0.0
+            && xy[1][0] * x + xy[1][1] * y + dxy[1] >= 0.0
+            && xy[2][0] * x + xy[2][1] * y + dxy[2] >= 0.0
+    }
+
+    /// The voxels `z` of column `(x, y)` whose box (conservative) / diamond (thin) meets the
+    /// plane, clamped to `[zlo, zhi]`; `None` if that is empty.
+    #[inline]
+    pub fn column_depth(&self, x: i32, y: i32, zlo: i32, zhi: i32) -> Option<(i32, i32)> {
+        let n = self.n;
+        let (x, y) = (x as f64, y as f64);
+        let a = -(n[0] * x + n[1] * y);
+        let lo_rhs = a + self.d_lo; // need n_z (p_z + 1) >= lo_rhs
+        let hi_rhs = a + self.d_hi; // need n_z p_z <= hi_rhs
+        let inv_nz = 1.0 / n[2];
+        let zl = zlo as f64;
+        let zh = zhi as f64;
+        let mut z0 = ((lo_rhs * inv_nz).ceil() - 1.0).clamp(zl - 1.0, zh + 1.0);
+        while z0 > zl - 1.0 && n[2] * z0 >= lo_rhs {
+            z0 -= 1.0;
+        }
+        while z0 <= zh && n[2] * (z0 + 1.0) < lo_rhs {
+            z0 += 1.0;
+        }
+        let mut z1 = (hi_rhs * inv_nz).floor().clamp(zl - 1.0, zh + 1.0);
+        while z1 < zh + 1.0 && n[2] * (z1 + 1.0) <= hi_rhs {
+            z1 += 1.0;
+        }
+        while z1 >= zl && n[2] * z1 > hi_rhs {
+            z1 -= 1.0;
+        }
+        let z0 = z0.max(zl);
+        let z1 = z1.min(zh);
+        (z0 <= z1).then_some((z0 as i32, z1 as i32))
+    }
+
+    /// The YZ and ZX edge tests of voxel `p = (x, y, z)` (swizzled).
+    #[inline]
+    pub fn side_inside(&self, p: [i32; 3]) -> bool {
+        let [x, y, z] = p.map(|c| c as f64);
+        let [_, yz, zx] = &self.ne;
+        let [_, dyz, dzx] = &self.de;
+        yz[0][1] * z + (yz[0][0] * y + dyz[0]) >= 0.0
+            && yz[1][1] * z + (yz[1][0] * y + dyz[1]) >= 0.0
+            && yz[2][1] * z + (yz[2][0] * y + dyz[2]) >= 0.0
+            && zx[0][0] * z + (zx[0][1] * x + dzx[0]) >= 0.0
+            && zx[1][0] * z + (zx[1][1] * x + dzx[1]) >= 0.0
+            && zx[2][0] * z + (zx[2][1] * x + dzx[2]) >= 0.0
+    }
 }
 
 #[inline]
