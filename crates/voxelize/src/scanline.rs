@@ -68,8 +68,13 @@ const REL_SLACK: f64 = 1e-9;
 /// evaluation (~1e-10 for coordinates below 2^20), so a run never reaches a tie.
 const RUN_MARGIN: f64 = 1e-6;
 
-/// Shortest column range of a slice for which a run is worth certifying.
+/// Shortest column range of a slice for which a run is worth finding.
 const MIN_RUN: i32 = 3;
+
+/// Triangles whose window spans fewer columns than this in x or y go to [`TriSetup::scan`]
+/// (the same voxels): on them the slice setup costs more than it saves (measured,
+/// docs/BENCHMARKS.md).
+const SMALL: i32 = 32;
 
 /// A dominant-projection edge `a·x + b·y + c ≥ 0` as a bound on the columns y of slice x:
 /// `y ≥ −(c + a·x)/b` if `lower` (`b > 0`), else `y ≤` (`b < 0`); `inv_b = 0` for `b = 0`
@@ -87,6 +92,7 @@ struct ColumnBound {
 #[derive(Clone, Copy, Debug)]
 struct RunBound {
     alpha: f64,
+    inv_alpha: f64,
     beta0: f64,
     beta1: f64,
     mu: f64,
@@ -116,6 +122,7 @@ impl Slices {
         let lines = [s.d_lo / n[2] - 1.0, s.d_hi / n[2]];
         let mut run = [RunBound {
             alpha: 0.0,
+            inv_alpha: 0.0,
             beta0: 0.0,
             beta1: 0.0,
             mu: 0.0,
@@ -129,6 +136,7 @@ impl Slices {
                 let c = s.de[1][i];
                 run[k] = RunBound {
                     alpha: a + b * gy,
+                    inv_alpha: 1.0 / (a + b * gy),
                     beta0: c + b * z0,
                     beta1: b * gx,
                     mu: RUN_MARGIN * (a.abs() + b.abs()),
@@ -139,6 +147,7 @@ impl Slices {
                 let c = s.de[2][i];
                 run[k] = RunBound {
                     alpha: a * gy,
+                    inv_alpha: 1.0 / (a * gy),
                     beta0: c + a * z0,
                     beta1: b + a * gx,
                     mu: RUN_MARGIN * (a.abs() + b.abs()),
@@ -166,7 +175,7 @@ impl Slices {
             }
             let t = (-e.c - ax) * e.inv_b;
             let slack = REL_SLACK * (1.0 + (e.c.abs() + ax.abs()) * e.inv_b.abs());
-            if !(slack < 0.25) {
+            if slack.is_nan() || slack >= 0.25 {
                 continue; // ill-conditioned: no bound from this edge
             }
             if e.lower {
@@ -189,14 +198,16 @@ impl Slices {
         for r in &self.run {
             // α·y ≥ μ − β
             let rhs = r.mu - (r.beta0 + r.beta1 * x);
-            if r.alpha > 0.0 {
-                a = a.max((rhs / r.alpha).ceil());
-            } else if r.alpha < 0.0 {
-                b = b.min((rhs / r.alpha).floor());
-            } else if rhs > 0.0 {
+            let q = rhs * r.inv_alpha;
+            if r.alpha > 0.0 && q.is_finite() {
+                a = a.max(q.ceil());
+            } else if r.alpha < 0.0 && q.is_finite() {
+                b = b.min(q.floor());
+            } else if r.alpha != 0.0 || rhs > 0.0 || rhs.is_nan() {
+                // a bound out of range (or not a number): no run in this slice
                 return (1, 0);
             }
-            if !(a <= b) {
+            if a > b {
                 return (1, 0);
             }
         }
@@ -268,8 +279,12 @@ pub fn scan(s: &TriSetup, lo: [i32; 3], hi: [i32; 3], mut emit: impl FnMut([i32;
     if (0..3).any(|k| lo[k] > hi[k]) {
         return;
     }
-    let sl = Slices::new(s);
     let (zl, zh) = (lo[2], hi[2]);
+    if hi[0] - lo[0] + 1 < SMALL || hi[1] - lo[1] + 1 < SMALL {
+        // a small triangle: the overlap tests' own column loop (the same voxels) is faster
+        return s.scan(lo, hi, emit);
+    }
+    let sl = Slices::new(s);
 
     for x in lo[0]..=hi[0] {
         let xf = x as f64;
@@ -346,9 +361,9 @@ pub fn ilv_line(p0: P3, p1: P3, mut mark: impl FnMut(P3)) {
         }
         let lmin = l[k];
         p[k] += step[k];
-        for j in 0..3 {
-            if l[j] != i64::MAX {
-                l[j] -= lmin;
+        for lj in &mut l {
+            if *lj != i64::MAX {
+                *lj -= lmin;
             }
         }
         l[k] = 2 * m[k];
