@@ -10,7 +10,7 @@ mod common;
 use common::*;
 use voxlod_format::Voxel;
 use voxlod_geom::{Bounds, Grid, Triangle, CHUNK, TRI_HAS_COLORS, TRI_HAS_NORMALS};
-use voxlod_voxelize::scanline::{ilv_line, scan, scan_ilv};
+use voxlod_voxelize::scanline::{ilv_line, scan, scan_ilv, scan_slices};
 use voxlod_voxelize::{ChunkVoxelizer, Method, Mode, TriSetup};
 
 type Hits = Vec<([i32; 3], bool)>;
@@ -20,7 +20,10 @@ fn three_ways(s: &TriSetup, lo: [i32; 3], hi: [i32; 3]) -> (Hits, Hits, Vec<[i32
     let mut sat = Vec::new();
     s.scan(lo, hi, |p, f| sat.push((p, f)));
     let mut sl = Vec::new();
-    scan(s, lo, hi, |p, f| sl.push((p, f)));
+    scan_slices(s, lo, hi, |p, f| sl.push((p, f)));
+    let mut auto = Vec::new();
+    scan(s, lo, hi, |p, f| auto.push((p, f)));
+    assert_eq!(auto, sl, "scan and scan_slices");
     // the definition: p in the window and the bounding box, and the three predicates
     let lo = [0, 1, 2].map(|k| lo[k].max(s.bmin[k]));
     let hi = [0, 1, 2].map(|k| hi[k].min(s.bmax[k]));
@@ -172,7 +175,7 @@ fn mesh_matches(tris: &[Triangle], res: i32) -> usize {
             let mut sat = Vec::new();
             s.scan([0; 3], [res - 1; 3], |p, f| sat.push((p, f)));
             let mut sl = Vec::new();
-            scan(&s, [0; 3], [res - 1; 3], |p, f| sl.push((p, f)));
+            scan_slices(&s, [0; 3], [res - 1; 3], |p, f| sl.push((p, f)));
             assert_eq!(sl, sat, "{mode} {:?}", t.v);
             n += sl.len();
         }
@@ -344,6 +347,7 @@ fn ilv_error_is_within_the_documented_bound() {
     }
 }
 
-/// The documented bounds (docs/BENCHMARKS.md, module docs of `scanline`).
-const ILV_MISSED_PCT: f64 = 100.0;
-const ILV_ADDED_PCT: f64 = 100.0;
+/// The documented bounds (docs/BENCHMARKS.md, module docs of `scanline`): measured 12–13 %
+/// missed and 13–14 % added here.
+const ILV_MISSED_PCT: f64 = 15.0;
+const ILV_ADDED_PCT: f64 = 15.0;
