@@ -277,7 +277,7 @@ fn settled_column(
 /// The projected scanline voxelizer: calls `emit(p, first)` for exactly the voxels that
 /// [`TriSetup::scan`] emits for `[lo, hi]` (swizzled, inclusive), in the same order (x, then y,
 /// then z) with the same `first` flags (the first voxel of each (x, y) column).
-pub fn scan(s: &TriSetup, lo: [i32; 3], hi: [i32; 3], mut emit: impl FnMut([i32; 3], bool)) {
+pub fn scan(s: &TriSetup, lo: [i32; 3], hi: [i32; 3], emit: impl FnMut([i32; 3], bool)) {
     let lo = [0, 1, 2].map(|k| lo[k].max(s.bmin[k]));
     let hi = [0, 1, 2].map(|k| hi[k].min(s.bmax[k]));
     if (0..3).any(|k| lo[k] > hi[k]) {
