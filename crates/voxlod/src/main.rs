@@ -97,7 +97,8 @@ struct BuildArgs {
     #[arg(short, long)]
     mode: Option<Mode>,
     /// CPU voxelizer: sat (overlap tests of every column of a triangle's bounding box),
-    /// scanline (Zhang et al.'s projected scanline: the same voxels, faster), or scanline-ilv
+    /// scanline (Zhang et al.'s projected scanline: the same voxels, faster on triangles spanning
+    /// many voxels), or scanline-ilv
     /// (integer-only, approximate, conservative mode only) [default: scanline].
     #[arg(long)]
     voxelizer: Option<Method>,
