@@ -10,9 +10,10 @@
 //! then z, with no sort). Inside a slice every **scanline** is a line of voxels, and the voxels
 //! of a convex triangle along a line of voxels form an interval: the marked voxels are the
 //! lattice points of a convex polytope (the 13 separating-axis conditions are half-spaces in
-//! `p`). So only the ends of each interval are decided, and only through the three predicates
-//! of [`TriSetup`] (`column_inside`, `column_depth`, `side_inside`, exact once the overlap
-//! tests are); every other voxel follows from convexity:
+//! `p`). So only the ends of each interval are decided, through the three predicates of
+//! [`TriSetup`] (`column_inside`, `column_depth`, `side_inside`, exact once the overlap tests
+//! are); the voxels between the ends follow from convexity, and the columns of a run (3.) from
+//! a floating-point bound with a margin far above its rounding:
 //!
 //! 1. The **columns** of the slice, the y-interval where `column_inside(i, y)` holds: its ends
 //!    are computed in floating point from the three dominant-projection edges (rounded
@@ -36,6 +37,10 @@
 //!    happen) the slice is settled column by column.
 //! 4. Outside the run (a few columns at each end of the slice) the depth scanline is settled
 //!    at both ends with `side_inside`, stepping inwards (the depth interval is a hard bound).
+//!
+//! Triangles whose window spans fewer than `SMALL` (32) columns in x or y, where a slice's
+//! setup costs more than it saves, go to [`TriSetup::scan`] (the same voxels; [`scan_slices`]
+//! runs the slices on any triangle).
 //!
 //! This is the paper's super-cover rule (SLV): every voxel a scanline's interval touches,
 //! ties included, so the set **equals** the conservative set of the overlap tests, and in thin
