@@ -231,8 +231,8 @@ fn chunk_voxelizer_records_are_identical() {
     // random triangles with normals and colours, and the npm bunny over several chunks
     let mut rng = Rng(99);
     let mut tris = Vec::new();
-    for i in 0..400 {
-        let t = random_triangle(&mut rng, i, 300.0).map(|p| p.map(|x| x + 100.0));
+    for i in 0..240 {
+        let t = random_triangle(&mut rng, i, 200.0).map(|p| p.map(|x| x + 100.0));
         let mut tri = Triangle::new(f32tri(t));
         if i % 2 == 0 {
             tri.flags |= TRI_HAS_NORMALS;
