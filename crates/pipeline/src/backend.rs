@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use voxlod_format::Voxel;
 use voxlod_tile::Bins;
-use voxlod_voxelize::{ChunkVoxelizer, Mode};
+use voxlod_voxelize::{ChunkVoxelizer, Method, Mode};
 
 /// `--backend`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -133,10 +133,11 @@ pub(crate) type ChunkResult = Result<(Vec<Voxel>, u64)>;
 impl Voxelizers {
     /// Creates the voxelizers for `backend`; returns them with a description for the summary
     /// and any warning.
-    #[allow(unused_variables)]
+    #[allow(unused_variables, clippy::too_many_arguments)]
     pub(crate) fn new(
         backend: Backend,
         mode: Mode,
+        method: Method,
         cpu_workers: usize,
         threads: usize,
         gpu_method: &str,
@@ -146,14 +147,26 @@ impl Voxelizers {
         let cpu = || {
             let v = Voxelizers::Cpu(
                 (0..cpu_workers)
-                    .map(|_| Mutex::new(ChunkVoxelizer::new(mode)))
+                    .map(|_| {
+                        let mut cv = ChunkVoxelizer::new(mode);
+                        cv.set_method(method);
+                        Mutex::new(cv)
+                    })
                     .collect(),
             );
             (
                 v,
-                format!("cpu ({cpu_workers} chunk voxelizers on {threads} threads)"),
+                format!("cpu ({cpu_workers} chunk voxelizers on {threads} threads, {method})"),
             )
         };
+        // the GPU computes the overlap tests' set; the approximate method runs on the CPU only
+        match (backend, method.is_exact()) {
+            (Backend::Gpu, false) => {
+                anyhow::bail!("--voxelizer {method} runs on the CPU only (--backend cpu or auto)")
+            }
+            (Backend::Auto, false) => return Ok(cpu()),
+            _ => {}
+        }
         match backend {
             Backend::Cpu => Ok(cpu()),
             #[cfg(feature = "gpu")]

@@ -38,14 +38,15 @@ use voxlod_format::{encode_node, EncodedNode, FileSpec, Voxel, Writer};
 use voxlod_geom::{Bounds, Grid, Triangle};
 use voxlod_ingest::{IngestError, MeshSource};
 use voxlod_tile::{Bins, ChunkBin, ChunkCounts, Passes, RecordLayout, Spool, Spooler, TileError};
-use voxlod_voxelize::Mode;
+use voxlod_voxelize::{Method, Mode};
 
 use leaf_log::LeafLog;
 use progress::Stage;
 use work::WorkDir;
 
 /// Everything a build depends on. Only `resolution`, `mode` and `zstd_level` affect the output
-/// bytes; `threads`, `memory`, `tmp_dir` and `progress` do not.
+/// bytes (and `voxelizer` when it is the approximate `scanline-ilv`); `threads`, `memory`,
+/// `tmp_dir` and `progress` do not.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct BuildSettings {
@@ -53,6 +54,9 @@ pub struct BuildSettings {
     pub resolution: u32,
     /// Conservative (26-separating) or thin (6-separating).
     pub mode: Mode,
+    /// CPU voxelizer method: sat (overlap tests) or scanline (Zhang et al.), the same voxels;
+    /// scanline-ilv (integer-only, approximate, conservative only).
+    pub voxelizer: Method,
     /// Worker threads; 0 = one per core.
     pub threads: usize,
     /// Memory budget in bytes for the whole process.
@@ -82,6 +86,7 @@ impl Default for BuildSettings {
         BuildSettings {
             resolution: 1024,
             mode: Mode::Conservative,
+            voxelizer: Method::default(),
             threads: 0,
             memory: 2 << 30,
             zstd_level: voxlod_format::DEFAULT_ZSTD_LEVEL,
@@ -116,6 +121,8 @@ pub struct BuildSummary {
     pub degenerate_skipped: u64,
     pub resolution: u32,
     pub mode: Mode,
+    /// The CPU voxelizer method (the GPU backend computes the overlap tests' set itself).
+    pub voxelizer: Method,
     pub threads: usize,
     /// The voxelizer that ran (backend, adapter, method, cutoff).
     pub backend: String,
@@ -200,6 +207,13 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
     }
     if !(-7..=22).contains(&s.zstd_level) {
         bail!("zstd level {} is outside -7..=22", s.zstd_level);
+    }
+    if !s.voxelizer.supports(s.mode) {
+        bail!(
+            "--voxelizer {} approximates the conservative set only; use --voxelizer scanline (or sat) with {} mode",
+            s.voxelizer,
+            s.mode
+        );
     }
     let threads = if s.threads == 0 {
         std::thread::available_parallelism().map_or(1, |n| n.get())
@@ -535,11 +549,15 @@ fn run(
         Ok(())
     })?;
     bar.finish();
-    let manifest_settings = serde_json::json!({
+    let mut manifest_settings = serde_json::json!({
         "resolution": s.resolution,
         "mode": s.mode.to_string(),
         "zstd_level": s.zstd_level,
     });
+    // the exact methods write the same bytes; the approximate one says so in the file
+    if !s.voxelizer.is_exact() {
+        manifest_settings["voxelizer"] = s.voxelizer.to_string().into();
+    }
     let input_name = input
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -571,6 +589,7 @@ fn run(
         degenerate_skipped: marker.degenerate_skipped,
         resolution: s.resolution,
         mode: s.mode,
+        voxelizer: s.voxelizer,
         threads,
         backend: backend_used,
         gpu_split,
@@ -751,6 +770,7 @@ fn tile_and_voxelize(
             let (voxelizers, description) = backend::Voxelizers::new(
                 s.backend,
                 s.mode,
+                s.voxelizer,
                 plan.voxelizers,
                 pool.current_num_threads(),
                 &s.gpu_method,

@@ -34,7 +34,8 @@ fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
 
 impl WorkDir {
     /// The key of a build: input identity (canonical path, size, modification time), the
-    /// settings that change the intermediates, the tool version and [`WORK_FORMAT`].
+    /// settings that change the intermediates (the voxelizer method too: the leaf log of
+    /// `scanline-ilv` differs), the tool version and [`WORK_FORMAT`].
     pub fn key(input: &Path, s: &BuildSettings) -> Result<String> {
         let canon = input
             .canonicalize()
@@ -47,12 +48,13 @@ impl WorkDir {
             .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
             .map_or(0, |d| d.as_nanos());
         let text = format!(
-            "{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
+            "{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
             canon.display(),
             meta.len(),
             mtime,
             s.resolution,
             s.mode,
+            s.voxelizer,
             s.zstd_level,
             s.backend,
             env!("CARGO_PKG_VERSION"),

@@ -10,12 +10,25 @@
 //! chunk voxelizer on one thread (overlap + clipping + attributes + encoding) with the fast paths
 //! and with the general clipping only (`ChunkVoxelizer::set_fast_paths(false)`), whether both
 //! give the same voxel records, and `voxelize_grid` on all rayon threads.
+//!
+//! Comparing voxelizer methods (the paper's Table 2: one thread, set only and with attributes):
+//!
+//! `voxelize_bench - RES MESH methods sat,scanline [conservative|thin|both] [rounds=3] [set]`
+//!
+//! runs, per mode and round, each method in turn (interleaved): the set only
+//! (`voxelize_triangle_with`, whole triangles, counting voxels) and the chunk voxelizer with
+//! attributes on one thread (fast paths), both as CPU time of the thread; then prints the
+//! median per method, the voxel counts, and whether the sets and records equal the first
+//! method's. A last argument `set` skips the chunk voxelizer.
 
 use std::collections::HashMap;
 use std::time::Instant;
 
+use voxlod_format::Voxel;
 use voxlod_geom::{Bounds, Grid, Triangle, CHUNK};
-use voxlod_voxelize::{voxelize_grid, voxelize_triangle, ChunkVoxelizer, Mode};
+use voxlod_voxelize::{
+    voxelize_grid, voxelize_triangle, voxelize_triangle_with, ChunkVoxelizer, Method, Mode,
+};
 
 fn icosphere(subdiv: u32) -> Vec<[[f64; 3]; 3]> {
     let t = (1.0 + 5f64.sqrt()) / 2.0;
@@ -134,6 +147,9 @@ fn thread_cpu() -> Option<f64> {
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
+    if args.get(4).map(|s| s.as_str()) == Some("methods") {
+        return compare_methods(&args);
+    }
     let subdiv: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
     let res: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1024);
     let paths: &[bool] = match args.get(4).map(|s| s.as_str()) {
@@ -240,5 +256,140 @@ fn cpu_or_wall(c0: Option<f64>, t0: Instant) -> f64 {
     match (c0, thread_cpu()) {
         (Some(a), Some(b)) => b - a,
         _ => t0.elapsed().as_secs_f64(),
+    }
+}
+
+/// Bins `tris` to chunks and runs the chunk voxelizer with `method` on one thread: (records per
+/// chunk, thread CPU seconds).
+fn chunk_run(tris: &[Triangle], res: u32, mode: Mode, method: Method) -> (Vec<Vec<Voxel>>, f64) {
+    let grid = Grid::new([0.0; 3], res as f64, res).expect("grid");
+    let c0 = thread_cpu();
+    let t0 = Instant::now();
+    let mut bins: HashMap<[u32; 3], Vec<Triangle>> = HashMap::new();
+    for t in tris {
+        if let Some((lo, hi)) = grid.chunk_range(t) {
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        bins.entry([x, y, z]).or_default().push(*t);
+                    }
+                }
+            }
+        }
+    }
+    let mut keys: Vec<[u32; 3]> = bins.keys().copied().collect();
+    keys.sort();
+    let mut cv = ChunkVoxelizer::new(mode);
+    cv.set_method(method);
+    let out = keys
+        .iter()
+        .map(|k| {
+            cv.begin(k.map(|x| x * CHUNK));
+            cv.add(&bins[k]);
+            cv.finish()
+        })
+        .collect();
+    (out, cpu_or_wall(c0, t0))
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// `voxelize_bench - RES MESH methods LIST [MODES] [ROUNDS]`: see the module docs.
+fn compare_methods(args: &[String]) {
+    let res: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1024);
+    let tris = match args.get(3).filter(|s| *s != "-") {
+        Some(path) => mesh(std::path::Path::new(path), res),
+        None => sphere(6, res),
+    };
+    let methods: Vec<Method> = args
+        .get(5)
+        .map_or("sat,scanline", |s| s.as_str())
+        .split(',')
+        .map(|m| m.parse().expect("method"))
+        .collect();
+    let modes: &[Mode] = match args.get(6).map(|s| s.as_str()) {
+        Some("thin") => &[Mode::Thin],
+        Some("both") => &[Mode::Conservative, Mode::Thin],
+        _ => &[Mode::Conservative],
+    };
+    let rounds: usize = args.get(7).and_then(|s| s.parse().ok()).unwrap_or(3);
+    let set_only = args.get(8).map(|s| s.as_str()) == Some("set");
+    println!(
+        "{} triangles in a {res}³ grid, one thread, {rounds} interleaved rounds",
+        tris.len()
+    );
+    for &mode in modes {
+        let methods: Vec<Method> = methods
+            .iter()
+            .copied()
+            .filter(|m| m.supports(mode))
+            .collect();
+        let mut set_t = vec![Vec::new(); methods.len()];
+        let mut chunk_t = vec![Vec::new(); methods.len()];
+        let mut counts = vec![(0u64, 0usize); methods.len()];
+        let mut same = vec![(true, true); methods.len()];
+        let mut first_set: Option<Vec<u64>> = None;
+        let mut first_chunks: Option<Vec<Vec<Voxel>>> = None;
+        for round in 0..rounds {
+            for (i, &m) in methods.iter().enumerate() {
+                // set only: whole triangles, the voxels hashed in order
+                let c0 = thread_cpu();
+                let t0 = Instant::now();
+                let mut n = 0u64;
+                let mut h = 0u64;
+                let mut hashes = Vec::with_capacity(if round == 0 { tris.len() } else { 0 });
+                for t in &tris {
+                    voxelize_triangle_with(&t.v, [0; 3], [res as i32 - 1; 3], mode, m, &mut |p| {
+                        n += 1;
+                        h = h.rotate_left(5)
+                            ^ (p[0] as u64) << 40
+                            ^ (p[1] as u64) << 20
+                            ^ p[2] as u64;
+                    });
+                    if round == 0 {
+                        hashes.push(h);
+                    }
+                }
+                set_t[i].push(cpu_or_wall(c0, t0));
+                counts[i].0 = n;
+                if round == 0 {
+                    match &first_set {
+                        None => first_set = Some(hashes),
+                        Some(f) => same[i].0 = *f == hashes,
+                    }
+                }
+                // with attributes: the chunk voxelizer
+                if set_only {
+                    continue;
+                }
+                let (out, dt) = chunk_run(&tris, res, mode, m);
+                chunk_t[i].push(dt);
+                counts[i].1 = out.iter().map(|c| c.len()).sum();
+                if round == 0 {
+                    match &first_chunks {
+                        None => first_chunks = Some(out),
+                        Some(f) => same[i].1 = *f == out,
+                    }
+                }
+            }
+        }
+        for (i, m) in methods.iter().enumerate() {
+            let s = median(&mut set_t[i]);
+            let c = if set_only {
+                f64::NAN
+            } else {
+                median(&mut chunk_t[i])
+            };
+            println!(
+                "{mode:>12} {m:>13}: set only {s:7.3} s ({:>11} voxel hits{}), with attributes {c:7.3} s ({:>10} records{}) [cpu, median of {rounds}]",
+                counts[i].0,
+                if same[i].0 { "" } else { ", set DIFFERS" },
+                counts[i].1,
+                if same[i].1 { "" } else { ", records DIFFER" },
+            );
+        }
     }
 }

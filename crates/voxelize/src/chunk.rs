@@ -15,7 +15,7 @@ use crate::column::Columns;
 use crate::overlap::{
     cross_f64, dominant_axis, interior_voxel, swizzle, to_f64, unswizzle, TriSetup,
 };
-use crate::Mode;
+use crate::{scanline, Method, Mode};
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
 const BRICKS: usize = 32 * 32 * 32;
@@ -170,6 +170,8 @@ pub struct ChunkVoxelizer {
     skipped: u64,
     /// the column clipping state, reused from triangle to triangle
     cols: Columns,
+    /// how each triangle's voxels are found
+    method: Method,
 }
 
 impl ChunkVoxelizer {
@@ -183,7 +185,27 @@ impl ChunkVoxelizer {
             acc: Vec::new(),
             skipped: 0,
             cols: Columns::idle(true),
+            method: Method::default(),
         }
+    }
+
+    /// How each triangle's voxels are found ([`Method::default`] unless set). The exact methods
+    /// give the same voxels in the same order, so the same records.
+    ///
+    /// # Panics
+    /// If `method` does not support the voxelizer's mode ([`Method::supports`]).
+    pub fn set_method(&mut self, method: Method) {
+        assert!(
+            method.supports(self.mode),
+            "voxelizer {method} does not support {} mode",
+            self.mode
+        );
+        self.method = method;
+    }
+
+    /// The method set with [`ChunkVoxelizer::set_method`].
+    pub fn method(&self) -> Method {
+        self.method
     }
 
     /// For tests and benchmarks: `false` computes every weight by the general clipping of
@@ -251,7 +273,7 @@ impl ChunkVoxelizer {
             let bricks = &mut self.bricks;
             let blocks = &mut self.blocks;
             let acc = &mut self.acc;
-            s.scan(lo_s, hi_s, |p, first| {
+            let each = |p: [i32; 3], first: bool| {
                 if first {
                     cols.begin(p[0] as f64, p[1] as f64);
                 }
@@ -266,7 +288,12 @@ impl ChunkVoxelizer {
                 debug_assert!(local.iter().all(|&c| c < CHUNK));
                 let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
                 accumulate(bricks, blocks, acc, idx, w, n, col);
-            });
+            };
+            match self.method {
+                Method::Sat => s.scan(lo_s, hi_s, each),
+                Method::Scanline => scanline::scan(&s, lo_s, hi_s, each),
+                Method::ScanlineIlv => scanline::scan_ilv(&s, lo_s, hi_s, each),
+            }
         }
     }
 

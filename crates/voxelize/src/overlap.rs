@@ -423,6 +423,20 @@ impl TriSetup {
         (0..axes).all(|k| p[k] >= self.bmin[k] && p[k] <= self.bmax[k])
     }
 
+    /// The relative rounding bound of the f64 side (YZ, ZX) edge functions `ne·p + de`:
+    /// wherever the scan can reach, each differs from its exact value by at most
+    /// `side_slack() · (|ne₀| + |ne₁|)` (the bound `be` of [`TriSetup::new`] over the edge
+    /// normal's length); infinite when the triangle is decided exactly throughout.
+    /// `crate::scanline` certifies a run of columns by a float margin only when that margin is
+    /// far above this.
+    pub(crate) fn side_slack(&self) -> f64 {
+        if self.be[1..].iter().flatten().any(|b| b.is_infinite()) {
+            return f64::INFINITY;
+        }
+        let big_m = self.v.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs())) + 2.0;
+        8.0 * U * (2.0 * big_m + 1.0)
+    }
+
     /// Dominant-projection (XY) edge tests of column (x, y), exact.
     pub fn column_inside(&self, x: i32, y: i32) -> bool {
         let b = if self.near([x, y, 0], 2) {

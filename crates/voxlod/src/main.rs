@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use voxlod_pipeline::{format_size, parse_size, BuildSettings, BuildSummary};
-use voxlod_voxelize::Mode;
+use voxlod_voxelize::{Method, Mode};
 
 mod diff;
 mod export;
@@ -96,6 +96,12 @@ struct BuildArgs {
     /// conservative (26-separating: every voxel the triangle touches) or thin (6-separating) [default: conservative].
     #[arg(short, long)]
     mode: Option<Mode>,
+    /// CPU voxelizer: sat (overlap tests of every column of a triangle's bounding box),
+    /// scanline (Zhang et al.'s projected scanline: the same voxels, faster on triangles spanning
+    /// many voxels), or scanline-ilv
+    /// (integer-only, approximate, conservative mode only) [default: scanline].
+    #[arg(long)]
+    voxelizer: Option<Method>,
     /// Worker threads; 0 = one per core [default: 0].
     #[arg(short = 'j', long)]
     threads: Option<usize>,
@@ -177,6 +183,9 @@ fn run_build(a: BuildArgs) -> Result<()> {
     }
     if let Some(v) = a.mode {
         s.mode = v;
+    }
+    if let Some(v) = a.voxelizer {
+        s.voxelizer = v;
     }
     if let Some(v) = a.threads {
         s.threads = v;
