@@ -199,6 +199,18 @@ fn values(n: [f64; 3], c: [f64; 4]) -> [f32; 8] {
     ]
 }
 
+/// The unencoded sums of one voxel ([`ChunkVoxelizer::finish_sums`]): position in the chunk,
+/// number of contributions `k`, and in f32 `w = Σ w_i`, `n = Σ w_i·normal_i`,
+/// `c = Σ w_i·colour_i`; if `w == 0` (every weight zero), `n` and `c` are the unweighted sums.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VoxelSums {
+    pub pos: [u8; 3],
+    pub k: u32,
+    pub w: f32,
+    pub n: [f32; 3],
+    pub c: [f32; 4],
+}
+
 /// Reusable per-thread chunk voxelizer; see the crate docs for the attribute rules.
 pub struct ChunkVoxelizer {
     mode: Mode,
@@ -358,6 +370,31 @@ impl ChunkVoxelizer {
     /// sort: the voxels of the bricks before its brick (in Morton order) plus those before it
     /// in its brick.
     pub fn finish(&mut self) -> Vec<Voxel> {
+        let mut out = vec![Voxel::default(); self.acc.len()];
+        self.ranked(|r, pos, a| out[r] = encode(pos, a));
+        out
+    }
+
+    /// [`ChunkVoxelizer::finish`] without the encoding: the sums of each voxel, in the same
+    /// order (for tests of the accumulation against an exact reference, and diagnostics).
+    pub fn finish_sums(&mut self) -> Vec<VoxelSums> {
+        let mut out = vec![VoxelSums::default(); self.acc.len()];
+        self.ranked(|r, pos, a| {
+            out[r] = VoxelSums {
+                pos,
+                k: a.k,
+                w: a.s[3],
+                n: [a.s[0], a.s[1], a.s[2]],
+                c: [a.s[4], a.s[5], a.s[6], a.s[7]],
+            }
+        });
+        out
+    }
+
+    /// Calls `f(rank, position, sums)` for every accumulator, in the order they were made, with
+    /// its rank in Morton order; then resets.
+    #[inline]
+    fn ranked(&mut self, mut f: impl FnMut(usize, [u8; 3], &Acc)) {
         let mut order: Vec<(u32, u32)> = self
             .touched
             .iter()
@@ -376,17 +413,15 @@ impl ChunkVoxelizer {
             }
         }
         debug_assert_eq!(rank as usize, self.acc.len());
-        let mut out = vec![Voxel::default(); self.acc.len()];
         for a in &self.acc {
             let b = self.bricks[(a.idx >> 9) as usize] as usize - 1;
             let v = a.idx as usize & (BRICK - 1);
             let below = self.touched[b].1[v >> 6] & ((1u64 << (v & 63)) - 1);
             let r = first[b][v >> 6] + below.count_ones();
             let pos = demorton3(a.idx as u64).map(|c| c as u8);
-            out[r as usize] = encode(pos, a);
+            f(r as usize, pos, a);
         }
         self.reset();
-        out
     }
 
     /// Triangles skipped (zero area or non-finite) since this voxelizer was made.
