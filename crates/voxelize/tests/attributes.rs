@@ -67,13 +67,13 @@ fn reference(tris: &[Triangle], origin: [u32; 3]) -> BTreeMap<[u8; 3], Ref> {
             let r = out.entry(pos).or_default();
             r.k += 1;
             r.w += a;
-            for k in 0..3 {
-                r.n[k] += a * n[k];
-                r.un[k] += n[k];
+            for ((s, u), x) in r.n.iter_mut().zip(&mut r.un).zip(n) {
+                *s += a * x;
+                *u += x;
             }
-            for k in 0..4 {
-                r.c[k] += a * c[k];
-                r.uc[k] += c[k];
+            for ((s, u), x) in r.c.iter_mut().zip(&mut r.uc).zip(c) {
+                *s += a * x;
+                *u += x;
             }
         });
     }
@@ -189,11 +189,11 @@ fn check_chunk(tris: &[Triangle], origin: [u32; 3], st: &mut Stats) {
 
 /// Random vertex normals on every third triangle, random colours on every second.
 fn with_attributes(rng: &mut Rng, mut tri: Triangle, i: usize) -> Triangle {
-    if i % 3 == 0 {
+    if i.is_multiple_of(3) {
         tri.flags |= TRI_HAS_NORMALS;
         tri.n = [0, 1, 2].map(|_| rng.point(-1.0, 1.0).map(|x| x as f32));
     }
-    if i % 2 == 0 {
+    if i.is_multiple_of(2) {
         tri.flags |= TRI_HAS_COLORS;
         tri.c = [0, 1, 2].map(|_| [0, 1, 2, 3].map(|_| rng.int(0, 255) as u8));
     }
