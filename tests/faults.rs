@@ -113,7 +113,7 @@ impl Drop for Mount {
     }
 }
 
-/// 1. Two builds with the same `-o` at once: the second is refused at once, naming the first
+/// Item 1: Two builds with the same `-o` at once: the second is refused at once, naming the first
 /// one's pid, whether its input differs or its arguments are identical; two builds that would
 /// share a work folder (same input and settings, outputs of the same name in different
 /// folders, one `--tmp`) likewise. The first build's file is complete and valid.
@@ -212,7 +212,7 @@ fn same_output_at_once_is_refused_naming_the_other_process() {
     assert!(work_folders(&tmp).is_empty());
 }
 
-/// 2. An output that is an input (the same file by device and inode, so also a hard link) is
+/// Item 2: An output that is an input (the same file by device and inode, so also a hard link) is
 /// refused by `build`, `export`, `render` and `gen`, and the input is unchanged; an existing
 /// file of another kind is replaced only with `--force`.
 #[test]
@@ -296,7 +296,7 @@ fn output_that_is_an_input_is_refused() {
     assert_eq!(std::fs::read(&g).unwrap(), octree);
 }
 
-/// 3. A file truncated or overwritten while a reader has it open: reads fail with errors
+/// Item 3: A file truncated or overwritten while a reader has it open: reads fail with errors
 /// naming the node, the process does not die (before: SIGBUS through the memory map).
 #[test]
 fn file_changed_while_read_gives_errors_not_a_crash() {
@@ -357,7 +357,7 @@ fn file_changed_while_read_gives_errors_not_a_crash() {
     }
 }
 
-/// 4. `-j 10000` is capped at the number of cores with a warning (before: 10,000 threads).
+/// Item 4: `-j 10000` is capped at the number of cores with a warning (before: 10,000 threads).
 #[test]
 fn thread_count_is_capped_with_a_warning() {
     let dir = tempfile::tempdir().unwrap();
@@ -392,7 +392,7 @@ fn gzip(bytes: &[u8]) -> Vec<u8> {
     e.finish().unwrap()
 }
 
-/// 5. A `.ply.gz` with a bad CRC or without its trailer is an error naming the file (before:
+/// Item 5: A `.ply.gz` with a bad CRC or without its trailer is an error naming the file (before:
 /// exit 0 and other voxels), ASCII and binary alike; the intact file builds.
 #[test]
 fn damaged_gzip_is_an_error_naming_the_file() {
@@ -431,7 +431,7 @@ fn damaged_gzip_is_an_error_naming_the_file() {
     }
 }
 
-/// 8. OBJ polylines (`l 1 2 3`) are ignored, as docs/INGEST.md says (before: voxelized as a
+/// Item 8: OBJ polylines (`l 1 2 3`) are ignored, as docs/INGEST.md says (before: voxelized as a
 /// triangle).
 #[test]
 fn obj_polylines_are_ignored() {
@@ -464,7 +464,7 @@ fn obj_polylines_are_ignored() {
     assert_eq!(summary["triangles"], 1);
 }
 
-/// 9a. An output path that is a directory fails at once, before any work, without a work
+/// Item 9a: An output path that is a directory fails at once, before any work, without a work
 /// folder and without the OS error twice.
 #[test]
 fn output_that_is_a_directory_fails_at_once() {
@@ -491,7 +491,7 @@ fn output_that_is_a_directory_fails_at_once() {
     fails_with(&o, &["is a directory"]);
 }
 
-/// 9b. An output folder that cannot be written (with a writable `--tmp`) fails up front, not
+/// Item 9b: An output folder that cannot be written (with a writable `--tmp`) fails up front, not
 /// after the build, and leaves no work folder.
 #[test]
 fn unwritable_output_folder_fails_up_front() {
@@ -544,7 +544,7 @@ fn fill(dir: &Path, keep: u64) {
     let _ = w.sync_all();
 }
 
-/// 9c. A full output disk fails up front; 9d. a write that fails for lack of space keeps the
+/// Item 9c: A full output disk fails up front; 9d. a write that fails for lack of space keeps the
 /// voxelized chunks, and once there is space the same command writes only the file (the
 /// earlier stages are taken from the work folder) with the bytes of a fresh build.
 #[test]
@@ -631,7 +631,7 @@ fn full_output_disk_fails_early_and_keeps_the_work() {
     assert!(work_folders(&tmp).is_empty());
 }
 
-/// 11. The peak memory a build reports is its own, not that of the process that launched it
+/// Item 11: The peak memory a build reports is its own, not that of the process that launched it
 /// (before: a 1.5 GB launcher made a small build report 1.5 GB).
 #[test]
 fn peak_memory_is_the_builds_own() {

@@ -124,8 +124,10 @@ impl OutputGuard {
             bail!("the output path is empty");
         }
         if output.is_dir() || output.as_os_str().to_string_lossy().ends_with('/') {
+            let folder = output.to_string_lossy();
+            let folder = folder.trim_end_matches('/');
             bail!(
-                "{shown} is a directory: name the output file, e.g. {shown}/out.{}",
+                "{shown} is a directory: name the output file, e.g. {folder}/out.{}",
                 ext(kind)
             );
         }
