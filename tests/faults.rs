@@ -688,7 +688,7 @@ fn messages_name_the_problem() {
     let garbage = d.join("garbage.bin");
     std::fs::write(&garbage, vec![b'V'; 300]).unwrap();
     let o = voxlod(&["inspect", s(&garbage)], d);
-    let e = fails_with(&o, &["the first 8 bytes are 56 56 56", "not a voxlod file"]);
+    let e = fails_with(&o, &["magic bytes are 56 56 56", "not a voxlod file"]);
     no_debug(&e);
     assert_eq!(e.matches("garbage.bin").count(), 1, "{e}");
     // a FIFO or a device as input: said so, at once (before: "is empty", or a read that

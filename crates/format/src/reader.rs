@@ -511,7 +511,7 @@ fn check_header(h: &Header, len: u64) -> Result<(), String> {
                 .join(" ")
         };
         return Err(format!(
-            "the first 8 bytes are {}, expected {} (\"VOXLOD\\0\\x01\"): not a voxlod file",
+            "magic bytes are {}, expected {} (\"VOXLOD\\0\\x01\"): not a voxlod file",
             hex(&h.magic),
             hex(&MAGIC)
         ));
