@@ -222,9 +222,12 @@ pub fn diff(a: &Path, b: &Path, tol: &Tolerance) -> Result<DiffReport, DiffError
     report.removed = na.keys().filter(|k| !nb.contains_key(k)).copied().collect();
     report.added = nb.keys().filter(|k| !na.contains_key(k)).copied().collect();
     let (mut va, mut vb) = (Vec::new(), Vec::new());
+    let (mut pa, mut pb) = (Vec::new(), Vec::new());
     for (id, &ia) in &na {
         let Some(&ib) = nb.get(id) else { continue };
-        if ra.payload(ia) == rb.payload(ib) {
+        ra.read_payload_into(ia, &mut pa)?;
+        rb.read_payload_into(ib, &mut pb)?;
+        if pa == pb {
             // same bytes, same checksums: still decode, so a corrupt payload is not "identical"
             ra.read_node_into(ia, &mut va)?;
             rb.read_node_into(ib, &mut vb)?;

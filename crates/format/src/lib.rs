@@ -10,7 +10,8 @@
 //!
 //! - [`encode_node`] compresses one node (pure; call it from many threads),
 //! - [`Writer`] streams compressed nodes to `<path>.tmp` and renames it to `path` when done,
-//! - [`Reader`] memory-maps a file, validates it, and decodes nodes with checksums checked;
+//! - [`Reader`] validates a file and decodes nodes with checksums checked, reading with
+//!   positioned reads (no memory map: a file changed while open gives errors, not SIGBUS);
 //!   for renderers it walks the tree ([`Reader::depth_first`], [`Reader::level_nodes`]), picks
 //!   the nodes to draw for a [`Camera`] ([`Reader::select_by_error`]) and gives conservative
 //!   world boxes for culling ([`Reader::node_bounds`]); [`Reader::read_node_into`] decodes into

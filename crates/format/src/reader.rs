@@ -1,12 +1,18 @@
-//! The validating reader: memory-maps a file, checks the header, the index and every index
-//! entry up front (so a corrupt file fails at `open` with a message naming what is wrong), and
-//! checks each payload's checksums when a node is read. Nothing in a file can make it panic.
+//! The validating reader: reads the header, the index and the manifest, checks them and every
+//! index entry up front (so a corrupt file fails at `open` with a message naming what is
+//! wrong), and checks each payload's checksums when a node is read. Nothing in a file can make
+//! it panic.
+//!
+//! Payloads are read with positioned reads (`pread`), not through a memory map: a file that
+//! is truncated or rewritten while it is open (by `cp`, `truncate`, or another build renaming
+//! over it only changes the path, never the open file) gives an error from the next read — a
+//! short read or a checksum mismatch — where a map would kill the process with SIGBUS.
+//! FORMAT.md ("Files that change while they are read") states the contract.
 
 use std::cell::RefCell;
 use std::fs::File;
+use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
-
-use memmap2::Mmap;
 
 use crate::block::unshuffle;
 use crate::layout::{
@@ -18,9 +24,12 @@ use crate::{FileSpec, FormatError, MAX_NODE_VOXELS};
 /// A voxlod file opened for reading. `Send + Sync`: threads may read nodes concurrently.
 pub struct Reader {
     path: PathBuf,
-    map: Mmap,
+    file: File,
+    /// File size at `open`.
+    len: u64,
     header: Header,
     nodes: Vec<NodeEntry>,
+    manifest: Vec<u8>,
 }
 
 impl std::fmt::Debug for Reader {
@@ -42,7 +51,8 @@ impl Reader {
     /// padding before the index is 0–7 zero bytes — so every byte of the file is checked by
     /// `open` or by the checksums [`read_node_into`](Self::read_node_into) verifies.
     ///
-    /// The file must not be modified while the reader is alive (it is memory-mapped).
+    /// The file may change while the reader is alive: what is read afterwards then fails with
+    /// an error (a short read or a checksum mismatch), never a crash.
     pub fn open(path: &Path) -> Result<Reader, FormatError> {
         let io = |op: &'static str| {
             move |source| FormatError::Io {
@@ -52,43 +62,57 @@ impl Reader {
             }
         };
         let file = File::open(path).map_err(io("opening"))?;
-        let len = file.metadata().map_err(io("reading the file size"))?.len();
+        let meta = file.metadata().map_err(io("reading the file size"))?;
         let head = |what: String| FormatError::Header {
             path: path.to_owned(),
             what,
         };
+        if meta.is_dir() {
+            return Err(head("it is a directory, not a voxlod file".into()));
+        }
+        if !meta.is_file() {
+            return Err(head(
+                "it is not a regular file (a device, FIFO or socket), not a voxlod file".into(),
+            ));
+        }
+        let len = meta.len();
         if len < HEADER_SIZE as u64 {
             return Err(head(format!(
                 "the file is {len} bytes, shorter than the {HEADER_SIZE}-byte header"
             )));
         }
-        // SAFETY: the map is only read; the documented contract is that the file is not
-        // modified while mapped (as for every memory-mapped reader).
-        let map = unsafe { Mmap::map(&file) }.map_err(io("memory-mapping"))?;
-        if map.len() as u64 != len {
-            return Err(head(format!(
-                "the file changed size while opening ({len} → {} bytes)",
-                map.len()
-            )));
-        }
-        let h: Header = bytemuck::pod_read_unaligned(&map[..HEADER_SIZE as usize]);
+        let read = |offset: u64, size: u64, what: &str| -> Result<Vec<u8>, FormatError> {
+            let mut buf = vec![0u8; size as usize];
+            read_at(&file, &mut buf, offset).map_err(|e| match e {
+                ReadAtError::Short => head(format!(
+                    "the file ended before its {what} [{offset}, +{size}): it was truncated while being opened"
+                )),
+                ReadAtError::Io(source) => FormatError::Io {
+                    path: path.to_owned(),
+                    op: "reading",
+                    source,
+                },
+            })?;
+            Ok(buf)
+        };
+        let h: Header = bytemuck::pod_read_unaligned(&read(0, HEADER_SIZE as u64, "header")?);
         check_header(&h, len).map_err(head)?;
 
         let index_err = |what: String| FormatError::Index {
             path: path.to_owned(),
             what,
         };
-        let index = &map[h.index_offset as usize..(h.index_offset + h.index_size) as usize];
-        let crc = crc32fast::hash(index);
+        // the header check bounded both ranges by the file size
+        let index = read(h.index_offset, h.index_size, "node index")?;
+        let crc = crc32fast::hash(&index);
         if crc != h.index_crc32 {
             return Err(index_err(format!(
                 "checksum mismatch (header says {:08x}, index has {crc:08x})",
                 h.index_crc32
             )));
         }
-        let manifest =
-            &map[h.manifest_offset as usize..(h.manifest_offset + h.manifest_size) as usize];
-        let crc = crc32fast::hash(manifest);
+        let manifest = read(h.manifest_offset, h.manifest_size, "manifest")?;
+        let crc = crc32fast::hash(&manifest);
         if crc != h.manifest_crc32 {
             return Err(FormatError::Manifest {
                 path: path.to_owned(),
@@ -104,9 +128,11 @@ impl Reader {
             .collect();
         let reader = Reader {
             path: path.to_owned(),
-            map,
+            file,
+            len,
             header: h,
             nodes,
+            manifest,
         };
         reader.check_entries()?;
         Ok(reader)
@@ -184,11 +210,17 @@ impl Reader {
             prev_key = Some(key);
             total += e.voxel_count as u64;
         }
-        let pad = &self.map[prev_end as usize..h.index_offset as usize];
-        if pad.len() >= 8 || pad.iter().any(|&b| b != 0) {
+        let pad_len = h.index_offset - prev_end;
+        let mut pad = [0u8; 8];
+        let pad_ok = pad_len < 8 && {
+            let pad = &mut pad[..pad_len as usize];
+            self.read_at(pad, prev_end, "the padding before the index")?;
+            pad.iter().all(|&b| b == 0)
+        };
+        if !pad_ok {
             return Err(FormatError::Index {
                 path: self.path.clone(),
-                what: format!("the {} bytes between the last payload and the index are not 0–7 zero bytes of padding", pad.len()),
+                what: format!("the {pad_len} bytes between the last payload and the index are not 0–7 zero bytes of padding"),
             });
         }
         if total != h.total_voxels {
@@ -249,9 +281,9 @@ impl Reader {
             voxel_size: h.voxel_size,
         }
     }
-    /// File size in bytes.
+    /// File size in bytes (when it was opened).
     pub fn file_size(&self) -> u64 {
-        self.map.len() as u64
+        self.len
     }
     /// Sum of the voxel counts of all nodes.
     pub fn total_voxels(&self) -> u64 {
@@ -280,8 +312,7 @@ impl Reader {
 
     /// The raw manifest bytes (UTF-8 JSON).
     pub fn manifest_bytes(&self) -> &[u8] {
-        let h = &self.header;
-        &self.map[h.manifest_offset as usize..(h.manifest_offset + h.manifest_size) as usize]
+        &self.manifest
     }
     /// The manifest, parsed.
     pub fn manifest(&self) -> Result<serde_json::Value, FormatError> {
@@ -302,10 +333,61 @@ impl Reader {
             .ok()
     }
 
-    /// The compressed payload of node `index` (its range was validated by `open`).
-    pub fn payload(&self, index: usize) -> Option<&[u8]> {
-        let e = self.nodes.get(index)?;
-        Some(&self.map[e.payload_offset as usize..(e.payload_offset + e.payload_size) as usize])
+    /// Reads the compressed payload of node `index` (its range was validated by `open`) into
+    /// `out` (replacing its contents). Not checked against the checksums: see
+    /// [`read_node_into`](Self::read_node_into).
+    pub fn read_payload_into(&self, index: usize, out: &mut Vec<u8>) -> Result<(), FormatError> {
+        let Some(e) = self.nodes.get(index) else {
+            return Err(FormatError::NoSuchNode {
+                path: self.path.clone(),
+                index,
+                count: self.nodes.len(),
+            });
+        };
+        out.clear();
+        out.resize(e.payload_size as usize, 0);
+        let r = read_at(&self.file, out, e.payload_offset);
+        r.map_err(|err| {
+            out.clear();
+            match err {
+                ReadAtError::Short => self.node_error(
+                    index,
+                    format!(
+                        "the file ends before this payload [{}, +{}): it was truncated after it was opened ({} bytes then)",
+                        e.payload_offset, e.payload_size, self.len
+                    ),
+                ),
+                ReadAtError::Io(source) => FormatError::Io {
+                    path: self.path.clone(),
+                    op: "reading a payload",
+                    source,
+                },
+            }
+        })
+    }
+
+    /// The compressed payload of node `index`, read from the file.
+    pub fn payload(&self, index: usize) -> Result<Vec<u8>, FormatError> {
+        let mut out = Vec::new();
+        self.read_payload_into(index, &mut out)?;
+        Ok(out)
+    }
+
+    /// `read_at` for the checks of `open`: a short read is an index error.
+    fn read_at(&self, buf: &mut [u8], offset: u64, what: &str) -> Result<(), FormatError> {
+        read_at(&self.file, buf, offset).map_err(|e| match e {
+            ReadAtError::Short => FormatError::Index {
+                path: self.path.clone(),
+                what: format!(
+                    "the file ended before {what} at {offset}: it was truncated while being opened"
+                ),
+            },
+            ReadAtError::Io(source) => FormatError::Io {
+                path: self.path.clone(),
+                op: "reading",
+                source,
+            },
+        })
     }
 
     /// Reads node `index` into `out` (cleared first; reuse it across calls to avoid
@@ -313,13 +395,23 @@ impl Reader {
     /// checksum, undoes the transform, checks Morton order and the bounds. Errors name the node.
     pub fn read_node_into(&self, index: usize, out: &mut Vec<Voxel>) -> Result<(), FormatError> {
         out.clear();
-        let Some(payload) = self.payload(index) else {
-            return Err(FormatError::NoSuchNode {
-                path: self.path.clone(),
-                index,
-                count: self.nodes.len(),
-            });
-        };
+        let mut payload = PAYLOAD.with(|p| std::mem::take(&mut *p.borrow_mut()));
+        let r = self
+            .read_payload_into(index, &mut payload)
+            .and_then(|()| self.decode_payload(index, &payload, out));
+        if payload.capacity() <= 64 << 20 {
+            PAYLOAD.with(|p| *p.borrow_mut() = payload); // reused by the next read
+        }
+        r
+    }
+
+    /// Checks and decodes a payload read by [`read_payload_into`](Self::read_payload_into).
+    fn decode_payload(
+        &self,
+        index: usize,
+        payload: &[u8],
+        out: &mut Vec<Voxel>,
+    ) -> Result<(), FormatError> {
         let e = self.nodes[index];
         let crc = crc32fast::hash(payload);
         if crc != e.payload_crc32 {
@@ -384,7 +476,27 @@ impl Reader {
     }
 }
 
+/// Why a positioned read failed.
+enum ReadAtError {
+    /// The file ends before the range.
+    Short,
+    Io(std::io::Error),
+}
+
+/// Reads exactly `buf.len()` bytes at `offset` (retrying on EINTR).
+fn read_at(file: &File, buf: &mut [u8], offset: u64) -> Result<(), ReadAtError> {
+    file.read_exact_at(buf, offset).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::UnexpectedEof {
+            ReadAtError::Short
+        } else {
+            ReadAtError::Io(e)
+        }
+    })
+}
+
 thread_local! {
+    // Per-thread buffer for the compressed payload of the node being read.
+    static PAYLOAD: RefCell<Vec<u8>> = const { RefCell::new(Vec::new()) };
     // Per-thread zstd context and decompression buffer, reused across reads.
     static SCRATCH: RefCell<(Option<zstd::bulk::Decompressor<'static>>, Vec<u8>)> = const { RefCell::new((None, Vec::new())) };
 }
@@ -392,9 +504,16 @@ thread_local! {
 /// Header checks in the order that gives the most useful message first.
 fn check_header(h: &Header, len: u64) -> Result<(), String> {
     if h.magic != MAGIC {
+        let hex = |b: &[u8]| {
+            b.iter()
+                .map(|x| format!("{x:02x}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
         return Err(format!(
-            "magic bytes are {:02x?}, expected {:02x?} (\"VOXLOD\\0\\x01\"): not a voxlod file",
-            h.magic, MAGIC
+            "magic bytes are {}, expected {} (\"VOXLOD\\0\\x01\"): not a voxlod file",
+            hex(&h.magic),
+            hex(&MAGIC)
         ));
     }
     if h.version != VERSION {

@@ -48,6 +48,9 @@ pub enum IngestError {
         #[source]
         source: std::io::Error,
     },
+    /// The input is a directory, device or FIFO: a mesh is read more than once.
+    #[error("{}: it is {what}, not a mesh file (the input must be a regular file)", .path.display())]
+    NotAFile { path: PathBuf, what: &'static str },
     /// The file has no bytes at all.
     #[error("{}: the file is empty", .path.display())]
     Empty { path: PathBuf },
@@ -124,5 +127,41 @@ impl IngestError {
             at,
             message: message.into(),
         }
+    }
+}
+
+/// A token from a file as a message shows it: in double quotes, control characters, quotes
+/// and backslashes as `\xNN` (not Rust's debug escapes such as `\u{1}`), at most 40
+/// characters.
+pub(crate) fn quoted(token: &str) -> String {
+    let mut out = String::from("\"");
+    for (n, c) in token.chars().enumerate() {
+        if n == 40 {
+            out.push('…');
+            break;
+        }
+        if c.is_control() || c == '"' || c == '\\' {
+            let mut b = [0u8; 4];
+            for byte in c.encode_utf8(&mut b).bytes() {
+                out.push_str(&format!("\\x{byte:02x}"));
+            }
+        } else {
+            out.push(c);
+        }
+    }
+    out.push('"');
+    out
+}
+
+#[cfg(test)]
+mod quoted_tests {
+    #[test]
+    fn tokens_are_quoted_without_rust_escapes() {
+        assert_eq!(super::quoted("vertx"), "\"vertx\"");
+        assert_eq!(
+            super::quoted("prope\u{1}\0\0\0float"),
+            "\"prope\\x01\\x00\\x00\\x00float\""
+        );
+        assert_eq!(super::quoted("é"), "\"é\"");
     }
 }

@@ -159,7 +159,8 @@ fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
         return Ok(Format::Stl);
     }
     unknown(format!(
-        "the extension of {name:?} is not .ply, .ply.gz, .obj or .stl, and the content is not PLY or STL"
+        "the extension of {} is not .ply, .ply.gz, .obj or .stl, and the content is not PLY or STL",
+        crate::error::quoted(&name)
     ))
 }
 
@@ -167,9 +168,29 @@ impl MeshSource {
     /// Opens a mesh: detects the format by extension (and magic bytes) and reads the header
     /// (PLY), the counts (OBJ: one pass over the file) or the facet count (binary STL).
     pub fn open(path: &Path) -> Result<MeshSource, IngestError> {
-        let file_len = std::fs::metadata(path)
-            .map_err(|e| IngestError::io(path, e))?
-            .len();
+        let meta = std::fs::metadata(path).map_err(|e| IngestError::io(path, e))?;
+        // A mesh is read more than once (header, then passes) and its size sets the plan: a
+        // directory, device (/dev/zero) or FIFO cannot be, and has no meaningful size.
+        if !meta.is_file() {
+            let what = if meta.is_dir() {
+                "a directory"
+            } else {
+                use std::os::unix::fs::FileTypeExt;
+                let t = meta.file_type();
+                if t.is_fifo() {
+                    "a FIFO (named pipe)"
+                } else if t.is_char_device() || t.is_block_device() {
+                    "a device"
+                } else {
+                    "not a regular file"
+                }
+            };
+            return Err(IngestError::NotAFile {
+                path: path.to_path_buf(),
+                what,
+            });
+        }
+        let file_len = meta.len();
         if file_len == 0 {
             return Err(IngestError::Empty {
                 path: path.to_path_buf(),

@@ -76,7 +76,11 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                 let mut p = [0f64; 3];
                 for (k, v) in vals[..3].iter().enumerate() {
                     p[k] = v.parse::<f32>().map_err(|_| {
-                        IngestError::malformed(path, at.clone(), format!("{v:?} is not a number"))
+                        IngestError::malformed(
+                            path,
+                            at.clone(),
+                            format!("{} is not a number", crate::error::quoted(v)),
+                        )
                     })? as f64;
                 }
                 if !p.iter().all(|x| x.is_finite()) {
@@ -103,7 +107,10 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                         IngestError::malformed(
                             path,
                             at.clone(),
-                            format!("face corner {c:?} has no vertex index"),
+                            format!(
+                                "face corner {} has no vertex index",
+                                crate::error::quoted(c)
+                            ),
                         )
                     })?;
                     // 1-based, or negative: relative to the vertices read so far
@@ -203,10 +210,25 @@ impl ObjSource {
             ignore_lines: true,
             ..Default::default()
         };
-        let (models, materials) = tobj::load_obj(path, &opts).map_err(|e| IngestError::Obj {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+        // tobj reads `l 1 2 3` (a polyline) as a polygon face whatever `ignore_lines` says:
+        // the lines go to it blanked, as INGEST.md promises (line numbers unchanged).
+        let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
+        let mut reader = BufReader::with_capacity(
+            1 << 16,
+            WithoutPolylines {
+                inner: BufReader::with_capacity(1 << 18, file),
+                line: Vec::new(),
+                pos: 0,
+            },
+        );
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let (models, materials) =
+            tobj::load_obj_buf(&mut reader, &opts, |m| tobj::load_mtl(dir.join(m))).map_err(
+                |e| IngestError::Obj {
+                    path: path.to_path_buf(),
+                    message: e.to_string(),
+                },
+            )?;
         // a missing MTL was reported as a warning at open; its materials get the default colour
         let materials = materials.unwrap_or_default();
         em.report(em.bytes_total / 2);
@@ -270,6 +292,43 @@ impl ObjSource {
         }
         em.stats.polygons = self.polygons;
         Ok(())
+    }
+}
+
+/// An OBJ text with every polyline (`l …`) line replaced by an empty line.
+struct WithoutPolylines<R> {
+    inner: R,
+    /// The current line, `pos` bytes of it already handed out.
+    line: Vec<u8>,
+    pos: usize,
+}
+
+/// True for a line whose first token is `l`.
+fn is_polyline(line: &[u8]) -> bool {
+    let t = line.trim_ascii_start();
+    t.first() == Some(&b'l') && t.get(1).is_none_or(|b| b.is_ascii_whitespace())
+}
+
+impl<R: BufRead> std::io::Read for WithoutPolylines<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.pos == self.line.len() {
+            self.line.clear();
+            self.pos = 0;
+            if self.inner.read_until(b'\n', &mut self.line)? == 0 {
+                return Ok(0);
+            }
+            if is_polyline(&self.line) {
+                let nl = self.line.ends_with(b"\n");
+                self.line.clear();
+                if nl {
+                    self.line.push(b'\n');
+                }
+            }
+        }
+        let n = buf.len().min(self.line.len() - self.pos);
+        buf[..n].copy_from_slice(&self.line[self.pos..self.pos + n]);
+        self.pos += n;
+        Ok(n)
     }
 }
 

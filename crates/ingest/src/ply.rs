@@ -46,6 +46,9 @@ impl PlySource {
         } else {
             parse_header(path, &mut BufReader::new(file))?
         };
+        if !gz {
+            check_counts_fit(path, &header, file_len)?;
+        }
         let layout = &header.layout;
         let mut warnings = Vec::new();
         if layout.sources.is_empty() {
@@ -263,21 +266,27 @@ impl PlySource {
         let mut done = vec![false; self.header.layout.sources.len()];
         for pass in 0..self.passes {
             let (r, counter) = self.open_body(pass * self.file_len)?;
-            match self.header.encoding {
+            let rest = match self.header.encoding {
                 Encoding::Ascii => {
                     let mut src = AsciiRecords::new(&self.path, r, counter, self.header.lines);
                     self.pass(&mut src, &mut verts, &mut done, em)?;
+                    src.into_inner()
                 }
                 Encoding::BinaryLe => {
                     let mut src =
                         StreamRecords::<_, false>::new(&self.path, r, counter, self.header.bytes);
                     self.pass(&mut src, &mut verts, &mut done, em)?;
+                    src.into_inner()
                 }
                 Encoding::BinaryBe => {
                     let mut src =
                         StreamRecords::<_, true>::new(&self.path, r, counter, self.header.bytes);
                     self.pass(&mut src, &mut verts, &mut done, em)?;
+                    src.into_inner()
                 }
+            };
+            if self.gz && pass + 1 == self.passes {
+                check_gzip_trailer(&self.path, rest)?;
             }
         }
         debug_assert!(done.iter().all(|&d| d));
@@ -331,6 +340,57 @@ impl PlySource {
         }
         Ok(())
     }
+}
+
+/// Refuses a header whose element counts cannot fit in the file, even at the fewest bytes a
+/// record can take (a 42 KB file claiming 4e9 faces), before any plan is made from them.
+fn check_counts_fit(path: &Path, header: &Header, file_len: u64) -> Result<(), IngestError> {
+    let ascii = header.encoding == Encoding::Ascii;
+    let body = file_len.saturating_sub(header.bytes);
+    let mut need = 0u64;
+    for el in &header.elements {
+        need = need.saturating_add(el.count.saturating_mul(el.min_record_bytes(ascii)));
+        if need > body {
+            return Err(IngestError::malformed(
+                path,
+                Location::File,
+                format!(
+                    "the header declares {} {} records (and the elements before them), which need at least {need} bytes, but the file has {body} bytes after its header: the header is inconsistent with the file size (truncated file?)",
+                    el.count, el.name
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Reads a gzip stream to its end, which makes the decoder check each member's trailer (CRC32
+/// and length of the data): the parse stops after the last element it needs, before the
+/// trailer, so without this a damaged or truncated `.ply.gz` would build without an error.
+fn check_gzip_trailer(path: &Path, mut rest: impl Read) -> Result<(), IngestError> {
+    match std::io::copy(&mut rest, &mut std::io::sink()) {
+        Ok(_) => Ok(()),
+        Err(e) => Err(gzip_error(path, e)),
+    }
+}
+
+/// A gzip decoding error as a message about the file: damaged (checksum), truncated (no
+/// trailer) or another read error.
+pub(crate) fn gzip_error(path: &Path, e: std::io::Error) -> IngestError {
+    let what = match e.kind() {
+        std::io::ErrorKind::UnexpectedEof => {
+            "the gzip data ends early, without its trailer: the file is truncated"
+        }
+        std::io::ErrorKind::InvalidInput | std::io::ErrorKind::InvalidData => {
+            if e.to_string().contains("checksum") {
+                "the gzip checksum (CRC32 and length in the trailer) does not match the data: the file is damaged"
+            } else {
+                "the gzip data is corrupt: the file is damaged"
+            }
+        }
+        _ => return IngestError::io(path, e),
+    };
+    IngestError::malformed(path, Location::File, what)
 }
 
 fn skip_element<R: Records>(src: &mut R, el: &Element) -> Result<(), IngestError> {

@@ -2,6 +2,7 @@
 //! readers need from it: which element holds the vertices, which property is x, y, z, the
 //! normal and the colour, and which elements hold faces or triangle strips.
 
+use crate::error::quoted;
 use crate::IngestError;
 use std::io::{BufRead, Read};
 use std::path::Path;
@@ -112,6 +113,21 @@ impl Element {
     }
 }
 
+impl Element {
+    /// The fewest bytes a record can take: binary, a scalar's size and a list's count (the
+    /// list may be empty); ASCII, two characters per value (a digit and a separator).
+    pub fn min_record_bytes(&self, ascii: bool) -> u64 {
+        self.props
+            .iter()
+            .map(|p| match (ascii, p.kind) {
+                (true, _) => 2,
+                (false, Kind::Scalar(s)) => s.size() as u64,
+                (false, Kind::List { count, .. }) => count.size() as u64,
+            })
+            .sum()
+    }
+}
+
 /// What each vertex property means to us.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Role {
@@ -179,7 +195,7 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
             if toks != ["ply"] {
                 return Err(herr(
                     1,
-                    format!("the first line is {:?}, not \"ply\"", text.trim_end()),
+                    format!("the first line is {}, not \"ply\"", quoted(text.trim_end())),
                 ));
             }
             continue;
@@ -195,12 +211,14 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
                     "ascii" => Encoding::Ascii,
                     "binary_little_endian" => Encoding::BinaryLe,
                     "binary_big_endian" => Encoding::BinaryBe,
-                    other => return Err(herr(line_no, format!("unknown encoding {other:?}"))),
+                    other => {
+                        return Err(herr(line_no, format!("unknown encoding {}", quoted(other))))
+                    }
                 });
                 if toks[2] != "1.0" {
                     return Err(herr(
                         line_no,
-                        format!("unsupported PLY version {:?}", toks[2]),
+                        format!("unsupported PLY version {}", quoted(toks[2])),
                     ));
                 }
             }
@@ -211,7 +229,10 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
                 let count = toks[2].parse::<u64>().map_err(|_| {
                     herr(
                         line_no,
-                        format!("element count {:?} is not a non-negative integer", toks[2]),
+                        format!(
+                            "element count {} is not a non-negative integer",
+                            quoted(toks[2])
+                        ),
                     )
                 })?;
                 elements.push(Element {
@@ -225,8 +246,9 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
                     return Err(herr(line_no, "property before any element".into()));
                 };
                 let ty = |name: &str| {
-                    Scalar::parse(name)
-                        .ok_or_else(|| herr(line_no, format!("unknown property type {name:?}")))
+                    Scalar::parse(name).ok_or_else(|| {
+                        herr(line_no, format!("unknown property type {}", quoted(name)))
+                    })
                 };
                 let prop = match toks.get(1).copied() {
                     Some("list") if toks.len() == 5 => {
@@ -250,7 +272,12 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
                 el.props.push(prop);
             }
             Some("end_header") => break,
-            Some(other) => return Err(herr(line_no, format!("unknown header keyword {other:?}"))),
+            Some(other) => {
+                return Err(herr(
+                    line_no,
+                    format!("unknown header keyword {}", quoted(other)),
+                ))
+            }
         }
     }
     let Some(encoding) = encoding else {
@@ -296,8 +323,8 @@ fn layout(elements: &[Element]) -> Result<Layout, String> {
             }
             (Some(s), Kind::List { .. }) if s < 3 => {
                 return Err(format!(
-                    "vertex property {:?} is a list, expected a scalar",
-                    p.name
+                    "vertex property {} is a list, expected a scalar",
+                    quoted(&p.name)
                 ));
             }
             _ => roles.push(Role::Skip),
@@ -329,8 +356,8 @@ fn layout(elements: &[Element]) -> Result<Layout, String> {
         });
         let Some(list) = list else {
             return Err(format!(
-                "element {:?} has no list property vertex_indices or vertex_index",
-                e.name
+                "element {} has no list property vertex_indices or vertex_index",
+                quoted(&e.name)
             ));
         };
         if let Kind::List { item, .. } = e.props[list].kind {

@@ -309,6 +309,11 @@ impl<'a, R: BufRead, const BE: bool> StreamRecords<'a, R, BE> {
         }
     }
 
+    /// The stream, positioned after the last value read.
+    pub fn into_inner(self) -> R {
+        self.r
+    }
+
     /// `r` positioned at decompressed byte `pos`.
     pub fn new(path: &'a Path, r: R, counter: Counter, pos: u64) -> Self {
         StreamRecords {
@@ -427,6 +432,11 @@ fn is_space(b: u8) -> bool {
 }
 
 impl<'a, R: BufRead> AsciiRecords<'a, R> {
+    /// The stream, positioned after the last line read.
+    pub fn into_inner(self) -> R {
+        self.r
+    }
+
     /// `r` positioned just after the header's `lines` lines.
     pub fn new(path: &'a Path, r: R, counter: Counter, lines: u64) -> Self {
         AsciiRecords {
@@ -472,8 +482,8 @@ impl<'a, R: BufRead> AsciiRecords<'a, R> {
             self.path,
             Location::Line(self.line_no),
             format!(
-                "{:?} is not a valid {} value",
-                String::from_utf8_lossy(tok),
+                "{} is not a valid {} value",
+                crate::error::quoted(&String::from_utf8_lossy(tok)),
                 ty.name()
             ),
         )
@@ -539,9 +549,9 @@ impl<R: BufRead> Records for AsciiRecords<'_, R> {
                 self.path,
                 Location::Line(self.line_no),
                 format!(
-                    "extra values after the last property of the {} record: {:?}",
+                    "extra values after the last property of the {} record: {}",
                     self.el,
-                    String::from_utf8_lossy(rest).trim()
+                    crate::error::quoted(String::from_utf8_lossy(rest).trim())
                 ),
             ))
         }

@@ -223,7 +223,17 @@ impl StlSource {
             let mut t = line.split_ascii_whitespace();
             let Some(kw) = t.next() else { continue };
             let unexpected = |state: At| {
-                IngestError::malformed(path, at.clone(), format!("unexpected {kw:?} ({state:?})"))
+                let expected = match state {
+                    At::Outside => "\"solid\"",
+                    At::Solid => "\"facet\" or \"endsolid\"",
+                    At::Facet => "\"outer loop\" or \"endfacet\"",
+                    At::Loop => "\"vertex\" or \"endloop\"",
+                };
+                IngestError::malformed(
+                    path,
+                    at.clone(),
+                    format!("{} where {expected} was expected", crate::error::quoted(kw)),
+                )
             };
             state = match (kw, state) {
                 ("solid", At::Outside) => {
@@ -246,7 +256,7 @@ impl StlSource {
                             IngestError::malformed(
                                 path,
                                 at.clone(),
-                                format!("{s:?} is not a number"),
+                                format!("{} is not a number", crate::error::quoted(s)),
                             )
                         })?;
                     }

@@ -368,7 +368,10 @@ fn bad_obj_and_stl() {
         &d,
         "junk.stl",
         ascii.replace("outer loop", "outer space\nbanana"),
-        &["line 4", "unexpected \"banana\""],
+        &[
+            "line 4",
+            "\"banana\" where \"vertex\" or \"endloop\" was expected",
+        ],
     );
     check(
         &d,

@@ -15,6 +15,9 @@ use voxlod_format::EncodedNode;
 
 const MAGIC: u32 = u32::from_le_bytes(*b"LEAF");
 
+/// Bytes of a [`RecordHeader`] on disk.
+pub const RECORD_HEADER_BYTES: u64 = std::mem::size_of::<RecordHeader>() as u64;
+
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct RecordHeader {

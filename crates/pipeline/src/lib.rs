@@ -16,6 +16,7 @@ mod backend;
 mod leaf_log;
 mod memory;
 mod octree_writer;
+mod output;
 mod passes;
 mod progress;
 mod size;
@@ -26,6 +27,7 @@ mod work;
 pub use backend::{Backend, Cutoff};
 pub use memory::MemoryPlan;
 pub use octree_writer::{LevelStats, OctreeWriter};
+pub use output::{OutputGuard, OutputKind};
 pub use size::{format_size, parse_size};
 pub use system::{interrupted, peak_rss, request_interrupt};
 
@@ -75,6 +77,9 @@ pub struct BuildSettings {
     /// Show progress bars on stderr.
     #[serde(skip)]
     pub progress: bool,
+    /// Replace an existing output file that is not a voxlod octree.
+    #[serde(skip)]
+    pub force: bool,
     /// For tests of resuming: request an interrupt after this many leaf chunks.
     #[serde(skip)]
     #[doc(hidden)]
@@ -95,8 +100,51 @@ impl Default for BuildSettings {
             gpu_method: "hybrid".into(),
             cutoff: Cutoff::default(),
             progress: false,
+            force: false,
             interrupt_after_chunks: None,
         }
+    }
+}
+
+/// A setting that is wrong on its own, named as in a settings file (`resolution`,
+/// `zstd_level`), so that the command line can say where the value came from.
+#[derive(Debug)]
+pub struct SettingError {
+    /// The setting's name in a settings file.
+    pub field: &'static str,
+    /// The value, as given.
+    pub value: String,
+    /// What is wrong with it.
+    pub message: String,
+}
+
+impl std::fmt::Display for SettingError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} = {}: {}", self.field, self.value, self.message)
+    }
+}
+
+impl std::error::Error for SettingError {}
+
+impl BuildSettings {
+    /// Checks the settings that can be wrong on their own (the memory budget is checked by
+    /// [`MemoryPlan::new`], which knows the thread count).
+    pub fn validate(&self) -> std::result::Result<(), SettingError> {
+        if let Err(e) = Grid::new([0.0; 3], 1.0, self.resolution) {
+            return Err(SettingError {
+                field: "resolution",
+                value: self.resolution.to_string(),
+                message: e.to_string(),
+            });
+        }
+        if !(-7..=22).contains(&self.zstd_level) {
+            return Err(SettingError {
+                field: "zstd_level",
+                value: self.zstd_level.to_string(),
+                message: "outside -7..=22".into(),
+            });
+        }
+        Ok(())
     }
 }
 
@@ -202,12 +250,7 @@ fn interrupted_error(work: &Path) -> anyhow::Error {
 /// interrupted resumes from its work folder when started again with the same arguments.
 pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSummary> {
     let t0 = Instant::now();
-    if let Err(e) = Grid::new([0.0; 3], 1.0, s.resolution) {
-        bail!("--resolution: {e}");
-    }
-    if !(-7..=22).contains(&s.zstd_level) {
-        bail!("zstd level {} is outside -7..=22", s.zstd_level);
-    }
+    s.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
     if !s.voxelizer.supports(s.mode) {
         bail!(
             "--voxelizer {} approximates the conservative set only; use --voxelizer scanline (or sat) with {} mode",
@@ -215,17 +258,32 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
             s.mode
         );
     }
+    // More threads than cores never helps (every stage is bound by the CPU or the disk), and
+    // thousands of them only thrash.
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut warnings = Vec::new();
     let threads = if s.threads == 0 {
-        std::thread::available_parallelism().map_or(1, |n| n.get())
+        cores
+    } else if s.threads > cores {
+        warnings.push(format!(
+            "-j {}: capped at {cores}, the number of cores (more threads than cores only slow the build down)",
+            s.threads
+        ));
+        cores
     } else {
         s.threads
     };
+    if s.progress {
+        for w in &warnings {
+            eprintln!("warning: {w}");
+        }
+    }
     let plan = MemoryPlan::new(s.memory, threads)?;
+    // The output is checked (not a folder, not the input, not another kind of file, writable
+    // folder with some space) and locked before any work starts.
+    let guard = OutputGuard::acquire(output, &[input], OutputKind::Octree, s.force)?;
     let source = MeshSource::open(input)?;
-    let out_dir = output
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
+    let out_dir = crate::output::output_dir(output);
     let tmp_parent = s.tmp_dir.as_deref().unwrap_or(out_dir);
     let key = WorkDir::key(input, s)?;
     let (work, resumed) = WorkDir::open(tmp_parent, output, &key)?;
@@ -238,13 +296,24 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
             );
         }
     }
-    let r = run(&source, input, output, s, threads, plan, &work, resumed, t0);
+    let r = run(
+        &source, input, &guard, s, threads, plan, &work, resumed, t0, warnings,
+    );
     match r {
         Ok(summary) => {
             work.remove()?;
             Ok(summary)
         }
         Err(_) if interrupted() => Err(interrupted_error(work.path())),
+        Err(e) if work.file("leaves.json").exists() && is_output_failure(&e) => {
+            // Every chunk is voxelized: keep them, so that once the output side is fixed
+            // (space, permissions) the same command only writes the file.
+            Err(anyhow::anyhow!(
+                "{}; the voxelized chunks are kept in {}: run the same command again to write only the file",
+                chain_text(&e),
+                work.path().display()
+            ))
+        }
         Err(e) => {
             // A failed build leaves nothing behind (a killed one keeps its folder to resume).
             let _ = work.remove();
@@ -253,29 +322,72 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
     }
 }
 
+/// A failure of writing the output (I/O on it, too little space, the final rename), as
+/// opposed to bad data: worth keeping the work for.
+#[derive(Debug)]
+struct OutputFailure(String);
+
+impl std::fmt::Display for OutputFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for OutputFailure {}
+
+fn is_output_failure(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.is::<OutputFailure>()
+            || c.is::<std::io::Error>()
+            || matches!(
+                c.downcast_ref::<voxlod_format::FormatError>(),
+                Some(voxlod_format::FormatError::Io { .. })
+            )
+    })
+}
+
+/// An error and its causes as one line, each cause once (an OS error is often both in its
+/// wrapper's message and its source).
+pub fn chain_text(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for c in e.chain() {
+        let s = c.to_string();
+        if text.contains(&s) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&s);
+    }
+    text
+}
+
 #[allow(clippy::too_many_arguments)]
 fn run(
     source: &MeshSource,
     input: &Path,
-    output: &Path,
+    guard: &OutputGuard,
     s: &BuildSettings,
     threads: usize,
     plan: MemoryPlan,
     work: &WorkDir,
     resumed: bool,
     t0: Instant,
+    mut warnings: Vec<String>,
 ) -> Result<BuildSummary> {
+    let output = guard.output();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .context("creating the thread pool")?;
     let info = source.info().clone();
     let mut stages = Vec::new();
-    let mut warnings: Vec<String> = info
-        .warnings
-        .iter()
-        .map(|w| format!("{}: {w}", input.display()))
-        .collect();
+    warnings.extend(
+        info.warnings
+            .iter()
+            .map(|w| format!("{}: {w}", input.display())),
+    );
     let stage_done =
         |stages: &mut Vec<StageTime>, stage: &'static str, t: Instant, resumed: bool| {
             stages.push(StageTime {
@@ -502,7 +614,34 @@ fn run(
         origin: grid.origin,
         voxel_size: grid.voxel_size,
     };
-    let writer = Writer::create(output, spec)?;
+    // The file holds every leaf payload: refuse before writing if the output's folder cannot
+    // hold even those (the work folder is kept, see `build`).
+    let leaf_payloads = std::fs::metadata(&leaves_path)
+        .map_or(0, |m| m.len())
+        .saturating_sub(leaf_log::RECORD_HEADER_BYTES * leaves_marker.records);
+    let out_dir = crate::output::output_dir(output);
+    if let Some(free) = system::free_disk(out_dir) {
+        if free < leaf_payloads {
+            return Err(OutputFailure(format!(
+                "not enough disk space for {}: it holds at least {} of leaf chunks, {} free in {}",
+                output.display(),
+                format_size(leaf_payloads),
+                format_size(free),
+                out_dir.display()
+            ))
+            .into());
+        }
+        if free < leaf_payloads / 3 * 4 {
+            warnings.push(format!(
+                "{} free in {} may not hold {} (at least {} of leaf chunks, about a third more with the coarser levels)",
+                format_size(free),
+                out_dir.display(),
+                output.display(),
+                format_size(leaf_payloads)
+            ));
+        }
+    }
+    let writer = Writer::create(guard.staged(), spec)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &pool);
     let bar = Stage::items(s.progress, "lod+write", chunk_bins as u64);
     // The leaf log is read and decoded on a second thread, one leaf ahead of the merges and
@@ -578,6 +717,7 @@ fn run(
             "levels": levels,
         })
     })?;
+    guard.commit().map_err(|e| OutputFailure(chain_text(&e)))?;
     stage_done(&mut stages, "lod+write", t, false);
 
     let total_voxels: u64 = levels.iter().map(|l| l.voxels).sum();

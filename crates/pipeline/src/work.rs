@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use serde::{de::DeserializeOwned, Serialize};
 
 use crate::BuildSettings;
@@ -20,6 +20,10 @@ pub const WORK_FORMAT: u32 = 2;
 
 pub struct WorkDir {
     path: PathBuf,
+    /// The folder's advisory lock (`lock` inside it), held while the build runs, so two
+    /// builds never share one folder (same input and settings, outputs of the same name in
+    /// different folders, one `--tmp`).
+    _lock: Option<std::fs::File>,
 }
 
 /// FNV-1a, 64 bit: a stable hash for the folder name (std's hasher is not stable across
@@ -76,10 +80,34 @@ impl WorkDir {
         let path = parent.join(format!(".voxlod-work-{name}-{key}"));
         let existed = path.is_dir();
         if !existed {
-            std::fs::create_dir_all(&path)
-                .with_context(|| format!("creating the work folder {}", path.display()))?;
+            std::fs::create_dir_all(&path).map_err(|e| {
+                anyhow::anyhow!(
+                    "creating the work folder {}: {}",
+                    path.display(),
+                    crate::output::os_text(&e)
+                )
+            })?;
         }
-        Ok((WorkDir { path }, existed))
+        let lock = match crate::output::lock_or_name_holder(&path.join("lock")) {
+            Ok(f) => f,
+            Err(crate::output::LockError::Held(pid)) => bail!(
+                "the work folder {} is in use by another voxlod build ({}): wait for it to finish",
+                path.display(),
+                pid.map_or("pid unknown".to_string(), |p| format!("pid {p}"))
+            ),
+            Err(crate::output::LockError::Io(e)) => bail!(
+                "locking the work folder {}: {}",
+                path.display(),
+                crate::output::os_text(&e)
+            ),
+        };
+        Ok((
+            WorkDir {
+                path,
+                _lock: Some(lock),
+            },
+            existed,
+        ))
     }
 
     pub fn path(&self) -> &Path {
@@ -131,6 +159,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let w = WorkDir {
             path: dir.path().to_path_buf(),
+            _lock: None,
         };
         let mut seed = 0x2545_f491_4f6c_dd1du64;
         let mut vals: Vec<f64> = vec![-0.9728269577026367, 0.1 + 0.2, f64::MIN_POSITIVE, 1e300];

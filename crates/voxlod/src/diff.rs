@@ -18,17 +18,33 @@ pub struct DiffArgs {
     json: bool,
     /// Accept normals of common voxels differing by up to this angle (degrees); also accepts
     /// face-mask differences, which follow from normals.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = parse_degrees)]
     max_normal_deg: f64,
     /// Accept colour channels differing by up to this much (0–255).
     #[arg(long, default_value_t = 0)]
     max_color: u8,
     /// Accept changed nodes whose voxel positions have at least this intersection-over-union.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = parse_fraction)]
     min_iou: f64,
     /// Nodes listed per category in the text report (all are in --json).
     #[arg(long, default_value_t = 20)]
     limit: usize,
+}
+
+/// A number in 0..=1 (NaN, which every comparison fails, is refused).
+fn parse_fraction(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("'{s}' is not a number from 0 to 1")),
+    }
+}
+
+/// An angle in 0..=180 degrees (NaN refused).
+fn parse_degrees(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if (0.0..=180.0).contains(&v) => Ok(v),
+        _ => Err(format!("'{s}' is not an angle from 0 to 180 degrees")),
+    }
 }
 
 pub fn run(a: DiffArgs) -> Result<()> {

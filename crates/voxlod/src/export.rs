@@ -3,10 +3,10 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use voxlod_format::Reader;
-use voxlod_pipeline::format_size;
+use voxlod_pipeline::{format_size, OutputGuard, OutputKind};
 
 #[derive(Args)]
 pub struct ExportArgs {
@@ -18,11 +18,18 @@ pub struct ExportArgs {
     /// Output PLY file.
     #[arg(short, long)]
     output: PathBuf,
+    /// Replace an existing output file even if it is not a PLY mesh.
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn run(a: ExportArgs) -> Result<()> {
-    let r = Reader::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
-    let s = voxlod_render::export_ply(&r, a.level, &a.output)?;
+    // the output is checked (not the input, not another kind of file) and locked first, and
+    // written under a temporary name: an interrupted export leaves no partial file
+    let guard = OutputGuard::acquire(&a.output, &[&a.file], OutputKind::Ply, a.force)?;
+    let r = Reader::open(&a.file)?;
+    let s = voxlod_render::export_ply(&r, a.level, guard.staged())?;
+    guard.commit()?;
     println!(
         "wrote {}: level {}, {} voxels, {} quads, {} vertices, {}",
         a.output.display(),

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 use voxlod_format::Reader;
 use voxlod_pipeline::format_size;
@@ -33,7 +33,8 @@ struct FileInfo {
 }
 
 fn gather(path: &Path) -> Result<FileInfo> {
-    let r = Reader::open(path).with_context(|| format!("opening {}", path.display()))?;
+    // the reader's errors name the file
+    let r = Reader::open(path)?;
     let h = r.header();
     let mut per_level: Vec<LevelInfo> = (0..h.levels)
         .map(|level| LevelInfo {
@@ -50,9 +51,7 @@ fn gather(path: &Path) -> Result<FileInfo> {
         l.payload_bytes += n.payload_size;
     }
     let voxels: u64 = per_level.iter().map(|l| l.voxels).sum();
-    let bytes = std::fs::metadata(path)
-        .with_context(|| format!("reading the size of {}", path.display()))?
-        .len();
+    let bytes = r.file_size();
     let mode = match h.mode {
         0 => "conservative".to_string(),
         1 => "thin".to_string(),
@@ -75,9 +74,7 @@ fn gather(path: &Path) -> Result<FileInfo> {
             0.0
         },
         per_level,
-        manifest: r
-            .manifest()
-            .with_context(|| format!("reading the manifest of {}", path.display()))?,
+        manifest: r.manifest()?,
     })
 }
 

@@ -68,6 +68,9 @@ struct GenArgs {
     /// No progress bar.
     #[arg(short, long)]
     quiet: bool,
+    /// Replace an existing output file even if it is not a PLY mesh.
+    #[arg(long)]
+    force: bool,
 }
 
 fn parse_count(s: &str) -> Result<u64, String> {
@@ -132,6 +135,9 @@ struct BuildArgs {
     /// Print the summary as JSON on stdout.
     #[arg(long)]
     json: bool,
+    /// Replace an existing output file even if it is not a voxlod octree.
+    #[arg(long)]
+    force: bool,
     /// Testing aid: stop as if interrupted after this many leaf chunks.
     #[arg(long, hide = true)]
     debug_interrupt_after_chunks: Option<u64>,
@@ -161,7 +167,7 @@ fn main() -> ExitCode {
     match r {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", voxlod_pipeline::chain_text(&e));
             ExitCode::FAILURE
         }
     }
@@ -208,7 +214,20 @@ fn run_build(a: BuildArgs) -> Result<()> {
     if a.tmp.is_some() {
         s.tmp_dir = a.tmp.clone();
     }
+    // a bad value is blamed on where it came from: the flag, or the settings file
+    if let Err(e) = s.validate() {
+        let flag_given = match e.field {
+            "resolution" => a.resolution.is_some(),
+            "zstd_level" => a.zstd_level.is_some(),
+            _ => true,
+        };
+        match &a.config {
+            Some(c) if !flag_given => anyhow::bail!("settings file {}: {e}", c.display()),
+            _ => anyhow::bail!("--{} {}: {}", e.field.replace('_', "-"), e.value, e.message),
+        }
+    }
     s.progress = !a.quiet;
+    s.force = a.force;
     s.interrupt_after_chunks = a.debug_interrupt_after_chunks;
 
     // Ctrl-C: the first asks the build to stop at the next safe point (its work folder is kept
@@ -331,6 +350,13 @@ fn run_gen(a: GenArgs) -> Result<()> {
         Some(p) => p.clone(),
         None => bundled_sample()?,
     };
+    // checks and locks the output (gen writes its own temporary file and renames it)
+    let _guard = voxlod_pipeline::OutputGuard::acquire(
+        &a.output,
+        &[&base],
+        voxlod_pipeline::OutputKind::Ply,
+        a.force,
+    )?;
     let bar = if a.quiet {
         indicatif::ProgressBar::hidden()
     } else {

@@ -4,9 +4,10 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use voxlod_format::Reader;
+use voxlod_pipeline::{OutputGuard, OutputKind};
 use voxlod_render::{Lod, Renderer, View};
 
 #[derive(Args)]
@@ -38,6 +39,9 @@ pub struct RenderArgs {
     /// Move closer: 1 frames the whole model, 2 is twice as close.
     #[arg(long, default_value_t = 1.0)]
     zoom: f64,
+    /// Replace an existing output file even if it is not a PNG image.
+    #[arg(long)]
+    force: bool,
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -66,7 +70,9 @@ fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
 
 pub fn run(a: RenderArgs) -> Result<()> {
     let t = Instant::now();
-    let r = Reader::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
+    // the output is checked (not the input, not another kind of file) and locked first
+    let guard = OutputGuard::acquire(&a.output, &[&a.file], OutputKind::Png, a.force)?;
+    let r = Reader::open(&a.file)?;
     let lod = match (a.level, a.error) {
         (Some(l), _) => Lod::Level(l),
         (None, Some(e)) => Lod::Error(e),
@@ -86,7 +92,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if pic.coverage().iter().all(|&c| !c) {
         bail!("nothing of the model is in the picture (check --view, --up and --zoom)");
     }
-    pic.write_png(&a.output)?;
+    pic.write_png(guard.staged())?;
+    guard.commit()?;
     let mut levels: Vec<u32> = nodes.iter().map(|&i| r.nodes()[i].level).collect();
     levels.sort_unstable();
     levels.dedup();

@@ -1,0 +1,394 @@
+//! Output safety for every command that writes a file (`build`, `render`, `export`, `gen`):
+//! checks made before any work starts, an advisory lock per output, a unique temporary name
+//! beside the output, and the final rename.
+//!
+//! Checked up front ([`OutputGuard::acquire`]): the output is not a directory and its folder
+//! exists; it is not one of the command's inputs (same device and inode, so links and other
+//! spellings of a path are caught); an existing file there is of the kind the command writes
+//! (or empty) unless `force`; the folder is writable and not full (the lock file below is
+//! created and written there); no other voxlod process holds the output's lock.
+//!
+//! The lock is `flock(LOCK_EX | LOCK_NB)` on `.voxlod-lock-<name>` beside the output, holding the
+//! pid of its owner so that a second process can name it. The file is removed when the guard
+//! is dropped, while still locked; a process that locked a file that was removed meanwhile
+//! sees another inode at the path and tries again, so two processes never both hold it.
+//! The kernel releases the lock when its process dies (`kill -9` included).
+
+use std::fs::{File, OpenOptions};
+use std::io::{Read, Write};
+use std::os::unix::fs::MetadataExt;
+use std::os::unix::io::AsRawFd;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Result};
+
+use crate::format_size;
+
+/// Below this much free space in the output's folder a command is refused at once: even the
+/// smallest octree (header, one node, index, manifest) or picture would not fit.
+pub const MIN_OUTPUT_FREE: u64 = 64 << 10;
+
+/// What a command writes; an existing file of another kind is not replaced without `force`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputKind {
+    /// A voxlod octree (`build`).
+    Octree,
+    /// A PNG picture (`render`).
+    Png,
+    /// A PLY mesh (`export`, `gen`).
+    Ply,
+}
+
+impl OutputKind {
+    fn name(self) -> &'static str {
+        match self {
+            OutputKind::Octree => "a voxlod octree",
+            OutputKind::Png => "a PNG image",
+            OutputKind::Ply => "a PLY mesh",
+        }
+    }
+
+    fn of(head: &[u8]) -> Option<OutputKind> {
+        if head.starts_with(&voxlod_format::MAGIC) {
+            Some(OutputKind::Octree)
+        } else if head.starts_with(b"\x89PNG\r\n\x1a\n") {
+            Some(OutputKind::Png)
+        } else if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
+            Some(OutputKind::Ply)
+        } else {
+            None
+        }
+    }
+}
+
+/// What a file's first bytes say it is, for messages.
+fn describe(head: &[u8]) -> &'static str {
+    if let Some(k) = OutputKind::of(head) {
+        return k.name();
+    }
+    if head.starts_with(&[0x1f, 0x8b]) {
+        "gzip-compressed data"
+    } else if head.starts_with(b"solid") {
+        "an ASCII STL mesh"
+    } else if head.iter().all(|b| b.is_ascii()) {
+        "a text file"
+    } else {
+        "a file of unknown kind"
+    }
+}
+
+/// The checks, lock and temporary name of one command's output; see the module docs.
+#[derive(Debug)]
+pub struct OutputGuard {
+    output: PathBuf,
+    staged: PathBuf,
+    lock_path: PathBuf,
+    lock: File,
+}
+
+/// The output's folder (`.` for a bare file name).
+pub fn output_dir(output: &Path) -> &Path {
+    output
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+}
+
+fn file_name(output: &Path) -> String {
+    output
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into())
+}
+
+/// An OS error's text without its "(os error N)" suffix, e.g. "Is a directory".
+pub(crate) fn os_text(e: &std::io::Error) -> String {
+    let s = e.to_string();
+    match s.find(" (os error") {
+        Some(i) => s[..i].to_string(),
+        None => s,
+    }
+}
+
+impl OutputGuard {
+    /// Runs the up-front checks for writing `output` from `inputs` and takes the output's lock.
+    /// Errors name the output (or its folder) once and say what to do.
+    pub fn acquire(
+        output: &Path,
+        inputs: &[&Path],
+        kind: OutputKind,
+        force: bool,
+    ) -> Result<OutputGuard> {
+        let shown = output.display();
+        if output.as_os_str().is_empty() {
+            bail!("the output path is empty");
+        }
+        if output.is_dir() || output.as_os_str().to_string_lossy().ends_with('/') {
+            let folder = output.to_string_lossy();
+            let folder = folder.trim_end_matches('/');
+            bail!(
+                "{shown} is a directory: name the output file, e.g. {folder}/out.{}",
+                ext(kind)
+            );
+        }
+        let dir = output_dir(output);
+        if !dir.is_dir() {
+            bail!(
+                "{shown}: the output's folder {} does not exist",
+                dir.display()
+            );
+        }
+        if let Ok(om) = std::fs::metadata(output) {
+            for input in inputs {
+                if let Ok(im) = std::fs::metadata(input) {
+                    if im.dev() == om.dev() && im.ino() == om.ino() {
+                        bail!(
+                            "{shown} is the input {}: choose another output file",
+                            input.display()
+                        );
+                    }
+                }
+            }
+            if !om.is_file() {
+                bail!("{shown} exists and is not a regular file: choose another output file");
+            }
+            if om.len() > 0 {
+                let mut head = [0u8; 16];
+                let n = File::open(output)
+                    .and_then(|mut f| read_head(&mut f, &mut head))
+                    .unwrap_or(0);
+                let head = &head[..n];
+                if OutputKind::of(head) != Some(kind) && !force {
+                    bail!(
+                        "{shown} exists and is {}, not {}: refusing to replace it (use --force to overwrite it)",
+                        describe(head),
+                        kind.name()
+                    );
+                }
+            }
+        }
+        let name = file_name(output);
+        let lock_path = dir.join(format!(".voxlod-lock-{name}"));
+        let lock = lock_file(&lock_path, output, dir)?;
+        let guard = OutputGuard {
+            output: output.to_path_buf(),
+            staged: dir.join(format!(
+                ".voxlod-part-{name}-{}-{:x}",
+                std::process::id(),
+                std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| d.as_nanos() as u64)
+            )),
+            lock_path,
+            lock,
+        };
+        if let Some(free) = crate::system::free_disk(dir) {
+            if free < MIN_OUTPUT_FREE {
+                bail!(
+                    "{shown}: the output's folder {} has only {} free (full disk?)",
+                    dir.display(),
+                    format_size(free)
+                );
+            }
+        }
+        // Leftovers of killed runs (their unique temporary names): nobody else writes them
+        // while we hold the lock.
+        let prefix = format!(".voxlod-part-{name}-");
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            for e in entries.flatten() {
+                if e.file_name().to_string_lossy().starts_with(&prefix) {
+                    let _ = std::fs::remove_file(e.path());
+                }
+            }
+        }
+        Ok(guard)
+    }
+
+    /// The unique temporary name to write the output under (beside it, so that
+    /// [`commit`](Self::commit) is an atomic rename).
+    pub fn staged(&self) -> &Path {
+        &self.staged
+    }
+
+    /// The output path.
+    pub fn output(&self) -> &Path {
+        &self.output
+    }
+
+    /// Renames the staged file to the output (replacing an old one) and makes the rename
+    /// durable (fsync of the folder).
+    pub fn commit(&self) -> Result<()> {
+        if let Err(e) = std::fs::rename(&self.staged, &self.output) {
+            bail!(
+                "{}: cannot move the finished file into place: {}",
+                self.output.display(),
+                os_text(&e)
+            );
+        }
+        if let Ok(d) = File::open(output_dir(&self.output)) {
+            let _ = d.sync_all();
+        }
+        Ok(())
+    }
+}
+
+impl Drop for OutputGuard {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.staged);
+        let _ = std::fs::remove_file(format!("{}.tmp", self.staged.display()));
+        // removed while still locked (the lock goes with the descriptor, closed after this)
+        if same_inode(&self.lock, &self.lock_path) {
+            let _ = std::fs::remove_file(&self.lock_path);
+        }
+    }
+}
+
+fn ext(kind: OutputKind) -> &'static str {
+    match kind {
+        OutputKind::Octree => "voxlod",
+        OutputKind::Png => "png",
+        OutputKind::Ply => "ply",
+    }
+}
+
+fn read_head(f: &mut File, head: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < head.len() {
+        match f.read(&mut head[n..])? {
+            0 => break,
+            k => n += k,
+        }
+    }
+    Ok(n)
+}
+
+/// True if `path` still names the file open as `f`.
+fn same_inode(f: &File, path: &Path) -> bool {
+    match (f.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+/// Opens and locks `lock_path` (exclusive, non-blocking) and writes our pid into it. Refuses,
+/// naming the holder's pid, when another process holds it.
+fn lock_file(lock_path: &Path, output: &Path, dir: &Path) -> Result<File> {
+    lock_or_name_holder(lock_path).map_err(|e| match e {
+        LockError::Held(pid) => anyhow::anyhow!(
+            "{} is being written by another voxlod process ({}): wait for it to finish or choose another output file",
+            output.display(),
+            pid.map_or("pid unknown".to_string(), |p| format!("pid {p}"))
+        ),
+        LockError::Io(e) if matches!(e.raw_os_error(), Some(libc::ENOSPC | libc::EDQUOT)) => {
+            anyhow::anyhow!(
+                "{}: the output's folder {} is full: {}",
+                output.display(),
+                dir.display(),
+                os_text(&e)
+            )
+        }
+        LockError::Io(e) => anyhow::anyhow!(
+            "{}: the output's folder {} is not writable: {}",
+            output.display(),
+            dir.display(),
+            os_text(&e)
+        ),
+    })
+}
+
+/// Why a lock was not taken.
+#[derive(Debug)]
+pub(crate) enum LockError {
+    /// Another process holds it (its pid, when it has written it yet).
+    Held(Option<u32>),
+    /// Creating, locking or writing the lock file failed.
+    Io(std::io::Error),
+}
+
+/// Takes the exclusive advisory lock on `path` (created if missing) and writes our pid into it;
+/// see the module docs for the protocol.
+pub(crate) fn lock_or_name_holder(path: &Path) -> std::result::Result<File, LockError> {
+    for _ in 0..100 {
+        let mut f = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(path)
+            .map_err(LockError::Io)?;
+        // SAFETY: flock on a descriptor we own.
+        if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+            let e = std::io::Error::last_os_error();
+            if e.raw_os_error() != Some(libc::EWOULDBLOCK) {
+                return Err(LockError::Io(e));
+            }
+            // the holder writes its pid right after locking: give it a moment
+            let mut pid = None;
+            for _ in 0..20 {
+                let mut s = String::new();
+                if File::open(path)
+                    .and_then(|mut g| g.read_to_string(&mut s))
+                    .is_ok()
+                {
+                    pid = s.trim().parse::<u32>().ok();
+                }
+                if pid.is_some() {
+                    break;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+            return Err(LockError::Held(pid));
+        }
+        if !same_inode(&f, path) {
+            continue; // removed by its last holder after we opened it: lock the new one
+        }
+        let write = |f: &mut File| -> std::io::Result<()> {
+            f.set_len(0)?;
+            f.write_all(format!("{}\n", std::process::id()).as_bytes())?;
+            f.sync_all()
+        };
+        if let Err(e) = write(&mut f) {
+            let _ = std::fs::remove_file(path);
+            return Err(LockError::Io(e));
+        }
+        return Ok(f);
+    }
+    Err(LockError::Io(std::io::Error::other(
+        "the lock file keeps being replaced",
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_second_lock_names_the_holder() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("l");
+        let f = lock_or_name_holder(&p).unwrap();
+        // flock locks belong to the open file description: a second open in this process
+        // conflicts like another process would
+        match lock_or_name_holder(&p) {
+            Err(LockError::Held(Some(pid))) => assert_eq!(pid, std::process::id()),
+            other => panic!("expected the lock to be held, got {other:?}"),
+        }
+        drop(f);
+        assert!(lock_or_name_holder(&p).is_ok());
+    }
+
+    #[test]
+    fn kinds_are_recognized() {
+        assert_eq!(OutputKind::of(b"ply\nformat"), Some(OutputKind::Ply));
+        assert_eq!(
+            OutputKind::of(b"\x89PNG\r\n\x1a\n.."),
+            Some(OutputKind::Png)
+        );
+        assert_eq!(
+            OutputKind::of(b"VOXLOD\0\x01...."),
+            Some(OutputKind::Octree)
+        );
+        assert_eq!(OutputKind::of(b"solid x"), None);
+        assert_eq!(describe(b"solid x"), "an ASCII STL mesh");
+    }
+}
