@@ -12,7 +12,7 @@
 
 use std::cell::RefCell;
 
-use crate::voxel::{morton8, Voxel};
+use crate::voxel::Voxel;
 use crate::{FormatError, MAX_NODE_VOXELS};
 
 /// One node's voxels, compressed and checksummed, ready for [`Writer::write_node`](crate::Writer::write_node).
@@ -70,22 +70,34 @@ impl EncodedNode {
         if n == 0 || voxel_count > MAX_NODE_VOXELS {
             return Err(bad(format!("stored payload claims {voxel_count} voxels")));
         }
-        let mut block = Vec::with_capacity(12 * n);
-        let got = zstd::bulk::Decompressor::new()
-            .and_then(|mut d| d.decompress_to_buffer(&payload, &mut block))
-            .map_err(|e| bad(format!("stored payload: zstd decompression failed: {e}")))?;
-        if got != 12 * n {
-            return Err(bad(format!(
-                "stored payload decompressed to {got} bytes, expected 12·{n}"
-            )));
-        }
-        let (bounds_min, bounds_max) =
-            unshuffle(&block, n, out).map_err(|w| bad(format!("stored payload: {w}")))?;
+        let (block_crc32, (bounds_min, bounds_max)) = BLOCK.with(|cell| {
+            let block = &mut *cell.borrow_mut();
+            block.clear();
+            block.reserve(12 * n);
+            let got = DECOMPRESSOR
+                .with(|d| {
+                    let mut d = d.borrow_mut();
+                    if d.is_none() {
+                        *d = Some(zstd::bulk::Decompressor::new()?);
+                    }
+                    let d = d.as_mut().expect("decompressor was just set");
+                    d.decompress_to_buffer(&payload, block)
+                })
+                .map_err(|e| bad(format!("stored payload: zstd decompression failed: {e}")))?;
+            if got != 12 * n {
+                return Err(bad(format!(
+                    "stored payload decompressed to {got} bytes, expected 12·{n}"
+                )));
+            }
+            let bounds =
+                unshuffle(block, n, out).map_err(|w| bad(format!("stored payload: {w}")))?;
+            Ok((crc32fast::hash(block), bounds))
+        })?;
         Ok(EncodedNode {
             payload_crc32,
             payload,
             voxel_count,
-            block_crc32: crc32fast::hash(&block),
+            block_crc32,
             bounds_min,
             bounds_max,
         })
@@ -112,56 +124,61 @@ pub fn encode_node(voxels: &[Voxel], zstd_level: i32) -> Result<EncodedNode, For
             zstd::compression_level_range()
         )));
     }
-    let mut lo = [u8::MAX; 3];
-    let mut hi = [0u8; 3];
-    let mut prev: Option<u32> = None;
-    for (i, v) in voxels.iter().enumerate() {
-        if v.pos_mask >> 30 != 0 || v.normal >> 30 != 0 {
-            return Err(bad(format!(
-                "voxel {i}: reserved bits 30-31 set (pos_mask {:#010x}, normal {:#010x})",
-                v.pos_mask, v.normal
-            )));
-        }
-        let m = v.morton();
-        if let Some(p) = prev {
-            if m <= p {
-                let why = if m == p {
-                    "duplicate position"
-                } else {
-                    "not in Morton order"
-                };
-                return Err(bad(format!(
-                    "voxel {i} at {:?}: {why} (previous voxel at {:?})",
-                    v.pos(),
-                    voxels[i - 1].pos()
-                )));
-            }
-        }
-        prev = Some(m);
-        let p = v.pos();
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
-    debug_assert!(voxels.len() <= MAX_NODE_VOXELS as usize); // implied by strictly increasing 24-bit codes
-
-    let mut block = Vec::new();
-    shuffle(voxels, &mut block);
-    let block_crc32 = crc32fast::hash(&block);
-    let payload =
-        compress(&block, zstd_level).map_err(|e| bad(format!("zstd compression failed: {e}")))?;
-    Ok(EncodedNode {
-        payload_crc32: crc32fast::hash(&payload),
-        payload,
-        voxel_count: voxels.len() as u32,
-        block_crc32,
-        bounds_min: lo,
-        bounds_max: hi,
+    BLOCK.with(|cell| {
+        let block = &mut *cell.borrow_mut();
+        let Some((bounds_min, bounds_max)) = shuffle(voxels, block) else {
+            return Err(bad(invalid_voxels(voxels)));
+        };
+        debug_assert!(voxels.len() <= MAX_NODE_VOXELS as usize); // implied by strictly increasing 24-bit codes
+        let block_crc32 = crc32fast::hash(block);
+        let payload = compress(block, zstd_level)
+            .map_err(|e| bad(format!("zstd compression failed: {e}")))?;
+        Ok(EncodedNode {
+            payload_crc32: crc32fast::hash(&payload),
+            payload,
+            voxel_count: voxels.len() as u32,
+            block_crc32,
+            bounds_min,
+            bounds_max,
+        })
     })
 }
 
+/// What is wrong with voxels that [`shuffle`] refused: the first voxel with reserved bits set,
+/// or out of Morton order.
+fn invalid_voxels(voxels: &[Voxel]) -> String {
+    let mut prev: Option<u32> = None;
+    for (i, v) in voxels.iter().enumerate() {
+        if v.pos_mask >> 30 != 0 || v.normal >> 30 != 0 {
+            return format!(
+                "voxel {i}: reserved bits 30-31 set (pos_mask {:#010x}, normal {:#010x})",
+                v.pos_mask, v.normal
+            );
+        }
+        let m = v.morton();
+        if prev.is_some_and(|p| m <= p) {
+            let why = if Some(m) == prev {
+                "duplicate position"
+            } else {
+                "not in Morton order"
+            };
+            return format!(
+                "voxel {i} at {:?}: {why} (previous voxel at {:?})",
+                v.pos(),
+                voxels[i - 1].pos()
+            );
+        }
+        prev = Some(m);
+    }
+    unreachable!("invalid_voxels called on valid voxels")
+}
+
 thread_local! {
+    /// The transformed block of the node being encoded or decoded on this thread, kept so
+    /// that every node does not allocate (and the kernel zero) 12 bytes per voxel afresh.
+    static BLOCK: RefCell<Vec<u8>> = const { RefCell::new(Vec::new()) };
+    /// One decompression context per thread (made once, not per node).
+    static DECOMPRESSOR: RefCell<Option<zstd::bulk::Decompressor<'static>>> = const { RefCell::new(None) };
     // One compression context per thread, re-made when the level changes (contexts are
     // expensive to set up and not Sync).
     static COMPRESSOR: RefCell<Option<(i32, zstd::bulk::Compressor<'static>)>> = const { RefCell::new(None) };
@@ -181,37 +198,132 @@ fn compress(block: &[u8], level: i32) -> std::io::Result<Vec<u8>> {
     })
 }
 
-/// Writes the transformed block (12·n bytes) of `voxels` into `out` (cleared).
-/// Preconditions (checked by [`encode_node`]): strictly increasing Morton codes.
-pub(crate) fn shuffle(voxels: &[Voxel], out: &mut Vec<u8>) {
+/// Voxels transformed per step of [`shuffle`] and [`unshuffle`]: their words sit in small
+/// arrays (in L1) between the word pass and the byte-plane pass.
+const STEP: usize = 256;
+
+/// Writes the transformed block (12·n bytes) of `voxels` into `out` and returns the voxels'
+/// tight bounds, or `None` (with `out` unspecified) if they are not in strictly increasing
+/// Morton order or have reserved bits set.
+///
+/// Per step of [`STEP`] voxels, a word pass (Morton deltas with the masks, bytewise deltas
+/// of normals and colours, the checks and bounds; branch-free) fills three word arrays, and
+/// a byte-plane pass spreads them into the twelve planes (no dependencies between voxels,
+/// so the compiler uses SIMD lanes).
+pub(crate) fn shuffle(voxels: &[Voxel], out: &mut Vec<u8>) -> Option<([u8; 3], [u8; 3])> {
     let n = voxels.len();
-    out.clear();
-    out.resize(12 * n, 0);
+    // every byte is written below: no need to zero what the buffer already holds
+    if out.len() < 12 * n {
+        out.resize(12 * n, 0);
+    }
+    out.truncate(12 * n);
     let (pos, rest) = out.split_at_mut(4 * n);
     let (nor, col) = rest.split_at_mut(4 * n);
-    let mut prev_m = 0u32;
-    let mut prev_n = 0u32;
-    let mut prev_c = 0u32;
-    for (j, v) in voxels.iter().enumerate() {
-        let m = v.morton();
-        debug_assert!(j == 0 || m > prev_m);
-        let w = (m - prev_m) | (v.mask() as u32) << 24;
-        prev_m = m;
-        let dn = byte_sub(v.normal, prev_n);
-        prev_n = v.normal;
-        let dc = byte_sub(v.color, prev_c);
-        prev_c = v.color;
-        for k in 0..4 {
-            pos[k * n + j] = (w >> (8 * k)) as u8;
-            nor[k * n + j] = (dn >> (8 * k)) as u8;
-            col[k * n + j] = (dc >> (8 * k)) as u8;
+    let mut prev_m = None;
+    let (mut prev_n, mut prev_c) = (0u32, 0u32);
+    let mut ok = true;
+    let mut reserved = 0u32;
+    let mut lo = [u8::MAX; 3];
+    let mut hi = [0u8; 3];
+    let mut words = [[0u32; STEP]; 3];
+    for (s, step) in voxels.chunks(STEP).enumerate() {
+        for (j, v) in step.iter().enumerate() {
+            let m = morton_of_word(v.pos_mask);
+            ok &= Some(m) > prev_m;
+            let delta = m.wrapping_sub(prev_m.unwrap_or(0));
+            prev_m = Some(m);
+            words[0][j] = delta | (v.pos_mask & 0x3f00_0000);
+            reserved |= v.pos_mask | v.normal;
+            words[1][j] = byte_sub(v.normal, prev_n);
+            prev_n = v.normal;
+            words[2][j] = byte_sub(v.color, prev_c);
+            prev_c = v.color;
+            for (a, (l, h)) in lo.iter_mut().zip(&mut hi).enumerate() {
+                let c = (v.pos_mask >> (8 * a)) as u8;
+                *l = (*l).min(c);
+                *h = (*h).max(c);
+            }
+        }
+        let (at, len) = (s * STEP, step.len());
+        for (w, planes) in words.iter().zip([&mut *pos, &mut *nor, &mut *col]) {
+            let (p0, rest) = planes.split_at_mut(n);
+            let (p1, rest) = rest.split_at_mut(n);
+            let (p2, p3) = rest.split_at_mut(n);
+            spread_planes(
+                &w[..len],
+                [
+                    &mut p0[at..at + len],
+                    &mut p1[at..at + len],
+                    &mut p2[at..at + len],
+                    &mut p3[at..at + len],
+                ],
+            );
         }
     }
+    (ok && reserved >> 30 == 0).then_some((lo, hi))
 }
+
+/// Byte `b` of every word into plane `b`.
+#[inline]
+fn spread_planes(words: &[u32], planes: [&mut [u8]; 4]) {
+    let [p0, p1, p2, p3] = planes;
+    let len = words.len();
+    let (p0, p1, p2, p3) = (
+        &mut p0[..len],
+        &mut p1[..len],
+        &mut p2[..len],
+        &mut p3[..len],
+    );
+    for j in 0..len {
+        let w = words[j];
+        p0[j] = w as u8;
+        p1[j] = (w >> 8) as u8;
+        p2[j] = (w >> 16) as u8;
+        p3[j] = (w >> 24) as u8;
+    }
+}
+
+/// The word of bytes `j` of four planes.
+#[inline]
+fn gather_planes(planes: [&[u8]; 4], words: &mut [u32]) {
+    let len = words.len();
+    let [p0, p1, p2, p3] = planes;
+    let (p0, p1, p2, p3) = (&p0[..len], &p1[..len], &p2[..len], &p3[..len]);
+    for j in 0..len {
+        words[j] = u32::from_le_bytes([p0[j], p1[j], p2[j], p3[j]]);
+    }
+}
+
+/// `morton8` of a position word (bits 0–23: x, y, z), by table.
+#[inline]
+fn morton_of_word(w: u32) -> u32 {
+    MORTON[(w & 0xff) as usize]
+        | MORTON[(w >> 8 & 0xff) as usize] << 1
+        | MORTON[(w >> 16 & 0xff) as usize] << 2
+}
+
+/// Byte `v` with its bits moved to every third bit (bit `b` → bit `3b`): one axis of `morton8`.
+static MORTON: [u32; 256] = {
+    let mut t = [0u32; 256];
+    let mut v = 0;
+    while v < 256 {
+        let mut b = 0;
+        while b < 8 {
+            t[v] |= ((v as u32 >> b) & 1) << (3 * b);
+            b += 1;
+        }
+        v += 1;
+    }
+    t
+};
 
 /// Inverse of [`shuffle`]: decodes the block of `n` voxels into `out` (cleared). Checks what
 /// the transform cannot express in a valid node (Morton codes past 24 bits or not strictly
 /// increasing, reserved bits) and returns the voxels' tight bounds.
+///
+/// Per step of [`STEP`] voxels, a byte-plane pass gathers the words (SIMD lanes), then a word
+/// pass runs the prefix sums and rebuilds the voxels, its checks accumulated branch-free (the
+/// failing voxel is looked for only when one failed).
 pub(crate) fn unshuffle(
     block: &[u8],
     n: usize,
@@ -228,57 +340,86 @@ pub(crate) fn unshuffle(
     out.reserve(n);
     // the twelve byte planes, each n long
     let plane = |k: usize| &block[k * n..(k + 1) * n];
-    let (p0, p1, p2, p3) = (plane(0), plane(1), plane(2), plane(3));
-    let (n0, n1, n2, n3) = (plane(4), plane(5), plane(6), plane(7));
-    let (c0, c1, c2, c3) = (plane(8), plane(9), plane(10), plane(11));
     let mut lo = [u8::MAX; 3];
     let mut hi = [0u8; 3];
     let mut m = 0u32;
     let mut normal = 0u32;
     let mut color = 0u32;
-    for j in 0..n {
-        let w = u32::from_le_bytes([p0[j], p1[j], p2[j], p3[j]]);
-        let d = w & 0x00ff_ffff;
-        if j > 0 && d == 0 {
-            return Err(format!("voxel {j}: Morton delta 0 (duplicate position)"));
+    let mut words = [[0u32; STEP]; 3];
+    let mut bad = false;
+    for at in (0..n).step_by(STEP) {
+        let len = STEP.min(n - at);
+        for (a, w) in words.iter_mut().enumerate() {
+            let p = |b: usize| &plane(4 * a + b)[at..at + len];
+            gather_planes([p(0), p(1), p(2), p(3)], &mut w[..len]);
         }
-        m += d; // both < 2^24: no overflow
-        if m >= 1 << 24 {
-            return Err(format!("voxel {j}: Morton code {m:#x} exceeds 24 bits"));
+        let first = at == 0;
+        out.extend((0..len).map(|j| {
+            let w = words[0][j];
+            let d = w & 0x00ff_ffff;
+            // a zero delta after the first voxel, a code past 24 bits, reserved bits
+            bad |= d == 0 && !(first && j == 0);
+            m += d; // both < 2^24: no overflow
+            bad |= m >= 1 << 24;
+            normal = byte_add(normal, words[1][j]);
+            color = byte_add(color, words[2][j]);
+            bad |= (w | normal) >> 30 != 0;
+            // the position as Voxel::pos_mask packs it (x | y << 8 | z << 16), by table
+            let pos = UNMORTON[0][(m & 0xff) as usize]
+                | UNMORTON[1][(m >> 8 & 0xff) as usize]
+                | UNMORTON[2][(m >> 16 & 0xff) as usize];
+            for (a, (l, h)) in lo.iter_mut().zip(&mut hi).enumerate() {
+                let c = (pos >> (8 * a)) as u8;
+                *l = (*l).min(c);
+                *h = (*h).max(c);
+            }
+            Voxel {
+                pos_mask: pos | (w >> 24 & 0x3f) << 24,
+                normal,
+                color,
+            }
+        }));
+        if bad {
+            return Err(first_invalid(block, n));
         }
-        if w >> 30 != 0 {
-            return Err(format!("voxel {j}: reserved position bits 30-31 set"));
-        }
-        normal = byte_add(normal, u32::from_le_bytes([n0[j], n1[j], n2[j], n3[j]]));
-        if normal >> 30 != 0 {
-            return Err(format!("voxel {j}: reserved normal bits 30-31 set"));
-        }
-        color = byte_add(color, u32::from_le_bytes([c0[j], c1[j], c2[j], c3[j]]));
-        // the position as Voxel::pos_mask packs it (x | y << 8 | z << 16), by table
-        let pos = UNMORTON[0][(m & 0xff) as usize]
-            | UNMORTON[1][(m >> 8 & 0xff) as usize]
-            | UNMORTON[2][(m >> 16) as usize];
-        let p = pos.to_le_bytes();
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-        debug_assert_eq!([p[0], p[1], p[2]], unmorton8(m));
-        out.push(Voxel {
-            pos_mask: pos | (w >> 24 & 0x3f) << 24,
-            normal,
-            color,
-        });
     }
     Ok((lo, hi))
 }
 
-/// Bytewise wrapping `a − b` of two words (each byte lane on its own).
+/// The first problem in a block that [`unshuffle`] refused, found voxel by voxel.
+fn first_invalid(block: &[u8], n: usize) -> String {
+    let byte = |k: usize, j: usize| block[k * n + j];
+    let word = |a: usize, j: usize| u32::from_le_bytes(std::array::from_fn(|b| byte(4 * a + b, j)));
+    let mut m = 0u32;
+    let mut normal = 0u32;
+    for j in 0..n {
+        let w = word(0, j);
+        let d = w & 0x00ff_ffff;
+        if j > 0 && d == 0 {
+            return format!("voxel {j}: Morton delta 0 (duplicate position)");
+        }
+        m += d;
+        if m >= 1 << 24 {
+            return format!("voxel {j}: Morton code {m:#x} exceeds 24 bits");
+        }
+        if w >> 30 != 0 {
+            return format!("voxel {j}: reserved position bits 30-31 set");
+        }
+        normal = byte_add(normal, word(1, j));
+        if normal >> 30 != 0 {
+            return format!("voxel {j}: reserved normal bits 30-31 set");
+        }
+    }
+    unreachable!("first_invalid called on a valid block")
+}
+
+/// Bytewise wrapping `a − b` of two words (each byte lane on its own; SWAR: the low seven
+/// bits of each lane subtract from a lane with its top bit set, so no borrow crosses lanes,
+/// and the top bit is fixed up by xor).
 #[inline]
 fn byte_sub(a: u32, b: u32) -> u32 {
-    u32::from_le_bytes(std::array::from_fn(|k| {
-        a.to_le_bytes()[k].wrapping_sub(b.to_le_bytes()[k])
-    }))
+    const H: u32 = 0x8080_8080;
+    ((a | H) - (b & !H)) ^ ((a ^ !b) & H)
 }
 
 /// Bytewise wrapping `a + b` (SWAR: the low seven bits of each lane add without carrying
@@ -317,8 +458,8 @@ const fn unmorton_tables() -> [[u32; 256]; 3] {
     t
 }
 
-/// Inverse of [`morton8`].
-#[inline]
+/// Inverse of [`morton8`] (the tests' reference for the tables).
+#[cfg(test)]
 pub(crate) fn unmorton8(m: u32) -> [u8; 3] {
     #[inline]
     fn compact(v: u32) -> u8 {
@@ -329,14 +470,14 @@ pub(crate) fn unmorton8(m: u32) -> [u8; 3] {
         x as u8
     }
     let p = [compact(m), compact(m >> 1), compact(m >> 2)];
-    debug_assert_eq!(morton8(p[0], p[1], p[2]), m & 0x00ff_ffff);
+    debug_assert_eq!(crate::voxel::morton8(p[0], p[1], p[2]), m & 0x00ff_ffff);
     p
 }
 
 #[cfg(test)]
 mod tests {
     #[test]
-    fn byte_add_and_unmorton_tables_match_their_plain_definitions() {
+    fn byte_add_sub_and_morton_tables_match_their_plain_definitions() {
         use super::*;
         let mut s = 0x1234_5678_9abc_def1u64;
         for _ in 0..200_000 {
@@ -348,6 +489,10 @@ mod tests {
                 a.to_le_bytes()[k].wrapping_add(b.to_le_bytes()[k])
             }));
             assert_eq!(byte_add(a, b), plain, "{a:#x} + {b:#x}");
+            let plain = u32::from_le_bytes(std::array::from_fn(|k| {
+                a.to_le_bytes()[k].wrapping_sub(b.to_le_bytes()[k])
+            }));
+            assert_eq!(byte_sub(a, b), plain, "{a:#x} - {b:#x}");
         }
         for m in (0..1u32 << 24).step_by(7) {
             let pos = UNMORTON[0][(m & 0xff) as usize]
@@ -356,6 +501,7 @@ mod tests {
             let p = unmorton8(m);
             assert_eq!(pos, p[0] as u32 | (p[1] as u32) << 8 | (p[2] as u32) << 16);
             assert_eq!(crate::voxel::morton8(p[0], p[1], p[2]), m);
+            assert_eq!(morton_of_word(pos | 0x3f00_0000), m);
         }
     }
 
@@ -409,7 +555,7 @@ mod tests {
     fn unmorton_inverts_morton() {
         for m in (0..1u32 << 24).step_by(997).chain([0, 1, (1 << 24) - 1]) {
             let p = unmorton8(m);
-            assert_eq!(morton8(p[0], p[1], p[2]), m);
+            assert_eq!(crate::voxel::morton8(p[0], p[1], p[2]), m);
         }
     }
 
@@ -431,7 +577,7 @@ mod tests {
         let a = Voxel::new([1, 0, 0], 0x01, 0x0000_01ff, 0x1122_3344);
         let b = Voxel::new([0, 1, 0], 0x04, 0x0007_fc00, 0x1122_3355);
         let mut block = Vec::new();
-        shuffle(&[a, b], &mut block);
+        assert_eq!(shuffle(&[a, b], &mut block), Some(([0, 0, 0], [1, 1, 0])));
         #[rustfmt::skip]
         let expected: [u8; 24] = [
             // position planes: deltas 1, 1; masks 0x01, 0x04

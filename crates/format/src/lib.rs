@@ -70,5 +70,8 @@ pub use writer::{temp_path, Writer};
 
 /// The zstd level used unless the caller picks one. Measured on a synthetic sphere chunk
 /// (`examples/measure_compression.rs`): level 9 is only 4–13% smaller than level 3 at 3–5×
-/// the compression time, level 19 6–21% smaller at 20–50×, so the default is zstd's own, 3.
-pub const DEFAULT_ZSTD_LEVEL: i32 = 3;
+/// the compression time, level 19 6–21% smaller at 20–50×. On real octrees level 1 is as small
+/// as level 3 (Stanford dragon at 4096³, all 57M voxels re-encoded: 2.000 against 2.001 bytes
+/// per voxel) at 60 % of its compression time, and negative levels are 30–50 % larger for
+/// little more speed (docs/BENCHMARKS.md, "LOD + write"), so the default is 1.
+pub const DEFAULT_ZSTD_LEVEL: i32 = 1;

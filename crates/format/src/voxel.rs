@@ -105,11 +105,12 @@ pub fn morton8(x: u8, y: u8, z: u8) -> u32 {
 
 /// Quantizes a normal to 10:10:10 snorm. The input is normalized first; a zero or non-finite
 /// vector packs to zero (which [`face_mask`] maps to all six faces).
+#[inline]
 pub fn pack_normal(n: [f32; 3]) -> u32 {
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-    if !(len.is_finite() && len > 0.0) {
-        return 0;
-    }
+    // Branch-free, so that loops over many normals ([`pack_normals`]) use SIMD lanes: a zero
+    // or non-finite length gives NaN or garbage components, and the word is then replaced by 0.
+    let valid = len.is_finite() && len > 0.0;
     let mut w = 0u32;
     for (a, &c) in n.iter().enumerate() {
         let q = ((c / len) * NORMAL_SCALE)
@@ -117,7 +118,25 @@ pub fn pack_normal(n: [f32; 3]) -> u32 {
             .clamp(-NORMAL_SCALE, NORMAL_SCALE) as i32;
         w |= ((q as u32) & 0x3ff) << (10 * a);
     }
-    w
+    if valid {
+        w
+    } else {
+        0
+    }
+}
+
+/// [`pack_normal`] of many vectors, given as their x, y and z components: `out[i]` is
+/// `pack_normal([x[i], y[i], z[i]])`, bit for bit. The loop has no branches, so the compiler
+/// runs it in SIMD lanes (square root and division are correctly rounded in every lane, so
+/// the bits are those of the scalar function). All four slices must have the same length.
+pub fn pack_normals(x: &[f32], y: &[f32], z: &[f32], out: &mut [u32]) {
+    assert!(
+        x.len() == out.len() && y.len() == out.len() && z.len() == out.len(),
+        "pack_normals: component and output slices differ in length"
+    );
+    for (((o, &x), &y), &z) in out.iter_mut().zip(x).zip(y).zip(z) {
+        *o = pack_normal([x, y, z]);
+    }
 }
 
 /// [`pack_normal`] of a direction given in f64 and not necessarily of unit length or of f32
@@ -154,10 +173,10 @@ pub fn face_mask(normal: u32) -> u8 {
         return FACE_ALL;
     }
     let mut m = 0u8;
-    for a in 0..3 {
-        if q[a] > 0 {
+    for (a, &c) in q.iter().enumerate() {
+        if c > 0 {
             m |= 1 << (2 * a);
-        } else if q[a] < 0 {
+        } else if c < 0 {
             m |= 1 << (2 * a + 1);
         }
     }
@@ -170,11 +189,11 @@ pub fn face_mask(normal: u32) -> u8 {
 #[inline]
 pub fn border_caps(pos: [u8; 3]) -> u8 {
     let mut m = 0u8;
-    for a in 0..3 {
-        if pos[a] == 255 {
+    for (a, &p) in pos.iter().enumerate() {
+        if p == 255 {
             m |= 1 << (2 * a);
         }
-        if pos[a] == 0 {
+        if p == 0 {
             m |= 1 << (2 * a + 1);
         }
     }
@@ -213,6 +232,67 @@ mod tests {
         let q = unpack_normal(pack_normal([1.0, 1.0, -1.0]));
         assert_eq!(q, [295, 295, -295]);
         assert_eq!(pack_normal([0.0, 0.0, -1.0]) >> 30, 0);
+        assert_eq!(pack_normal([f32::INFINITY, 0.0, 1.0]), 0);
+        assert_eq!(pack_normal([1e30, 1e30, 1e30]), 0); // the length overflows
+    }
+
+    /// FORMAT.md section 6 as written: early return for a zero or non-finite length.
+    fn reference_pack(n: [f32; 3]) -> u32 {
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        if !(len.is_finite() && len > 0.0) {
+            return 0;
+        }
+        let mut w = 0u32;
+        for (a, &c) in n.iter().enumerate() {
+            let q = ((c / len) * 511.0).round().clamp(-511.0, 511.0) as i32;
+            w |= ((q as u32) & 0x3ff) << (10 * a);
+        }
+        w
+    }
+
+    /// The branch-free scalar form and the batch form give the reference's bits, on integer
+    /// sums as the LOD merge makes them and on arbitrary floats, zero, non-finite and
+    /// denormal vectors included.
+    #[test]
+    fn pack_normals_matches_pack_normal() {
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        let mut v: Vec<[f32; 3]> = (0..100_000)
+            .map(|i| {
+                let r = next();
+                if i % 2 == 0 {
+                    // integer sums of up to eight 10-bit components
+                    [0, 21, 42].map(|k| ((r >> k & 0x1fff) as i32 - 4096) as f32)
+                } else {
+                    [0, 21, 42].map(|k| f32::from_bits((r >> k) as u32))
+                }
+            })
+            .collect();
+        v.extend([
+            [0.0, 0.0, 0.0],
+            [-0.0, 0.0, -0.0],
+            [f32::NAN, 1.0, 1.0],
+            [f32::INFINITY, 1.0, 1.0],
+            [1e-45, 0.0, 0.0],
+            [4088.0, -4088.0, 4088.0],
+            [0.5, 0.5, 0.0],
+        ]);
+        let (x, y, z): (Vec<f32>, Vec<f32>, Vec<f32>) = (
+            v.iter().map(|n| n[0]).collect(),
+            v.iter().map(|n| n[1]).collect(),
+            v.iter().map(|n| n[2]).collect(),
+        );
+        let mut out = vec![0u32; v.len()];
+        pack_normals(&x, &y, &z, &mut out);
+        for (n, w) in v.iter().zip(&out) {
+            assert_eq!(*w, reference_pack(*n), "{n:?}");
+            assert_eq!(pack_normal(*n), reference_pack(*n), "{n:?}");
+        }
     }
 
     #[test]
