@@ -46,9 +46,6 @@ impl PlySource {
         } else {
             parse_header(path, &mut BufReader::new(file))?
         };
-        if !gz {
-            check_counts_fit(path, &header, file_len)?;
-        }
         let layout = &header.layout;
         let mut warnings = Vec::new();
         if layout.sources.is_empty() {
@@ -66,6 +63,11 @@ impl PlySource {
                 _ => element_offsets::<false>(path, &header, &m)?,
             };
             map = Some(m);
+        }
+        // after the exact offsets of the fixed-size elements (whose own message names the
+        // element and the bytes missing), the counts of the variable-size ones
+        if !gz {
+            check_counts_fit(path, &header, file_len)?;
         }
         let passes = if layout.sources.iter().any(|s| s.0 < layout.vertex) {
             2
@@ -342,20 +344,30 @@ impl PlySource {
     }
 }
 
+/// An ASCII body may fall short of the fewest bytes its counts need by this much before the
+/// header is refused up front; a smaller shortfall is left to the parser, whose message names
+/// the line where the data stops or goes wrong (more useful for a truncated or mistyped file).
+const ASCII_SHORTFALL: u64 = 64 << 20;
+
 /// Refuses a header whose element counts cannot fit in the file, even at the fewest bytes a
 /// record can take (a 42 KB file claiming 4e9 faces), before any plan is made from them.
 fn check_counts_fit(path: &Path, header: &Header, file_len: u64) -> Result<(), IngestError> {
     let ascii = header.encoding == Encoding::Ascii;
     let body = file_len.saturating_sub(header.bytes);
+    let allowed = if ascii {
+        body.saturating_add(ASCII_SHORTFALL)
+    } else {
+        body
+    };
     let mut need = 0u64;
     for el in &header.elements {
         need = need.saturating_add(el.count.saturating_mul(el.min_record_bytes(ascii)));
-        if need > body {
+        if need > allowed {
             return Err(IngestError::malformed(
                 path,
                 Location::File,
                 format!(
-                    "the header declares {} {} records (and the elements before them), which need at least {need} bytes, but the file has {body} bytes after its header: the header is inconsistent with the file size (truncated file?)",
+                    "the header declares {} records of element \"{}\" (and the elements before them), which need at least {need} bytes, but the file has {body} bytes after its header: the header is inconsistent with the file size (truncated file?)",
                     el.count, el.name
                 ),
             ));
