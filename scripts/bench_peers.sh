@@ -29,7 +29,7 @@ TMP="$(mktemp -d)"
 trap 'rm -rf "$TMP"' EXIT
 
 # PLY (ASCII or binary little-endian, optionally gzipped; float x y z first, triangles as
-# `list uchar int|uint`) -> binary PLY (x y z, list uchar int) and OBJ
+# `list uchar int|uint`) -> binary PLY (x y z, grey r g b, list uchar int) and OBJ
 convert() {
   python3 - "$1" "$2" "$3" <<'PY'
 import gzip, sys
@@ -76,8 +76,12 @@ elif fmt == "binary_little_endian":
 else:
     sys.exit(f"{src}: {fmt} is not converted")
 with open(ply_out, "wb") as o:
-    o.write(f"ply\nformat binary_little_endian 1.0\nelement vertex {nv}\nproperty float x\nproperty float y\nproperty float z\nelement face {nf}\nproperty list uchar int vertex_indices\nend_header\n".encode())
-    o.write(v.astype("<f4").tobytes())
+    # float x y z + uchar red green blue: the OpenVDB harness reads 15-byte vertex records
+    o.write(f"ply\nformat binary_little_endian 1.0\nelement vertex {nv}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nelement face {nf}\nproperty list uchar int vertex_indices\nend_header\n".encode())
+    vrec = np.zeros((nv, 15), dtype=np.uint8)
+    vrec[:, :12] = v.astype("<f4").view(np.uint8).reshape(nv, 12)
+    vrec[:, 12:] = 200
+    o.write(vrec.tobytes())
     rec = np.zeros((nf, 13), dtype=np.uint8)
     rec[:, 0] = 3
     rec[:, 1:] = f.astype("<i4").view(np.uint8).reshape(nf, 12)
@@ -101,7 +105,7 @@ run() {
       vox=$(awk '$1 == "VOXELS" {print $2}' "$TMP/s.txt") ;;
     obj2voxel)
       /usr/bin/time -f "%e %M" -o "$TMP/t" "$PEERS/obj2voxel" "$obj" "$TMP/o.ply" -r "$res" > /dev/null 2>&1
-      vox=$(grep -a -m1 '^element vertex' "$TMP/o.ply" | awk '{print $3}') ;;
+      vox=$(grep -a -m1 '^element vertex' "$TMP/o.ply" | awk '{print $3}' | tr -dc 0-9) ;;
   esac
   read -r wall kib < "$TMP/t"
   echo "$wall $((kib / 1024)) $vox"
