@@ -139,6 +139,23 @@ pub fn pack_normals(x: &[f32], y: &[f32], z: &[f32], out: &mut [u32]) {
     }
 }
 
+/// [`pack_normal`] of a direction given in f64 and not necessarily of unit length or of f32
+/// range (e.g. an unnormalized sum of weighted normals, whose components may be tiny): it is
+/// normalized in f64 with one square root and one division, `q = round(c · 511/|n|)`, round half
+/// away from zero, clamped to [−511, 511]. Equal to `pack_normal(n / |n| as f32)` except where a
+/// component lies within about 1e-7 of a rounding boundary, where the two may differ by one step.
+/// A zero or non-finite vector packs to zero.
+#[inline]
+pub fn pack_normal_f64(n: [f64; 3]) -> u32 {
+    let len2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+    if !(len2.is_finite() && len2 > 0.0) {
+        return 0;
+    }
+    let s = NORMAL_SCALE as f64 / len2.sqrt();
+    let q = |c: f64| ((c * s).round().clamp(-511.0, 511.0) as i32 as u32) & 0x3ff;
+    q(n[0]) | q(n[1]) << 10 | q(n[2]) << 20
+}
+
 /// The three signed 10-bit components of a packed normal, each in [-511, 511].
 #[inline]
 pub fn unpack_normal(w: u32) -> [i32; 3] {
@@ -276,6 +293,39 @@ mod tests {
             assert_eq!(*w, reference_pack(*n), "{n:?}");
             assert_eq!(pack_normal(*n), reference_pack(*n), "{n:?}");
         }
+    }
+
+    #[test]
+    fn pack_normal_f64_matches_pack_normal() {
+        // SplitMix64 directions of all lengths, including tiny and huge ones
+        let mut x = 0x9e37_79b9_7f4a_7c15u64;
+        let mut r = || {
+            x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = x;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let mut off = 0;
+        for i in 0..200_000 {
+            let scale = [1.0, 1e-30, 1e-300, 1e30, 3.0][i % 5];
+            let n = [r() * scale, r() * scale, r() * scale];
+            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            let a = unpack_normal(pack_normal_f64(n));
+            let unit = n.map(|c| (c / len) as f32);
+            let b = unpack_normal(pack_normal(unit));
+            let d = (0..3).map(|k| (a[k] - b[k]).abs()).max().unwrap();
+            assert!(d <= 1, "{n:?}: {a:?} vs {b:?}");
+            off += (d != 0) as usize;
+        }
+        assert!(off < 200, "{off} of 200000 differ by one step");
+        assert_eq!(pack_normal_f64([0.0; 3]), 0);
+        assert_eq!(pack_normal_f64([f64::NAN, 1.0, 0.0]), 0);
+        assert_eq!(pack_normal_f64([f64::INFINITY, 1.0, 0.0]), 0);
+        assert_eq!(
+            pack_normal_f64([0.0, 0.0, -1e-40]),
+            pack_normal([0.0, 0.0, -1.0])
+        );
     }
 
     #[test]

@@ -4,7 +4,9 @@
 //!
 //! With a mesh file (PLY, OBJ, STL) its triangles, fitted to the grid, replace the icosphere
 //! (`-` keeps the icosphere). A fifth argument `fast` or `general` runs only that chunk path and
-//! skips the grid driver (for profiling).
+//! skips the grid driver (for profiling). A sixth argument `sums` also counts, per mode, the
+//! voxels whose normal sum nearly cancels (`|N|/W < 1.06e-4·(K+2)`, where the f32 sums do not
+//! bound the normal to one step; see `chunk::Acc`).
 //!
 //! Reports, per mode: the bare overlap test (`voxelize_triangle`, counting voxels), the full
 //! chunk voxelizer on one thread (overlap + clipping + attributes + encoding) with the fast paths
@@ -221,6 +223,35 @@ fn main() {
                 keys.len()
             );
             outputs.push(out);
+        }
+        if args.get(5).map(|s| s.as_str()) == Some("sums") {
+            let grid = Grid::new([0.0; 3], res as f64, res).expect("grid");
+            let mut bins: HashMap<[u32; 3], Vec<Triangle>> = HashMap::new();
+            for t in &tris {
+                if let Some((lo, hi)) = grid.chunk_range(t) {
+                    for z in lo[2]..=hi[2] {
+                        for y in lo[1]..=hi[1] {
+                            for x in lo[0]..=hi[0] {
+                                bins.entry([x, y, z]).or_default().push(*t);
+                            }
+                        }
+                    }
+                }
+            }
+            let mut cv = ChunkVoxelizer::new(mode);
+            let (mut total, mut cancel) = (0u64, 0u64);
+            for (k, ts) in &bins {
+                cv.begin(k.map(|x| x * CHUNK));
+                cv.add(ts);
+                for s in cv.finish_sums() {
+                    total += 1;
+                    let n = s.n.map(|c| c as f64);
+                    let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                    let w = if s.w > 0.0 { s.w as f64 } else { s.k as f64 };
+                    cancel += (len < 1.06e-4 * (s.k as f64 + 2.0) * w) as u64;
+                }
+            }
+            println!("{mode:>12} near-cancelling normal sums: {cancel} of {total} voxels");
         }
         if outputs.len() < 2 {
             continue;

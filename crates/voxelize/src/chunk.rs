@@ -7,155 +7,208 @@
 //! touch order so that one triangle's voxels stay in cache) and one accumulator per occupied
 //! voxel. Global Morton code = brick Morton code · 512 + Morton code inside the brick.
 
-use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, pack_normal, Voxel};
+use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, pack_normal_f64, Voxel};
 use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
 
-use crate::clip::{area_scale, triangle_area_centroid};
 use crate::column::Columns;
-use crate::overlap::{
-    cross_f64, dominant_axis, interior_voxel, swizzle, to_f64, unswizzle, TriSetup,
-};
+use crate::overlap::{cross_f64, interior_voxel, to_f64, TriSetup};
 use crate::{scanline, Method, Mode};
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
 const BRICKS: usize = 32 * 32 * 32;
 const BRICK: usize = 512;
 
-/// Sums of one voxel's contributions, in f64 and in triangle order.
+/// The sums of one voxel: `s = [Σ w·n_x, Σ w·n_y, Σ w·n_z, Σ w, Σ w·r, Σ w·g, Σ w·b, Σ w·a]`
+/// in f32, in triangle order, and the number of contributions `k`.
 ///
 /// The unweighted sums `Σ n`, `Σ c` are only used if `Σ w = 0`, i.e. if every contribution has
 /// zero weight, and then the weighted sums are all zero; so both share `s`: it holds the
-/// unweighted sums while `w == 0` and restarts as the weighted sums with the first positive
-/// weight (the zero-weight terms before it add only zeros to them). The averages are the same as
-/// with separate sums (up to the sign of a zero sum, which encodes the same).
+/// unweighted sums (and `s[3] = 0`) while no weight was positive and restarts as the weighted
+/// sums with the first positive weight (zero-weight terms add nothing to weighted sums).
+///
+/// **Error bound** (Higham, *Accuracy and Stability of Numerical Algorithms*, 2nd ed., §4.2,
+/// recursive summation). Let `u = 2⁻²⁴` and `γ_m = m·u/(1 − m·u)`. Each term `w·x` is formed
+/// from `w` and `x` rounded to f32 and one f32 product, so it carries a relative error of at
+/// most `γ_3` (`x` itself is evaluated in f64, whose error is negligible here); the `k − 1`
+/// additions add `γ_{k−1}`. Hence every sum satisfies `|Ŝ − S| ≤ γ_{k+2} · Σ |terms|`, with
+/// `S` the exact sum of the f64 terms. The terms of `W` and of the colour sums are
+/// non-negative, and `|n_j| ≤ 1`, so with `K = k + 2`:
+/// * `|Ŵ − W| ≤ γ_K·W` and `|Ĉ_j − C_j| ≤ γ_K·C_j`: the mean colour `C/W ∈ [0, 255]` is off by
+///   at most `255·2γ_K/(1 − γ_K)` (0.13 for `k ≤ 4094`, 3.1e-5·K in general), plus the f32
+///   division of the encoding (`255·u`); so below `k = 4094` the rounded colour is within one
+///   unit of the one from exact sums;
+/// * `|N̂_j − N_j| ≤ γ_K·W`, so the direction `N/|N|` moves by at most `2√3·γ_K·W/|N|` per
+///   component, less than one 10-bit step (1/511) whenever `|N|/W ≥ 1022·√3·γ_K`, about
+///   `1.06e-4·K`: everywhere except where the contributions' normals nearly cancel (opposite
+///   faces in one voxel), where the direction is rounding noise in any precision.
+///
+/// `tests/attributes.rs` checks these bounds against sums of the f64 reference
+/// ([`crate::clipped_area`] and the barycentric interpolation of the crate docs).
 #[derive(Clone, Copy, Debug)]
 struct Acc {
-    /// Morton code of the in-chunk position.
+    s: [f32; 8],
+    /// Morton code of the in-chunk position
     idx: u32,
-    /// number of contributions
     k: u32,
-    /// Σ w
-    w: f64,
-    /// `w > 0`: Σ w·n, Σ w·c; `w == 0`: Σ n, Σ c
-    s: [f64; 7],
 }
 
 impl Acc {
-    /// The sums after one contribution.
+    /// The sums after one contribution of weight `w` and values `x` (`x[3] = 1`).
     #[inline]
-    fn first(idx: u32, w: f64, n: [f64; 3], c: [f64; 4]) -> Acc {
-        let f = if w > 0.0 { w } else { 1.0 };
-        Acc {
-            idx,
-            k: 1,
-            w: 0.0 + w,
-            s: [
-                0.0 + f * n[0],
-                0.0 + f * n[1],
-                0.0 + f * n[2],
-                0.0 + f * c[0],
-                0.0 + f * c[1],
-                0.0 + f * c[2],
-                0.0 + f * c[3],
-            ],
+    fn first(idx: u32, w: f32, x: [f32; 8]) -> Acc {
+        if w > 0.0 {
+            Acc {
+                s: x.map(|v| w * v),
+                idx,
+                k: 1,
+            }
+        } else {
+            let mut s = x;
+            s[3] = 0.0;
+            Acc { s, idx, k: 1 }
         }
     }
 
     #[inline]
-    fn add(&mut self, w: f64, n: [f64; 3], c: [f64; 4]) {
+    fn add(&mut self, w: f32, x: [f32; 8]) {
         self.k += 1;
-        let x = [n[0], n[1], n[2], c[0], c[1], c[2], c[3]];
-        if self.w > 0.0 {
-            self.w += w;
-            for (s, x) in self.s.iter_mut().zip(x) {
-                *s += w * x;
+        if self.s[3] > 0.0 {
+            if w > 0.0 {
+                for (s, v) in self.s.iter_mut().zip(x) {
+                    *s += w * v;
+                }
             }
         } else if w > 0.0 {
             // the first positive weight: the weighted sums so far are zero
-            self.w += w;
-            for (s, x) in self.s.iter_mut().zip(x) {
-                *s = 0.0 + w * x;
-            }
+            self.s = x.map(|v| w * v);
         } else {
-            for (s, x) in self.s.iter_mut().zip(x) {
-                *s += x;
+            for (s, v) in self.s.iter_mut().zip(x) {
+                *s += v;
             }
+            self.s[3] = 0.0;
         }
     }
 }
 
-/// Per-triangle attribute interpolation: barycentrics at a point, vertex normals / colours.
-struct Attrs {
-    v0: [f64; 3],
-    e1: [f64; 3],
-    e2: [f64; 3],
-    n: [f64; 3],
-    inv_nn: f64,
-    face: [f64; 3],
+/// Per-triangle attribute interpolation (see the crate docs): the barycentrics are affine in
+/// the point, and every interpolation point lies in the triangle's plane, so each attribute is
+/// an affine function of the point's swizzled `(x, y)`, the dominant projection:
+/// `a(q) = a₀ + g_x·(q_x − v0_x) + g_y·(q_y − v0_y)` with per-triangle gradients. This equals
+/// `Σ λ_k a_k` with the crate docs' barycentrics up to rounding (relative 1e-15 for a
+/// non-degenerate triangle: `|n_z| ≥ |n|/√3` on the dominant axis).
+struct Interp {
+    o: [f64; 2],
+    /// colours (r, g, b, a) at v0 and their gradients
+    c0: [f64; 4],
+    cx: [f64; 4],
+    cy: [f64; 4],
+    /// vertex normals (unswizzled) at v0 and their gradients, if the triangle has them
     vn: Option<[[f64; 3]; 3]>,
-    vc: [[f64; 4]; 3],
+    /// unit face normal `n/|n|` (unswizzled, sign of the winding)
+    face: [f64; 3],
+    /// the swizzled `(x, y)` of the triangle's centroid (the point of an empty part)
+    centroid: [f64; 2],
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-impl Attrs {
-    fn new(t: &Triangle) -> Attrs {
-        let v = to_f64(&t.v);
-        let e1 = sub(v[1], v[0]);
-        let e2 = sub(v[2], v[0]);
-        let n = cross(e1, e2);
-        let nn = dot(n, n);
-        let len = nn.sqrt();
-        let face = [n[0] / len, n[1] / len, n[2] / len];
-        let vn = (t.flags & TRI_HAS_NORMALS != 0).then(|| t.n.map(|q| q.map(|c| c as f64)));
-        let vc = t.c.map(|q| q.map(|c| c as f64));
-        Attrs {
-            v0: v[0],
-            e1,
-            e2,
-            n,
-            inv_nn: 1.0 / nn,
-            face,
+impl Interp {
+    fn new(t: &Triangle, s: &TriSetup) -> Interp {
+        let [p0, p1, p2] = s.v;
+        let e1 = [p1[0] - p0[0], p1[1] - p0[1]];
+        let e2 = [p2[0] - p0[0], p2[1] - p0[1]];
+        // the dominant projection's signed doubled area: never 0 for a triangle TriSetup took
+        let inv = 1.0 / (e1[0] * e2[1] - e1[1] * e2[0]);
+        // a(d) = a0 + (a1 − a0)·λ1 + (a2 − a0)·λ2, λ1 = (d×e2)_z/det, λ2 = (e1×d)_z/det
+        let grad = |a: [f64; 3]| {
+            let (d1, d2) = (a[1] - a[0], a[2] - a[0]);
+            (
+                (d1 * e2[1] - d2 * e1[1]) * inv,
+                (d2 * e1[0] - d1 * e2[0]) * inv,
+            )
+        };
+        let mut c0 = [0.0; 4];
+        let mut cx = [0.0; 4];
+        let mut cy = [0.0; 4];
+        for k in 0..4 {
+            let a = [0, 1, 2].map(|i| t.c[i][k] as f64);
+            c0[k] = a[0];
+            (cx[k], cy[k]) = grad(a);
+        }
+        let vn = (t.flags & TRI_HAS_NORMALS != 0).then(|| {
+            let (mut a0, mut gx, mut gy) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+            for k in 0..3 {
+                let a = [0, 1, 2].map(|i| t.n[i][k] as f64);
+                a0[k] = a[0];
+                (gx[k], gy[k]) = grad(a);
+            }
+            [a0, gx, gy]
+        });
+        let n = cross_f64(&to_f64(&t.v));
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        let face = n.map(|c| c / len);
+        let centroid = [0, 1].map(|k| (p0[k] + p1[k] + p2[k]) / 3.0);
+        Interp {
+            o: [p0[0], p0[1]],
+            c0,
+            cx,
+            cy,
             vn,
-            vc,
+            face,
+            centroid,
         }
     }
 
-    /// (normal, colour) at point `q` of the triangle's plane.
+    /// The accumulated values `[n_x, n_y, n_z, 1, r, g, b, a]` at the swizzled point `(x, y)`.
     #[inline]
-    fn at(&self, q: [f64; 3]) -> ([f64; 3], [f64; 4]) {
-        let d = sub(q, self.v0);
-        let l1 = dot(cross(d, self.e2), self.n) * self.inv_nn;
-        let l2 = dot(cross(self.e1, d), self.n) * self.inv_nn;
-        let l = [1.0 - l1 - l2, l1, l2];
+    fn at(&self, x: f64, y: f64) -> [f32; 8] {
+        let (dx, dy) = (x - self.o[0], y - self.o[1]);
         let normal = match &self.vn {
-            Some(vn) => {
-                let m = [0, 1, 2].map(|k| l[0] * vn[0][k] + l[1] * vn[1][k] + l[2] * vn[2][k]);
-                let len = dot(m, m).sqrt();
-                if len > 0.0 && len.is_finite() {
-                    [m[0] / len, m[1] / len, m[2] / len]
-                } else {
-                    self.face
-                }
+            Some([a, gx, gy]) => {
+                let m = [0, 1, 2].map(|k| a[k] + gx[k] * dx + gy[k] * dy);
+                unit_or(m, self.face)
             }
             None => self.face,
         };
-        let c = &self.vc;
-        let colour = [0, 1, 2, 3].map(|k| l[0] * c[0][k] + l[1] * c[1][k] + l[2] * c[2][k]);
-        (normal, colour)
+        let c = [0, 1, 2, 3].map(|k| self.c0[k] + self.cx[k] * dx + self.cy[k] * dy);
+        values(normal, c)
     }
+}
+
+/// `m / |m|`, or `fallback` if that is zero or not finite.
+#[inline]
+fn unit_or(m: [f64; 3], fallback: [f64; 3]) -> [f64; 3] {
+    let len = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+    if len > 0.0 && len.is_finite() {
+        let inv = 1.0 / len;
+        m.map(|c| c * inv)
+    } else {
+        fallback
+    }
+}
+
+#[inline]
+fn values(n: [f64; 3], c: [f64; 4]) -> [f32; 8] {
+    [
+        n[0] as f32,
+        n[1] as f32,
+        n[2] as f32,
+        1.0,
+        c[0] as f32,
+        c[1] as f32,
+        c[2] as f32,
+        c[3] as f32,
+    ]
+}
+
+/// The unencoded sums of one voxel ([`ChunkVoxelizer::finish_sums`]): position in the chunk,
+/// number of contributions `k`, and in f32 `w = Σ w_i`, `n = Σ w_i·normal_i`,
+/// `c = Σ w_i·colour_i`; if `w == 0` (every weight zero), `n` and `c` are the unweighted sums.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VoxelSums {
+    pub pos: [u8; 3],
+    pub k: u32,
+    pub w: f32,
+    pub n: [f32; 3],
+    pub c: [f32; 4],
 }
 
 /// Reusable per-thread chunk voxelizer; see the crate docs for the attribute rules.
@@ -166,6 +219,8 @@ pub struct ChunkVoxelizer {
     bricks: Vec<u32>,
     /// per touched brick, slot + 1 of each voxel (`morton & 511`), 0 = empty
     blocks: Vec<u32>,
+    /// per touched brick: its brick index and the occupancy bits of its 512 voxels
+    touched: Vec<(u32, [u64; 8])>,
     acc: Vec<Acc>,
     skipped: u64,
     /// the column clipping state, reused from triangle to triangle
@@ -182,6 +237,7 @@ impl ChunkVoxelizer {
             origin: [0; 3],
             bricks: vec![0u32; BRICKS],
             blocks: Vec::new(),
+            touched: Vec::new(),
             acc: Vec::new(),
             skipped: 0,
             cols: Columns::idle(true),
@@ -210,8 +266,7 @@ impl ChunkVoxelizer {
 
     /// For tests and benchmarks: `false` computes every weight by the general clipping of
     /// [`crate::clipped_area`] (bit-identical to it), `true` (the default) uses the closed forms
-    /// of [`crate::column`](mod@crate::column) where they apply (equal up to rounding, so
-    /// the records are equal except where opposite normals cancel; see the crate docs).
+    /// of [`crate::column`](mod@crate::column) where they apply (equal up to rounding).
     pub fn set_fast_paths(&mut self, on: bool) {
         self.cols = Columns::idle(on);
     }
@@ -233,9 +288,10 @@ impl ChunkVoxelizer {
     }
 
     fn reset(&mut self) {
-        for a in &self.acc {
-            self.bricks[(a.idx >> 9) as usize] = 0;
+        for &(b, _) in &self.touched {
+            self.bricks[b as usize] = 0;
         }
+        self.touched.clear();
         self.blocks.clear();
         self.acc.clear();
     }
@@ -265,29 +321,29 @@ impl ChunkVoxelizer {
             if (0..3).any(|k| s.bmax[k] < lo_s[k] || s.bmin[k] > hi_s[k]) {
                 continue;
             }
-            let attrs = Attrs::new(t);
-            let tri_centroid =
-                [0, 1, 2].map(|k| (t.v[0][k] as f64 + t.v[1][k] as f64 + t.v[2][k] as f64) / 3.0);
+            let ip = Interp::new(t, &s);
             let cols = &mut self.cols;
             cols.set(&s);
-            let bricks = &mut self.bricks;
-            let blocks = &mut self.blocks;
-            let acc = &mut self.acc;
+            let mut sink = Sink {
+                bricks: &mut self.bricks,
+                blocks: &mut self.blocks,
+                touched: &mut self.touched,
+                acc: &mut self.acc,
+            };
             let each = |p: [i32; 3], first: bool| {
                 if first {
                     cols.begin(p[0] as f64, p[1] as f64);
                 }
                 let (w, c) = cols.voxel(p[2] as f64);
                 let q = match c {
-                    Some(c) => s.unswizzle(c),
-                    None => tri_centroid,
+                    Some(c) => [c[0], c[1]],
+                    None => ip.centroid,
                 };
-                let (n, col) = attrs.at(q);
+                let x = ip.at(q[0], q[1]);
                 let g = s.unswizzle(p);
                 let local = [0, 1, 2].map(|k| (g[k] as i64 - o[k]) as u32);
                 debug_assert!(local.iter().all(|&c| c < CHUNK));
-                let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
-                accumulate(bricks, blocks, acc, idx, w, n, col);
+                sink.add(local, w as f32, x);
             };
             match self.method {
                 Method::Sat => s.scan(lo_s, hi_s, each),
@@ -298,54 +354,101 @@ impl ChunkVoxelizer {
     }
 
     /// [`ChunkVoxelizer::add`] for a triangle inside the interior of voxel `p` (grid coordinates,
-    /// inside this chunk): the same contribution as the general path, bit for bit (its Triangle
-    /// column in one voxel: [`triangle_area_centroid`] of the swizzled triangle). `false` (and
-    /// nothing added) for a triangle that the general path skips (zero or non-finite normal).
+    /// inside this chunk): the whole triangle, weight = its area `|n|/2`, interpolation point =
+    /// its centroid, where the barycentrics are all 1/3 (so the normal is the normalized sum of
+    /// the vertex normals and the colour the mean vertex colour); the same contribution as the
+    /// general path up to rounding. `false` (and nothing added) for a triangle that the general
+    /// path skips (zero or non-finite normal).
     #[inline]
     fn add_interior(&mut self, t: &Triangle, p: [i32; 3]) -> bool {
-        let o = to_f64(&t.v);
-        let n = cross_f64(&o);
-        if n == [0.0; 3] || !n.iter().all(|c| c.is_finite()) {
+        let n = cross_f64(&to_f64(&t.v));
+        let nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+        if !(nn > 0.0 && nn.is_finite()) {
             return false;
         }
-        let swz = swizzle(dominant_axis(n));
-        let sw = |q: [f64; 3]| [q[swz[0]], q[swz[1]], q[swz[2]]];
-        let (w, c) = triangle_area_centroid(&[sw(o[0]), sw(o[1]), sw(o[2])], area_scale(sw(n)));
-        let (normal, col) = Attrs::new(t).at(unswizzle(swz, c));
+        let len = nn.sqrt();
+        let inv = 1.0 / len;
+        let face = n.map(|c| c * inv);
+        let normal = if t.flags & TRI_HAS_NORMALS != 0 {
+            let m = [0, 1, 2].map(|k| t.n[0][k] as f64 + t.n[1][k] as f64 + t.n[2][k] as f64);
+            unit_or(m, face)
+        } else {
+            face
+        };
+        let c = [0, 1, 2, 3]
+            .map(|k| (t.c[0][k] as u32 + t.c[1][k] as u32 + t.c[2][k] as u32) as f64 / 3.0);
         let local = [0, 1, 2].map(|k| (p[k] as i64 - self.origin[k] as i64) as u32);
         debug_assert!(local.iter().all(|&c| c < CHUNK));
-        let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
-        accumulate(
-            &mut self.bricks,
-            &mut self.blocks,
-            &mut self.acc,
-            idx,
-            w,
-            normal,
-            col,
-        );
+        Sink {
+            bricks: &mut self.bricks,
+            blocks: &mut self.blocks,
+            touched: &mut self.touched,
+            acc: &mut self.acc,
+        }
+        .add(local, (0.5 * len) as f32, values(normal, c));
         true
     }
 
     /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
     /// with normal, colour and face mask. Resets for the next `begin`.
+    ///
+    /// The accumulators are encoded in the order they were made (a sequential read) and each
+    /// record is stored at its rank in Morton order, which the occupancy bits give without a
+    /// sort: the voxels of the bricks before its brick (in Morton order) plus those before it
+    /// in its brick.
     pub fn finish(&mut self) -> Vec<Voxel> {
-        // encode in slot order (sequential), then sort (Morton code, slot) keys by radix and
-        // gather: no comparison sort, no random access into the large accumulators
-        let enc: Vec<Voxel> = self.acc.iter().map(encode).collect();
-        let mut keys: Vec<u64> = self
-            .acc
+        let mut out = vec![Voxel::default(); self.acc.len()];
+        self.ranked(|r, pos, a| out[r] = encode(pos, a));
+        out
+    }
+
+    /// [`ChunkVoxelizer::finish`] without the encoding: the sums of each voxel, in the same
+    /// order (for tests of the accumulation against an exact reference, and diagnostics).
+    pub fn finish_sums(&mut self) -> Vec<VoxelSums> {
+        let mut out = vec![VoxelSums::default(); self.acc.len()];
+        self.ranked(|r, pos, a| {
+            out[r] = VoxelSums {
+                pos,
+                k: a.k,
+                w: a.s[3],
+                n: [a.s[0], a.s[1], a.s[2]],
+                c: [a.s[4], a.s[5], a.s[6], a.s[7]],
+            }
+        });
+        out
+    }
+
+    /// Calls `f(rank, position, sums)` for every accumulator, in the order they were made, with
+    /// its rank in Morton order; then resets.
+    #[inline]
+    fn ranked(&mut self, mut f: impl FnMut(usize, [u8; 3], &Acc)) {
+        let mut order: Vec<(u32, u32)> = self
+            .touched
             .iter()
             .enumerate()
-            .map(|(i, a)| (a.idx as u64) << 32 | i as u64)
+            .map(|(i, &(b, _))| (b, i as u32))
             .collect();
-        radix_sort_morton(&mut keys);
-        let out = keys
-            .iter()
-            .map(|&k| enc[(k & 0xffff_ffff) as usize])
-            .collect();
+        order.sort_unstable();
+        // rank of the first voxel of each occupancy word of each touched brick
+        let mut first = vec![[0u32; 8]; self.touched.len()];
+        let mut rank = 0u32;
+        for &(_, i) in &order {
+            let occ = &self.touched[i as usize].1;
+            for (f, w) in first[i as usize].iter_mut().zip(occ) {
+                *f = rank;
+                rank += w.count_ones();
+            }
+        }
+        debug_assert_eq!(rank as usize, self.acc.len());
+        for a in &self.acc {
+            let b = self.bricks[(a.idx >> 9) as usize] as usize - 1;
+            let v = a.idx as usize & (BRICK - 1);
+            let below = self.touched[b].1[v >> 6] & ((1u64 << (v & 63)) - 1);
+            let r = first[b][v >> 6] + below.count_ones();
+            let pos = demorton3(a.idx as u64).map(|c| c as u8);
+            f(r as usize, pos, a);
+        }
         self.reset();
-        out
     }
 
     /// Triangles skipped (zero area or non-finite) since this voxelizer was made.
@@ -354,65 +457,49 @@ impl ChunkVoxelizer {
     }
 }
 
-/// Adds one contribution to the voxel with in-chunk Morton code `idx`, making its slot (and its
-/// brick's block of slots) on first touch.
-#[inline]
-fn accumulate(
-    bricks: &mut [u32],
-    blocks: &mut Vec<u32>,
-    acc: &mut Vec<Acc>,
-    idx: u32,
-    w: f64,
-    n: [f64; 3],
-    c: [f64; 4],
-) {
-    let b = &mut bricks[(idx >> 9) as usize];
-    if *b == 0 {
-        blocks.resize(blocks.len() + BRICK, 0);
-        *b = (blocks.len() / BRICK) as u32;
-    }
-    let sl = &mut blocks[(*b as usize - 1) * BRICK + (idx as usize & (BRICK - 1))];
-    if *sl == 0 {
-        acc.push(Acc::first(idx, w, n, c));
-        *sl = acc.len() as u32;
-    } else {
-        acc[*sl as usize - 1].add(w, n, c);
+/// The slot index and accumulators, borrowed apart from the column state.
+struct Sink<'a> {
+    bricks: &'a mut [u32],
+    blocks: &'a mut Vec<u32>,
+    touched: &'a mut Vec<(u32, [u64; 8])>,
+    acc: &'a mut Vec<Acc>,
+}
+
+impl Sink<'_> {
+    /// Adds one contribution to the voxel at in-chunk position `local`, making its slot (and
+    /// its brick's block of slots) on first touch.
+    #[inline]
+    fn add(&mut self, local: [u32; 3], w: f32, x: [f32; 8]) {
+        let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
+        let bi = (idx >> 9) as usize;
+        let mut b = self.bricks[bi] as usize;
+        if b == 0 {
+            self.blocks.resize(self.blocks.len() + BRICK, 0);
+            self.touched.push((bi as u32, [0; 8]));
+            b = self.touched.len();
+            self.bricks[bi] = b as u32;
+        }
+        let v = idx as usize & (BRICK - 1);
+        let sl = &mut self.blocks[(b - 1) * BRICK + v];
+        if *sl == 0 {
+            self.acc.push(Acc::first(idx, w, x));
+            *sl = self.acc.len() as u32;
+            self.touched[b - 1].1[v >> 6] |= 1 << (v & 63);
+        } else {
+            self.acc[*sl as usize - 1].add(w, x);
+        }
     }
 }
 
-/// The voxel record of an accumulator: area-weighted means, or unweighted means if Σ w = 0.
+/// The voxel record of an accumulator: area-weighted means, or unweighted means if `Σ w = 0`.
+/// The normal is packed from the sum itself (packing normalizes, and `N / W` has the direction
+/// of `N`), in f64 so that tiny sums neither underflow nor lose digits.
 #[inline]
-fn encode(a: &Acc) -> Voxel {
-    let pos = demorton3(a.idx as u64).map(|c| c as u8);
-    let d = if a.w > 0.0 { a.w } else { a.k as f64 };
+fn encode(pos: [u8; 3], a: &Acc) -> Voxel {
     let s = &a.s;
-    let normal = pack_normal([(s[0] / d) as f32, (s[1] / d) as f32, (s[2] / d) as f32]);
+    let normal = pack_normal_f64([s[0] as f64, s[1] as f64, s[2] as f64]);
     let mask = face_mask(normal) | border_caps(pos);
-    let c = |k: usize| (s[k] / d).round().clamp(0.0, 255.0) as u8;
-    Voxel::new(pos, mask, normal, pack_color([c(3), c(4), c(5), c(6)]))
-}
-
-/// Sorts keys `morton << 32 | slot` by their 24-bit Morton code (LSD radix, three 8-bit
-/// digits); Morton codes are unique within a chunk, so this is the order of a full sort.
-fn radix_sort_morton(keys: &mut Vec<u64>) {
-    if keys.len() < 64 {
-        keys.sort_unstable();
-        return;
-    }
-    let mut tmp = vec![0u64; keys.len()];
-    for shift in [32u32, 40, 48] {
-        let mut count = [0usize; 257];
-        for &k in keys.iter() {
-            count[((k >> shift) & 0xff) as usize + 1] += 1;
-        }
-        for i in 0..256 {
-            count[i + 1] += count[i];
-        }
-        for &k in keys.iter() {
-            let d = ((k >> shift) & 0xff) as usize;
-            tmp[count[d]] = k;
-            count[d] += 1;
-        }
-        std::mem::swap(keys, &mut tmp);
-    }
+    let inv = 1.0 / if s[3] > 0.0 { s[3] } else { a.k as f32 };
+    let c = |k: usize| (s[k] * inv).round().clamp(0.0, 255.0) as u8;
+    Voxel::new(pos, mask, normal, pack_color([c(4), c(5), c(6), c(7)]))
 }

@@ -232,30 +232,6 @@ impl Poly {
     }
 }
 
-/// [`Poly::area_centroid`] of the triangle `v` as a polygon (`Poly::triangle(v)`), with the same
-/// operations in the same order, so bit-identical to it, without building the 224-byte polygon.
-/// A triangle always has a centroid (the mean of its vertices if its area is zero).
-#[inline]
-pub(crate) fn triangle_area_centroid(v: &[[f64; 3]; 3], area_scale: f64) -> (f64, [f64; 3]) {
-    let [p0, p1, p2] = *v;
-    let u = [p1[0] - p0[0], p1[1] - p0[1]];
-    let w = [p2[0] - p0[0], p2[1] - p0[1]];
-    let ai = u[0] * w[1] - u[1] * w[0];
-    // `0.0 + x` as in the polygon's running sums (it turns -0.0 into 0.0)
-    let a2 = 0.0 + ai;
-    let c = [0, 1, 2].map(|k| 0.0 + ai * (p0[k] + p1[k] + p2[k]));
-    if a2 != 0.0 {
-        let s = 1.0 / (3.0 * a2);
-        (0.5 * a2.abs() * area_scale, [c[0] * s, c[1] * s, c[2] * s])
-    } else {
-        let inv = 1.0 / 3.0;
-        (
-            0.0,
-            [0, 1, 2].map(|k| 0.0 + p0[k] * inv + p1[k] * inv + p2[k] * inv),
-        )
-    }
-}
-
 /// `|n| / |n_z|` for a swizzled normal.
 #[inline]
 pub(crate) fn area_scale(n: [f64; 3]) -> f64 {
@@ -286,36 +262,5 @@ pub fn clipped_area(v: &[[f32; 3]; 3], voxel: [i32; 3]) -> (f64, [f64; 3]) {
     match c {
         Some(c) => (area, unswizzle(swz, c)),
         None => (0.0, tri_centroid),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// `triangle_area_centroid` is `Poly::area_centroid` of the triangle bit for bit, on random
-    /// triangles, triangles with a zero-area projection, and a -0.0 coordinate.
-    #[test]
-    fn triangle_area_centroid_is_the_polygons() {
-        let mut s = 0x2545_f491_4f6c_dd1du64;
-        let mut r = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64 * 600.0 - 300.0
-        };
-        let mut cases: Vec<[[f64; 3]; 3]> = (0..10_000)
-            .map(|_| [[r(), r(), r()], [r(), r(), r()], [r(), r(), r()]])
-            .collect();
-        cases.push([[1.0, 1.0, 0.0], [2.0, 2.0, 5.0], [3.0, 3.0, -1.0]]);
-        cases.push([[-0.0, 0.0, 0.0], [0.0, -0.0, 1.0], [0.0, 0.0, 2.0]]);
-        for v in cases {
-            let scale = 1.0 + v[0][2].abs();
-            let (a, c) = triangle_area_centroid(&v, scale);
-            let (pa, pc) = Poly::triangle(&v).area_centroid(scale);
-            assert_eq!(a.to_bits(), pa.to_bits(), "{v:?}");
-            let pc = pc.expect("a triangle has a centroid");
-            assert_eq!(c.map(f64::to_bits), pc.map(f64::to_bits), "{v:?}");
-        }
     }
 }

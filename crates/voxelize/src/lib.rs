@@ -45,20 +45,43 @@
 //!   (its sign follows the winding `v0, v1, v2`);
 //! * colour = `Σ λ_k c_k` of the RGBA8 vertex colours as reals in 0..255.
 //!
-//! Per voxel, in f64 and in triangle order: `W = Σ w`, `N = Σ w·normal`, `C = Σ w·colour`, plus
-//! the count `K` and the unweighted sums `N′`, `C′`. If `W > 0` the voxel's normal is `N / W` and
-//! its colour `C / W`; otherwise (only touched on its boundary, e.g. conservative ties) `N′ / K`
-//! and `C′ / K`. Encoding: normal word = `pack_normal(normal as f32)`, face mask =
+//! Per voxel, in triangle order: `W = Σ w`, `N = Σ w·normal`, `C = Σ w·colour`, plus the count
+//! `K` and the unweighted sums `N′`, `C′`. If `W > 0` the voxel's normal is `N / W` and its
+//! colour `C / W`; otherwise (only touched on its boundary, e.g. conservative ties) `N′ / K` and
+//! `C′ / K`. Encoding: normal word = `pack_normal` of that normal, face mask =
 //! `face_mask(normal word) | border_caps(pos)`, colour = `pack_color(round(colour) clamped to
 //! 0..255)` with round half away from zero. Voxels are sorted by `morton8` of their in-chunk
-//! position. A GPU port computing in f32 matches up to rounding.
+//! position.
+//!
+//! That is the definition, in exact arithmetic. [`ChunkVoxelizer`] evaluates it as follows, and
+//! its records are within one quantization step of the exact ones (normal: one 10-bit step per
+//! component; colour: one unit per channel) except where the normals of a voxel's
+//! contributions nearly cancel (`|N|/W` below about `1.06e-4·(K+2)`, opposite faces in one
+//! voxel), where the direction is rounding noise in any precision:
+//! * `w` and `q` in f64 as above, by the column method below (equal to [`clipped_area`] up to
+//!   rounding);
+//! * normal and colour at `q` in f64 as affine functions of `q`'s coordinates in the dominant
+//!   projection with per-triangle gradients (the same barycentrics: `q` lies in the plane);
+//! * the sums `W`, `N`, `C` (or `N′`, `C′`) in **f32**, in triangle order, which makes the
+//!   result deterministic (one chunk is voxelized by one thread) and halves the accumulator
+//!   (40 bytes per voxel). Error bound (proved on `chunk::Acc`): every sum is within
+//!   `γ_{K+2} = (K+2)·2⁻²⁴/(1 − (K+2)·2⁻²⁴)` of the sum of its terms' absolute values, so the
+//!   mean colour is off by less than 0.13 for `K ≤ 4094` contributions and the normal by less
+//!   than one step wherever `|N|/W ≥ 1.06e-4·(K+2)`; `tests/attributes.rs` checks the bound
+//!   against the f64 reference on random triangles and the npm bunny;
+//! * encoding: the normal is packed from `N` itself (`pack_normal_f64`: normalized in f64, one
+//!   square root, one division), the colour as `C · (1/W)` in f32.
+//!
+//! The GPU voxelizer (crates/gpu) computes the definition in f64 (or f32) with 96-bit
+//! fixed-point sums; its tests accept one quantization step against this one.
 //!
 //! # How the chunk voxelizer computes this quickly
 //!
 //! In conservative mode a triangle inside the open interior of one voxel (most triangles of a
 //! scan voxelized coarser than its triangles, [`overlap::interior_voxel`]) marks only that voxel,
-//! with the whole triangle's area and centroid: no overlap test, no clipping, and bit for bit
-//! what the general path gives it. Other triangles:
+//! with the whole triangle's area `|n|/2` and its centroid, where the barycentrics are all ⅓:
+//! no overlap test, no clipping, no interpolation (normal = normalized sum of the vertex
+//! normals or the face normal, colour = mean vertex colour). Other triangles:
 //! the weights and centroids are computed column by column ([`column`](mod@column)): the triangle's part
 //! above a column of its dominant projection is clipped once, each voxel of the column only
 //! clips that part to its depth slab, and a column part lying in one voxel is measured once.
@@ -71,10 +94,10 @@
 //! [`ChunkVoxelizer::set_fast_paths`]`(false)` computes every weight by the general clipping;
 //! on the npm bunny at 4096³ (54 M conservative, 32 M thin voxels) both give identical
 //! records. Where coplanar triangles of opposite orientation overlap (double-sided walls of CAD
-//! meshes), `Σ w·normal` cancels to rounding noise (`|N|/W < 1e-8`) and the packed normal of
-//! such a voxel is that noise, so it can differ: 202 of 3.4 M records of the conference room
-//! at 1024³ (conservative), 31,186 of 8.0 M of Munich at 2048³ (conservative), 14,367 of
-//! 6.9 M (thin); colours and voxel sets never differ.
+//! meshes), `Σ w·normal` cancels to rounding noise and the packed normal of such a voxel is that
+//! noise, so it can differ (with the earlier f64 sums, where `|N|/W < 1e-8`: 202 of 3.4 M
+//! records of the conference room at 1024³, conservative; 31,186 of 8.0 M of Munich at 2048³,
+//! conservative, 14,367 of 6.9 M thin); colours and voxel sets never differ.
 //!
 //! # Example
 //!
@@ -109,7 +132,7 @@ pub mod overlap;
 pub mod predicates;
 pub mod scanline;
 
-pub use chunk::ChunkVoxelizer;
+pub use chunk::{ChunkVoxelizer, VoxelSums};
 pub use clip::clipped_area;
 pub use column::voxel_areas;
 pub use grid::{voxelize_grid, GridVoxels};
