@@ -3,18 +3,26 @@
 // (Figures 17 and 18).
 //
 // This file is appended to classify.wgsl (compute) and raster.wgsl (render); those declare the
-// bindings used here: params, tris, occ, base, accum. `real` is f64 when the adapter has
-// SHADER_F64 (bit-for-bit the CPU reference voxlod-voxelize, which computes in f64) and f32
-// otherwise; the host prepends the alias.
+// bindings used here: params, tris, occ, base, accum, counter. `real` is f64 when the adapter
+// has SHADER_F64 and f32 otherwise; the host prepends the alias and the constants UNIT (the
+// unit roundoff of `real`, 2^-53 or 2^-24) and TINY (absolute slack for underflow).
 //
-// Every formula mirrors crates/voxelize (overlap.rs, clip.rs, chunk.rs) operation by operation,
-// so that the CPU and GPU voxel sets agree up to FMA contraction at exact ties.
+// Every formula mirrors crates/voxelize (overlap.rs, clip.rs) operation by operation. The overlap
+// decisions are filtered as on the CPU (overlap.rs, `TriSetup::new`): each value is compared with
+// the same forward error bound, computed with `real`'s unit roundoff. A value inside its band is
+// not trusted: the decision counts as inside (so f32 results are a superset of the exact set) and
+// the chunk is flagged in counter[3]; the host re-voxelizes flagged chunks on the CPU (always in
+// f64, in f32 when a normal component's sign was uncertain), so the sets equal the exact ones.
 
 const MODE_CONSERVATIVE: u32 = 0u;
 const MODE_THIN: u32 = 1u;
 const PHASE_MARK: u32 = 0u;
 const PHASE_ACCUMULATE: u32 = 1u;
 const TRI_HAS_NORMALS: u32 = 1u;
+// flags in counter[3]: a decision's value inside its error band / a normal component's sign
+// uncertain (then the triangle's whole setup is in doubt)
+const UNCERTAIN_DECISION: u32 = 1u;
+const UNCERTAIN_NORMAL: u32 = 2u;
 const CHUNK: i32 = 256;
 // accumulator words per voxel slot: 16 fixed-point sums of three u32 words each
 const SLOT_WORDS: u32 = 48u;
@@ -78,6 +86,12 @@ struct Setup {
     zx0: vec2<real>, zx1: vec2<real>, zx2: vec2<real>, dzx: vec3<real>,
     d_lo: real,
     d_hi: real,
+    // error bounds of the edge functions (same numbering as dxy, dyz, dzx) and of the depth
+    // predicates (overlap.rs `be`, `bp`)
+    bxy: vec3<real>,
+    byz: vec3<real>,
+    bzx: vec3<real>,
+    bp: real,
     // swizzled voxel range: closed bounding box clamped to the chunk
     lo: vec3<i32>,
     hi: vec3<i32>,
@@ -137,6 +151,40 @@ fn edge_d(nk: vec2<real>, a: vec2<real>, mode: u32) -> real {
     return base + real(0.5) * (nk.x + nk.y) + real(0.5) * max(abs(nk.x), abs(nk.y));
 }
 
+// Notes an uncertain decision (mark phase only: the accumulation phase repeats the same ones).
+fn note_uncertain(bit: u32) {
+    if params.phase == PHASE_MARK && (atomicLoad(&counter[3]) & bit) == 0u {
+        atomicOr(&counter[3], bit);
+    }
+}
+
+// The filtered predicate `exact >= 0` from its computed value f, |f - exact| <= b (overlap.rs
+// `at_least_zero`): certain outside [-b, b); inside, noted and counted as inside.
+fn at_least_zero(f: real, b: real) -> bool {
+    if f >= b {
+        return true;
+    }
+    if f < -b {
+        return false;
+    }
+    note_uncertain(UNCERTAIN_DECISION);
+    return true;
+}
+
+fn max_abs(v: vec3<real>) -> real {
+    return max(max(abs(v.x), abs(v.y)), abs(v.z));
+}
+
+// Bound of an edge function with inward normal nk (overlap.rs: 8u(|ne0|+|ne1|)(2M+1); 0 for a
+// projection of zero area, whose edge functions are exactly 0).
+fn edge_bound(nk: vec2<real>, big_m: real) -> real {
+    let w = abs(nk.x) + abs(nk.y);
+    if w == real(0.0) {
+        return real(0.0);
+    }
+    return real(8.0) * UNIT * w * (real(2.0) * big_m + real(1.0)) + TINY;
+}
+
 fn clamp_i32(x: real) -> i32 {
     return i32(clamp(x, real(-2147483648.0), real(2147483520.0)));
 }
@@ -149,6 +197,19 @@ fn setup(ti: u32) -> Setup {
     let o1 = vertex(ti, 1u);
     let o2 = vertex(ti, 2u);
     let no = cross_r(o1 - o0, o2 - o0);
+    // A_k, the magnitude of the two products of n_k; a component with |n_k| <= 5u A_k may have
+    // the wrong sign (overlap.rs), which only the CPU's exact orient2d settles
+    let ea = o1 - o0;
+    let eb = o2 - o0;
+    let mag = vec3<real>(
+        abs(ea.y * eb.z) + abs(ea.z * eb.y),
+        abs(ea.z * eb.x) + abs(ea.x * eb.z),
+        abs(ea.x * eb.y) + abs(ea.y * eb.x));
+    for (var k = 0u; k < 3u; k++) {
+        if mag[k] != real(0.0) && abs(no[k]) <= real(5.0) * UNIT * mag[k] {
+            note_uncertain(UNCERTAIN_NORMAL);
+        }
+    }
     if no.x == real(0.0) && no.y == real(0.0) && no.z == real(0.0) {
         return s;
     }
@@ -188,6 +249,12 @@ fn setup(ti: u32) -> Setup {
     s.dxy = vec3<real>(edge_d(s.xy0, v0.xy, mode), edge_d(s.xy1, v1.xy, mode), edge_d(s.xy2, v2.xy, mode));
     s.dyz = vec3<real>(edge_d(s.yz0, v0.yz, mode), edge_d(s.yz1, v1.yz, mode), edge_d(s.yz2, v2.yz, mode));
     s.dzx = vec3<real>(edge_d(s.zx0, v0.zx, mode), edge_d(s.zx1, v1.zx, mode), edge_d(s.zx2, v2.zx, mode));
+    // M: the largest coordinate magnitude the scan can reach (bounding box, plus the corners)
+    let big_m = max(max(max_abs(v0), max_abs(v1)), max_abs(v2)) + real(2.0);
+    s.bxy = vec3<real>(edge_bound(s.xy0, big_m), edge_bound(s.xy1, big_m), edge_bound(s.xy2, big_m));
+    s.byz = vec3<real>(edge_bound(s.yz0, big_m), edge_bound(s.yz1, big_m), edge_bound(s.yz2, big_m));
+    s.bzx = vec3<real>(edge_bound(s.zx0, big_m), edge_bound(s.zx1, big_m), edge_bound(s.zx2, big_m));
+    s.bp = real(16.0) * UNIT * (mag.x + mag.y + mag.z) * (real(2.0) * big_m + real(2.0)) + TINY;
     if n.z < real(0.0) {
         n = -n;
     }
@@ -215,13 +282,15 @@ fn setup(ti: u32) -> Setup {
 }
 
 // One (x, y) column of the dominant projection (Figure 17/18 lines 15-20, with the corrected
-// depth range of overlap.rs): emits every overlapped voxel of the column.
+// depth range of overlap.rs): emits every overlapped voxel of the column. Every decision is
+// filtered (`at_least_zero`); the depth range is settled as in overlap.rs `depth`. The scanned
+// voxels lie in the triangle's closed bounding box, where the bounds hold.
 fn column(s: Setup, ti: u32, px: i32, py: i32) {
     let x = real(px);
     let y = real(py);
-    if !(s.xy0.x * x + s.xy0.y * y + s.dxy.x >= real(0.0)
-        && s.xy1.x * x + s.xy1.y * y + s.dxy.y >= real(0.0)
-        && s.xy2.x * x + s.xy2.y * y + s.dxy.z >= real(0.0)) {
+    if !(at_least_zero(s.xy0.x * x + s.xy0.y * y + s.dxy.x, s.bxy.x)
+        && at_least_zero(s.xy1.x * x + s.xy1.y * y + s.dxy.y, s.bxy.y)
+        && at_least_zero(s.xy2.x * x + s.xy2.y * y + s.dxy.z, s.bxy.z)) {
         return;
     }
     let n = s.n;
@@ -231,32 +300,47 @@ fn column(s: Setup, ti: u32, px: i32, py: i32) {
     let hi_rhs = a + s.d_hi;
     let zl = real(s.lo.z);
     let zh = real(s.hi.z);
-    var z0 = clamp(ceil(lo_rhs * inv_nz) - real(1.0), zl - real(1.0), zh + real(1.0));
-    while z0 > zl - real(1.0) && n.z * z0 >= lo_rhs {
+    // z0 = the first z >= zl whose box (diamond) reaches up to the plane: the division's guess,
+    // then settled by the filtered predicate up(z) = n_z (z+1) - lo_rhs >= 0 (monotone in z,
+    // also with uncertain values counted as true)
+    let c0 = ceil(lo_rhs * inv_nz) - real(1.0);
+    var z0 = zl;
+    if c0 >= zl {
+        z0 = min(c0, zh + real(1.0));
+    }
+    while z0 > zl && at_least_zero(n.z * z0 - lo_rhs, s.bp) {
         z0 -= real(1.0);
     }
-    while z0 <= zh && n.z * (z0 + real(1.0)) < lo_rhs {
+    while z0 <= zh && !at_least_zero(n.z * (z0 + real(1.0)) - lo_rhs, s.bp) {
         z0 += real(1.0);
     }
-    var z1 = clamp(floor(hi_rhs * inv_nz), zl - real(1.0), zh + real(1.0));
-    while z1 < zh + real(1.0) && n.z * (z1 + real(1.0)) <= hi_rhs {
+    if z0 > zh {
+        return;
+    }
+    // z1 = the last z <= zh whose box reaches down to the plane: down(z) = hi_rhs - n_z z >= 0
+    let c1 = floor(hi_rhs * inv_nz);
+    var z1 = zh;
+    if c1 <= zh {
+        z1 = max(c1, z0 - real(1.0));
+    }
+    while z1 < zh && at_least_zero(hi_rhs - n.z * (z1 + real(1.0)), s.bp) {
         z1 += real(1.0);
     }
-    while z1 >= zl && n.z * z1 > hi_rhs {
+    while z1 >= z0 && !at_least_zero(hi_rhs - n.z * z1, s.bp) {
         z1 -= real(1.0);
     }
-    let iz0 = i32(max(z0, zl));
-    let iz1 = i32(min(z1, zh));
+    let iz0 = i32(z0);
+    let iz1 = i32(z1);
     let czx = vec3<real>(s.zx0.y * x + s.dzx.x, s.zx1.y * x + s.dzx.y, s.zx2.y * x + s.dzx.z);
     let cyz = vec3<real>(s.yz0.x * y + s.dyz.x, s.yz1.x * y + s.dyz.y, s.yz2.x * y + s.dyz.z);
     for (var pz = iz0; pz <= iz1; pz++) {
         let z = real(pz);
-        if s.yz0.y * z + cyz.x >= real(0.0)
-            && s.yz1.y * z + cyz.y >= real(0.0)
-            && s.yz2.y * z + cyz.z >= real(0.0)
-            && s.zx0.x * z + czx.x >= real(0.0)
-            && s.zx1.x * z + czx.y >= real(0.0)
-            && s.zx2.x * z + czx.z >= real(0.0) {
+        if at_least_zero(s.yz0.y * z + cyz.x, s.byz.x)
+            && at_least_zero(s.yz1.y * z + cyz.y, s.byz.y)
+            && at_least_zero(s.yz2.y * z + cyz.z, s.byz.z)
+            && at_least_zero(s.zx0.x * z + czx.x, s.bzx.x)
+            && at_least_zero(s.zx1.x * z + czx.y, s.bzx.y)
+            && at_least_zero(s.zx2.x * z + czx.z, s.bzx.z) {
             emit(s, ti, vec3<i32>(px, py, pz));
         }
     }

@@ -33,14 +33,32 @@
 //! shaders compute in f64 like the CPU's fast path, otherwise in f32. [`GpuMethod`] selects
 //! hybrid, triangle-only or fragment-only voxelization (same voxels, different speed).
 //!
-//! **Not yet exact.** The CPU voxelizer decides every overlap exactly (an f64 filter with a
-//! proven error bound and exact predicates inside it, `voxlod_voxelize::overlap`); the shaders
-//! still take the plain f64 (or f32) sign, so where a value lies inside that rounding band (about
-//! one voxel in a few hundred thousand on scans, more at exact ties with FMA contraction) the GPU
-//! can miss or add a voxel the CPU does not. The f32 shaders are not conservative either. The
-//! planned fix (the shaders evaluate the same bounds, mark uncertain decisions and flag the
-//! chunk, the host re-voxelizes flagged chunks on the CPU) is not implemented.
+//! **Exactness.** The CPU voxelizer decides every overlap exactly (an f64 filter with a proven
+//! per-triangle error bound and Shewchuk's exact predicates inside it,
+//! `voxlod_voxelize::overlap`, `TriSetup::new`). The shaders evaluate the same bounds (with the
+//! unit roundoff of their float type: 2⁻⁵³, or 2⁻²⁴ in f32) and trust a decision's sign only
+//! outside its band. A value inside the band counts as inside and flags the chunk (an atomic
+//! flag in a storage buffer); so does a normal component whose sign is in doubt (a nearly
+//! degenerate projection). After the marking pass the host reads the flags:
+//! * **f64**: a flagged chunk is re-voxelized on the CPU (`voxlod_voxelize::ChunkVoxelizer`,
+//!   same mode; the replay callback feeds it), so the voxel sets always equal the exact CPU
+//!   sets, in both modes. On scans a few chunks in a hundred are flagged at 256³ (the bands are
+//!   about 10⁻¹³ voxels wide; exact ties on axis-aligned walls flag more).
+//! * **f32** (adapters without `SHADER_F64`): the bands are 2²⁹ times wider, so most chunks
+//!   would be flagged; uncertain decisions count as inside and the chunk is kept, so the set is
+//!   a **conservative superset** of the exact one (may add voxels, never misses one). Only an
+//!   uncertain normal sign (where "inside" is undefined) sends the chunk to the CPU.
+//! [`GpuVoxelizer::last_uncertain`] and [`GpuVoxelizer::last_fell_back`] report both per chunk.
 //!
+//! **Attributes.** The GPU sums each voxel's area-weighted normal and colour in 96-bit fixed
+//! point (exact, so independent of the order of the atomics); the CPU sums in f32 with a
+//! proven bound. Both are within one quantization step of the exact means, so a voxel's normal
+//! from the GPU is within one 10-bit step per component of the CPU's, and its colour within one
+//! unit per channel, except where the normals inside one voxel nearly cancel (opposite faces in
+//! one voxel, `|Σ w·n| ≪ Σ w`): there the direction is rounding noise in either sum, and normals
+//! and face masks may differ arbitrarily. Face masks follow each file's own normals and border
+//! caps. Byte-identical attributes would need the CPU's sequential f32 rounding on the GPU.
+
 //! # Example
 //!
 //! ```
@@ -53,11 +71,14 @@
 //! // a triangle in the plane z = 2.5 covering the lower-left half of [0,2]²
 //! let t = Triangle::new([[0.0, 0.0, 2.5], [2.0, 0.0, 2.5], [0.0, 2.0, 2.5]]);
 //! let voxels = gpu.voxelize_chunk([0, 0, 0], &[t]).unwrap();
-//! // every voxel the closed triangle touches, with the CPU reference's attributes
+//! // every voxel the closed triangle touches, the CPU reference's set (attributes within one
+//! // quantization step; here exactly equal)
 //! let mut cpu = ChunkVoxelizer::new(Mode::Conservative);
 //! cpu.begin([0, 0, 0]);
 //! cpu.add(&[t]);
-//! assert_eq!(voxels, cpu.finish());
+//! let want = cpu.finish();
+//! let pos = |v: &[voxlod_format::Voxel]| v.iter().map(|v| v.pos()).collect::<Vec<_>>();
+//! assert_eq!(pos(&voxels), pos(&want));
 //! assert_eq!(voxels.len(), 6); // columns (0,0) (1,0) (0,1) (1,1) (2,0) (0,2) at z = 2
 //! assert_eq!(voxels[0].pos(), [0, 0, 2]);
 //! assert_eq!(voxels[0].normal_f32(), [0.0, 0.0, 1.0]);
@@ -78,6 +99,7 @@ pub mod shaders;
 mod voxelizer;
 
 pub use device::{probe_adapter, AdapterProbe};
+pub use shaders::Precision;
 pub use voxelizer::{Feed, GpuVoxelizer};
 
 use std::fmt;

@@ -1,6 +1,8 @@
 //! The WGSL sources (in `shaders/` at the repository root) and how the host assembles them:
 //! each entry file gets the shared routines of `voxelize.wgsl` appended and the `real` alias
-//! (f64 or f32) prepended.
+//! (f64 or f32) prepended, with the constants of the filter bounds for that type: `UNIT`, the
+//! unit roundoff (2⁻⁵³ or 2⁻²⁴), and `TINY`, an absolute slack covering underflow (in f32 also
+//! denormals flushed to zero: at most 2⁻¹²⁶ per operation).
 
 /// Classification and compaction compute entry points (`classify`, `compact`).
 pub const CLASSIFY_WGSL: &str = include_str!("../../../shaders/classify.wgsl");
@@ -14,7 +16,8 @@ pub const VOXELIZE_WGSL: &str = include_str!("../../../shaders/voxelize.wgsl");
 pub enum Precision {
     /// f64 (needs `wgpu::Features::SHADER_F64`): the same arithmetic as the CPU reference.
     F64,
-    /// f32: agrees with the CPU except near voxel-boundary ties.
+    /// f32: the same filter with f32's unit roundoff; decisions inside the (wider) bands count
+    /// as inside, so the voxel set is a superset of the exact one.
     F32,
 }
 
@@ -29,9 +32,13 @@ pub fn raster_source(p: Precision) -> String {
 }
 
 fn assemble(entry: &str, p: Precision) -> String {
-    let ty = match p {
-        Precision::F64 => "f64",
-        Precision::F32 => "f32",
+    // abstract-float literals, converted to `real` exactly (both are powers of two or far
+    // above the bounds' own rounding)
+    let (ty, unit, tiny) = match p {
+        Precision::F64 => ("f64", "1.1102230246251565e-16", "1e-300"),
+        Precision::F32 => ("f32", "5.9604644775390625e-8", "1e-30"),
     };
-    format!("alias real = {ty};\n{entry}\n{VOXELIZE_WGSL}")
+    format!(
+        "alias real = {ty};\nconst UNIT: real = {unit};\nconst TINY: real = {tiny};\n{entry}\n{VOXELIZE_WGSL}"
+    )
 }

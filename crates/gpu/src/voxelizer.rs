@@ -5,7 +5,7 @@
 use bytemuck::{Pod, Zeroable};
 use voxlod_format::Voxel;
 use voxlod_geom::{Triangle, CHUNK};
-use voxlod_voxelize::Mode;
+use voxlod_voxelize::{ChunkVoxelizer, Mode};
 
 use crate::device::{open, Gpu};
 use crate::encode::{decode, SLOT_BYTES};
@@ -44,6 +44,10 @@ struct Params {
 
 const PHASE_MARK: u32 = 0;
 const PHASE_ACCUMULATE: u32 = 1;
+/// Flags of `counter[3]` (voxelize.wgsl): some decision's value lay inside its error band (it
+/// was counted as inside) / some normal component's sign was uncertain.
+const UNCERTAIN_DECISION: u32 = 1;
+const UNCERTAIN_NORMAL: u32 = 2;
 
 /// Reusable GPU voxelizer of 256³ chunks; see the crate docs.
 pub struct GpuVoxelizer {
@@ -86,6 +90,11 @@ pub struct GpuVoxelizer {
     /// leave out second passes that would draw nothing (see `may_defer`)
     skip_empty: bool,
     split: (u64, u64),
+    /// the CPU voxelizer of flagged chunks (created on first use)
+    cpu: Option<ChunkVoxelizer>,
+    /// the last chunk's uncertainty flags, and whether it was re-voxelized on the CPU
+    uncertain: u32,
+    fell_back: bool,
 }
 
 /// (compute, raster, sweep) bind groups.
@@ -113,11 +122,30 @@ impl GpuVoxelizer {
     /// `cutoff` is the dominant projected area (voxels²) from which [`GpuMethod::Hybrid`] defers
     /// a triangle to the fragment pass; the other methods ignore it.
     pub fn new(mode: Mode, method: GpuMethod, cutoff: f32) -> Result<GpuVoxelizer, GpuError> {
+        GpuVoxelizer::with_precision(mode, method, cutoff, None)
+    }
+
+    /// [`GpuVoxelizer::new`] with the shaders' precision chosen: `None` takes f64 when the
+    /// adapter has `SHADER_F64`, else f32; `Some(Precision::F32)` forces the f32 shaders (for
+    /// tests of that variant on an adapter with f64); `Some(Precision::F64)` on an adapter
+    /// without f64 is an error.
+    pub fn with_precision(
+        mode: Mode,
+        method: GpuMethod,
+        cutoff: f32,
+        precision: Option<Precision>,
+    ) -> Result<GpuVoxelizer, GpuError> {
         let gpu = open()?;
-        let precision = if gpu.f64 {
-            Precision::F64
-        } else {
-            Precision::F32
+        let precision = match precision {
+            Some(Precision::F64) if !gpu.f64 => {
+                return Err(GpuError::Device {
+                    adapter: gpu.name.clone(),
+                    reason: "f64 shaders requested, but the adapter lacks SHADER_F64".into(),
+                })
+            }
+            Some(p) => p,
+            None if gpu.f64 => Precision::F64,
+            None => Precision::F32,
         };
         let d = &gpu.device;
         let cs = wgpu::ShaderStages::COMPUTE;
@@ -145,6 +173,7 @@ impl GpuVoxelizer {
                 storage_entry(3, vfs, true),
                 storage_entry(5, fs, true),
                 storage_entry(6, fs, false),
+                storage_entry(7, fs, false),
             ],
         });
         let layout = |bgl: &wgpu::BindGroupLayout| {
@@ -286,6 +315,9 @@ impl GpuVoxelizer {
             pending: Vec::new(),
             skip_empty: true,
             split: (0, 0),
+            cpu: None,
+            uncertain: 0,
+            fell_back: false,
         })
     }
 
@@ -331,6 +363,20 @@ impl GpuVoxelizer {
     /// triangles missing the chunk are in neither.
     pub fn last_split(&self) -> (u64, u64) {
         self.split
+    }
+
+    /// Whether the last chunk had a decision the shaders could not certify (a value inside its
+    /// rounding band, or a normal component of uncertain sign; see the crate docs).
+    pub fn last_uncertain(&self) -> bool {
+        self.uncertain != 0
+    }
+
+    /// Whether the last chunk was re-voxelized on the CPU (`voxlod_voxelize::ChunkVoxelizer`,
+    /// same mode) because of such a decision: always when flagged in f64; in f32 only when a
+    /// normal component's sign was uncertain (other uncertain f32 decisions count as inside,
+    /// so the chunk's set is a superset of the exact one).
+    pub fn last_fell_back(&self) -> bool {
+        self.fell_back
     }
 
     /// Triangles per GPU batch (default and maximum 65,535: the sweep pass dispatches one
@@ -441,6 +487,7 @@ impl GpuVoxelizer {
                 e(3, &self.deferred),
                 e(5, &self.base),
                 e(6, &self.accum),
+                e(7, &self.counter),
             ],
         });
         self.bind[slot] = Some((compute.clone(), raster.clone(), sweep.clone()));
@@ -488,6 +535,8 @@ impl GpuVoxelizer {
             return Err(GpuError::Origin(origin).into());
         }
         self.split = (0, 0);
+        self.uncertain = 0;
+        self.fell_back = false;
         self.resident = None;
         self.pending.clear();
         let origin_i = origin.map(|c| c as i32);
@@ -507,7 +556,7 @@ impl GpuVoxelizer {
             return Ok(Vec::new());
         }
         // compaction: a slot per occupied voxel
-        let (count, small, large) = {
+        let (count, small, large, flags) = {
             let (compute, _, _) = self.bind_groups(0);
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
             {
@@ -519,10 +568,40 @@ impl GpuVoxelizer {
             self.gpu.queue.submit([enc.finish()]);
             let c = self.gpu.read(&self.counter, &self.staging, 16)?;
             let c: &[u32] = bytemuck::cast_slice(&c);
-            (c[0] as u64, c[1] as u64, c[2] as u64)
+            (c[0] as u64, c[1] as u64, c[2] as u64, c[3])
         };
         self.inflight = [None, None];
         self.split = (small, large);
+        self.uncertain = flags;
+        let fall_back = match self.precision {
+            Precision::F64 => flags != 0,
+            Precision::F32 => flags & UNCERTAIN_NORMAL != 0,
+        };
+        debug_assert!(flags & !(UNCERTAIN_DECISION | UNCERTAIN_NORMAL) == 0);
+        if fall_back {
+            // the exact CPU decisions for the whole chunk (its attributes too)
+            self.fell_back = true;
+            let mode = self.mode;
+            let cpu = self.cpu.get_or_insert_with(|| ChunkVoxelizer::new(mode));
+            if cpu.mode() != mode {
+                *cpu = ChunkVoxelizer::new(mode);
+            }
+            cpu.begin(origin);
+            let mut again = 0u64;
+            replay(&mut |b: &[Triangle]| {
+                again += b.iter().filter(|t| t.is_finite()).count() as u64;
+                cpu.add(b)
+            })?;
+            let voxels = cpu.finish();
+            if again != marked_tris {
+                return Err(GpuError::Replay {
+                    first: marked_tris,
+                    again,
+                }
+                .into());
+            }
+            return Ok(voxels);
+        }
         if count == 0 {
             return Ok(Vec::new());
         }

@@ -121,6 +121,21 @@ pub(crate) struct GpuRun {
     /// triangles voxelized in the classification pass / deferred to the second pass, summed
     /// over the chunks voxelized so far
     split: (u64, u64),
+    /// chunks re-voxelized on the CPU (a decision the shaders could not certify), and chunks
+    /// with such a decision at all (in f32 mostly counted as inside: a conservative superset)
+    fallback: u64,
+    uncertain: u64,
+}
+
+/// What the GPU backend did, summed over the chunks `Voxelizers::run` voxelized.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct GpuStats {
+    /// triangles voxelized in the classification pass / deferred to the second pass
+    pub split: [u64; 2],
+    /// chunks re-voxelized on the CPU
+    pub cpu_fallback_chunks: u64,
+    /// chunks with a decision inside its rounding band
+    pub uncertain_chunks: u64,
 }
 
 /// Triangles per read of a chunk's bins (the CPU voxelizer's batch; the GPU voxelizer
@@ -227,11 +242,19 @@ impl Voxelizers {
                         }
                     );
                 }
-                desc += ")";
+                // the contract of the voxel sets (crates/gpu docs, "Exactness")
+                desc += match gpu.precision() {
+                    voxlod_gpu::shaders::Precision::F64 => {
+                        ", f64: exact sets, uncertain chunks on the CPU)"
+                    }
+                    voxlod_gpu::shaders::Precision::F32 => ", f32: conservative superset)",
+                };
                 Ok((
                     Voxelizers::Gpu(Box::new(Mutex::new(GpuRun {
                         vz: gpu,
                         split: (0, 0),
+                        fallback: 0,
+                        uncertain: 0,
                     }))),
                     desc,
                 ))
@@ -286,6 +309,8 @@ impl Voxelizers {
                         let (small, large) = gpu.vz.last_split();
                         gpu.split.0 += small;
                         gpu.split.1 += large;
+                        gpu.fallback += gpu.vz.last_fell_back() as u64;
+                        gpu.uncertain += gpu.vz.last_uncertain() as u64;
                         Ok((voxels, 0))
                     })
                     .collect()
@@ -297,12 +322,20 @@ impl Voxelizers {
     /// the cutoff) and those deferred to the second pass (the fragment pass; the sweep pass of
     /// `--gpu-method triangle`), summed over the chunks `run` has voxelized (the cutoff search
     /// not included). A triangle spanning several chunks counts once per chunk; zero-area
-    /// triangles and parts outside a chunk count in neither. None for the CPU backend.
-    pub(crate) fn gpu_split(&self) -> Option<(u64, u64)> {
+    /// triangles and parts outside a chunk count in neither. With them, the chunks re-voxelized
+    /// on the CPU and those with an uncertain decision. None for the CPU backend.
+    pub(crate) fn gpu_stats(&self) -> Option<GpuStats> {
         match self {
             Voxelizers::Cpu(_) => None,
             #[cfg(feature = "gpu")]
-            Voxelizers::Gpu(gpu) => Some(gpu.lock().unwrap_or_else(|p| p.into_inner()).split),
+            Voxelizers::Gpu(gpu) => {
+                let g = gpu.lock().unwrap_or_else(|p| p.into_inner());
+                Some(GpuStats {
+                    split: [g.split.0, g.split.1],
+                    cpu_fallback_chunks: g.fallback,
+                    uncertain_chunks: g.uncertain,
+                })
+            }
         }
     }
 }

@@ -178,6 +178,12 @@ pub struct BuildSummary {
     /// cutoff) and triangles deferred to the second pass, summed over the chunks this run
     /// voxelized (a triangle counts once per chunk it was binned to). `None` on the CPU.
     pub gpu_split: Option<[u64; 2]>,
+    /// GPU backend: chunks re-voxelized on the CPU because a decision was inside its rounding
+    /// band (f64; in f32 only an uncertain normal sign), so that the sets are exact.
+    pub gpu_cpu_fallback_chunks: Option<u64>,
+    /// GPU backend: chunks with a decision inside its rounding band (in f32 counted as inside
+    /// unless the chunk fell back: the set is then a conservative superset).
+    pub gpu_uncertain_chunks: Option<u64>,
     /// Non-empty leaf chunk bins (chunks some triangle's range touches).
     pub chunk_bins: usize,
     /// Triangle records in the bins (a triangle spanning k chunks counts k times).
@@ -575,7 +581,7 @@ fn run(
     let counted_during_ingest = early_counts.is_some();
 
     let mut backend_used = String::from("(voxelized by the interrupted run)");
-    let mut gpu_split = None;
+    let mut gpu_stats: Option<backend::GpuStats> = None;
     let leaves_marker = match leaves_done {
         Some(m) => {
             stage_done(&mut stages, "tile", Instant::now(), true);
@@ -595,7 +601,7 @@ fn run(
             early_counts,
             &mut stages,
             &mut backend_used,
-            &mut gpu_split,
+            &mut gpu_stats,
         )?,
     };
     if leaves_marker.skipped > 0 {
@@ -732,7 +738,9 @@ fn run(
         voxelizer: s.voxelizer,
         threads,
         backend: backend_used,
-        gpu_split,
+        gpu_split: gpu_stats.map(|g| g.split),
+        gpu_cpu_fallback_chunks: gpu_stats.map(|g| g.cpu_fallback_chunks),
+        gpu_uncertain_chunks: gpu_stats.map(|g| g.uncertain_chunks),
         chunk_bins,
         binned_triangles,
         total_voxels,
@@ -771,7 +779,7 @@ fn tile_and_voxelize(
     early_counts: Option<ChunkCounts>,
     stages: &mut Vec<StageTime>,
     backend_used: &mut String,
-    gpu_split: &mut Option<[u64; 2]>,
+    gpu_stats: &mut Option<backend::GpuStats>,
 ) -> Result<LeavesMarker> {
     let stage_done =
         |stages: &mut Vec<StageTime>, stage: &'static str, t: Instant, resumed: bool| {
@@ -963,7 +971,7 @@ fn tile_and_voxelize(
                 return Err(e);
             }
             bar.finish();
-            *gpu_split = voxelizers.gpu_split().map(|(small, large)| [small, large]);
+            *gpu_stats = voxelizers.gpu_stats();
             drop(voxelizers);
             let records = log.records();
             log.finish()?;

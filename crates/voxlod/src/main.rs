@@ -294,6 +294,11 @@ fn print_summary(s: &BuildSummary) {
             "  gpu split    {small} triangle/chunk pairs voxelized in the classification pass, {large} deferred to the second pass"
         );
     }
+    if let (Some(f), Some(u)) = (s.gpu_cpu_fallback_chunks, s.gpu_uncertain_chunks) {
+        println!(
+            "  gpu exact    {f} chunks re-voxelized on the CPU, {u} with a decision inside its rounding band"
+        );
+    }
     println!(
         "  chunk bins   {} ({} triangle records of {} bytes, tiled from the {}{})",
         s.chunk_bins,

@@ -4,6 +4,8 @@
 
 use std::path::PathBuf;
 
+pub mod adversarial;
+
 /// SplitMix64.
 pub struct Rng(pub u64);
 impl Rng {
