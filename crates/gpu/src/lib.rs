@@ -48,6 +48,7 @@
 //!   would be flagged; uncertain decisions count as inside and the chunk is kept, so the set is
 //!   a **conservative superset** of the exact one (may add voxels, never misses one). Only an
 //!   uncertain normal sign (where "inside" is undefined) sends the chunk to the CPU.
+//!
 //! [`GpuVoxelizer::last_uncertain`] and [`GpuVoxelizer::last_fell_back`] report both per chunk.
 //!
 //! **Attributes.** The GPU sums each voxel's area-weighted normal and colour in 96-bit fixed

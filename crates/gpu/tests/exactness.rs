@@ -13,7 +13,6 @@
 //! These tests need an adapter (lavapipe is enough): without one they FAIL.
 
 #[path = "../../voxelize/tests/common/mod.rs"]
-#[allow(dead_code)]
 mod vcommon;
 
 use std::collections::BTreeSet;
@@ -55,12 +54,12 @@ fn exact(cpu: &mut ChunkVoxelizer, origin: [u32; 3], t: &Triangle) -> BTreeSet<[
     positions(&cpu.finish())
 }
 
+/// `check(got, exact, voxelizer, what)`: checks one triangle's set.
+type Check<'a> = dyn FnMut(&BTreeSet<[u8; 3]>, &BTreeSet<[u8; 3]>, &GpuVoxelizer, &str) + 'a;
+
 /// (flagged, clean) triangles over every place, mode and scheme, after checking each set with
 /// `check(got, exact, flagged)`.
-fn run(
-    g: &mut GpuVoxelizer,
-    check: &mut dyn FnMut(&BTreeSet<[u8; 3]>, &BTreeSet<[u8; 3]>, &GpuVoxelizer, &str),
-) -> (usize, usize) {
+fn run(g: &mut GpuVoxelizer, check: &mut Check<'_>) -> (usize, usize) {
     let (mut flagged, mut clean) = (0, 0);
     for mode in [Mode::Conservative, Mode::Thin] {
         g.set_mode(mode);
