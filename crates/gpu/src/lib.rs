@@ -42,8 +42,10 @@
 //! degenerate projection). After the marking pass the host reads the flags:
 //! * **f64**: a flagged chunk is re-voxelized on the CPU (`voxlod_voxelize::ChunkVoxelizer`,
 //!   same mode; the replay callback feeds it), so the voxel sets always equal the exact CPU
-//!   sets, in both modes. On scans a few chunks in a hundred are flagged at 256³ (the bands are
-//!   about 10⁻¹³ voxels wide; exact ties on axis-aligned walls flag more).
+//!   sets, in both modes. How often: the bands are about 10⁻¹³ voxel wide, but exact ties
+//!   (faces on grid planes) and near-degenerate slivers are flagged every time; at 512³ no
+//!   chunk of the Stanford bunny fell back, 3 of 4 of the dragon's, every chunk of Sponza and
+//!   the conference room (docs/BENCHMARKS.md, "GPU exactness").
 //! * **f32** (adapters without `SHADER_F64`): the bands are 2²⁹ times wider, so most chunks
 //!   would be flagged; uncertain decisions count as inside and the chunk is kept, so the set is
 //!   a **conservative superset** of the exact one (may add voxels, never misses one). Only an
