@@ -957,6 +957,12 @@ fn tile_and_voxelize(
                     }
                     Ok(())
                 },
+                &|i, message| {
+                    anyhow::anyhow!(
+                        "voxelizing leaf chunk {i} {:?} panicked: {message}",
+                        chunks[i].coord
+                    )
+                },
             );
             if let Err(e) = appended {
                 log.finish()?;
