@@ -184,7 +184,7 @@ fn the_validator_rejects_what_it_should() {
     let mut e = Vec::new();
     validate(&s, &good, "$", &mut e);
     assert!(e.is_empty(), "{e:?}");
-    let mut bad = |f: &dyn Fn(&mut Value), want: &str| {
+    let bad = |f: &dyn Fn(&mut Value), want: &str| {
         let mut d = good.clone();
         f(&mut d);
         let mut e = Vec::new();
