@@ -91,6 +91,11 @@ pub(crate) fn ordered<T: Send, E>(
     let lock = || -> Result<MutexGuard<'_, State<T>>, ()> { state.lock().map_err(|_| ()) };
     let end = range.end;
     std::thread::scope(|scope| {
+        // first, so that workers already started end however the consumer leaves
+        let _stop = StopOnDrop {
+            state: &state,
+            cv: &cv,
+        };
         for _ in 0..workers {
             scope.spawn(|| {
                 let _alive = AliveGuard {
@@ -123,10 +128,6 @@ pub(crate) fn ordered<T: Send, E>(
                 })
             });
         }
-        let _stop = StopOnDrop {
-            state: &state,
-            cv: &cv,
-        };
         for i in range.clone() {
             let r = {
                 let Ok(mut s) = lock() else {
