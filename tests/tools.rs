@@ -262,7 +262,10 @@ fn first_hour_messages() {
         "cpu",
         "-q",
     ]));
-    assert!(!t.contains("does not end in"), "-q hides the warning too:\n{t}");
+    assert!(
+        !t.contains("does not end in"),
+        "-q hides the warning too:\n{t}"
+    );
     std::fs::remove_file(&ply).unwrap();
     let t = ok(&voxlod(&[
         "build",
