@@ -217,3 +217,85 @@ fn export_and_render_commands() {
     let t = fails(&voxlod(&["render", s(&a), "-o", s(&png), "--level", "7"]));
     assert!(t.contains("level 7 is not in the file"), "{t}");
 }
+
+/// The first hour: the sample's summary names `data/bunny.ply`, a piped build prints plain
+/// progress lines (stage, percent, rounded rate) instead of nothing, an octree named `.ply`
+/// gets a warning, a missing output folder is an error that names it, and export says the
+/// PLY's size before writing it.
+#[test]
+fn first_hour_messages() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = Command::new(BIN)
+        .args(["build", "-r", "256", "--backend", "cpu"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    let t = ok(&o);
+    assert!(
+        t.contains("input        data/bunny.ply, the bundled sample"),
+        "{t}"
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    for stage in ["ingest", "voxelize", "lod+write"] {
+        let line = err
+            .lines()
+            .find(|l| l.trim_start().starts_with(stage) && l.ends_with("(done)"))
+            .unwrap_or_else(|| panic!("no plain progress line for {stage}:\n{err}"));
+        assert!(line.contains("100%") && line.contains("/s,"), "{line}");
+    }
+    assert!(
+        !err.contains('\u{1b}'),
+        "terminal escapes in piped progress:\n{err}"
+    );
+
+    let bunny = d.join("bunny.voxlod");
+    let ply = d.join("octree.ply");
+    let t = ok(&voxlod(&[
+        "build",
+        s(&Path::new(REPO).join("data/bunny.ply")),
+        "-o",
+        s(&ply),
+        "-r",
+        "256",
+        "--backend",
+        "cpu",
+        "-q",
+    ]));
+    assert!(
+        !t.contains("does not end in"),
+        "-q hides the warning too:\n{t}"
+    );
+    std::fs::remove_file(&ply).unwrap();
+    let t = ok(&voxlod(&[
+        "build",
+        s(&Path::new(REPO).join("data/bunny.ply")),
+        "-o",
+        s(&ply),
+        "-r",
+        "256",
+        "--backend",
+        "cpu",
+    ]));
+    assert!(t.contains("does not end in .voxlod"), "{t}");
+
+    let t = fails(&voxlod(&[
+        "build",
+        "-o",
+        s(&d.join("no/such/x.voxlod")),
+        "-q",
+    ]));
+    assert!(t.contains("no/such") && t.contains("does not exist"), "{t}");
+
+    let out = d.join("level0.ply");
+    let o = voxlod(&["export", s(&bunny), "-o", s(&out)]);
+    let t = ok(&o);
+    let size = std::fs::metadata(&out).unwrap().len();
+    let err = String::from_utf8_lossy(&o.stderr);
+    let size = voxlod_pipeline::format_size(size);
+    assert!(
+        err.starts_with("writing level 0 of ") && err.contains(&size),
+        "{err}"
+    );
+    assert!(t.contains(&size), "{t}");
+}

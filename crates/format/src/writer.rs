@@ -1,6 +1,6 @@
 //! The streamed writer: payloads go to disk as nodes are finished (leaves in Morton order,
-//! each parent right after its last child, as the brief's "Write" stage asks), only the
-//! 64-byte index entries stay in memory. The file is built under a temporary name and renamed
+//! each parent right after its last child, so a build holds only the current Morton path);
+//! only the 64-byte index entries stay in memory. The file is built under a temporary name and renamed
 //! into place when complete, so `path` never holds a partial file.
 
 use std::ffi::OsString;

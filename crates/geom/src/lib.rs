@@ -95,7 +95,9 @@ fn sub64(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
 /// Axis-aligned bounds accumulated in f64.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bounds {
+    /// Smallest corner (+∞ on every axis while empty).
     pub min: [f64; 3],
+    /// Largest corner (−∞ on every axis while empty).
     pub max: [f64; 3],
 }
 
@@ -113,6 +115,7 @@ impl Bounds {
     // first of equal values stays, so the bounds of a sequence are the same bits however it is
     // cut into batches and merged in order (the ingest pass merges per-thread batches).
     // NaN is never taken.
+    /// Grows the box to hold `p`.
     pub fn add_point(&mut self, p: [f32; 3]) {
         for a in 0..3 {
             let x = p[a] as f64;
@@ -124,6 +127,7 @@ impl Bounds {
             }
         }
     }
+    /// Grows the box to hold the triangle's three corners.
     pub fn add_triangle(&mut self, t: &Triangle) {
         for v in &t.v {
             self.add_point(*v);
@@ -161,6 +165,7 @@ impl Bounds {
             }
         }
     }
+    /// True if no point was added (NaN bounds count as empty).
     pub fn is_empty(&self) -> bool {
         !(self.min[0] <= self.max[0])
     }
@@ -204,8 +209,11 @@ impl std::error::Error for GridError {}
 /// voxel `i` covers `[i, i+1]` on each axis. Leaf chunks are 256³ blocks of voxels.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Grid {
+    /// World position of the grid's minimum corner.
     pub origin: [f64; 3],
+    /// Edge of one voxel, world units.
     pub voxel_size: f64,
+    /// Voxels per axis.
     pub resolution: u32,
 }
 

@@ -24,6 +24,7 @@ pub struct MergeScratch {
 }
 
 impl MergeScratch {
+    /// Empty scratch buffers (they grow on first use).
     pub fn new() -> Self {
         Self::default()
     }

@@ -18,6 +18,7 @@ pub enum Backend {
     /// is slower than the CPU backend, so `auto` does not pick it).
     #[default]
     Auto,
+    /// The CPU chunk voxelizer on every core.
     Cpu,
     /// Any adapter, software ones included; an error when there is none.
     Gpu,
@@ -49,7 +50,9 @@ impl std::fmt::Display for Backend {
 /// fragment pass, or `auto` for a short bracketing search on the build's largest chunk.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Cutoff {
+    /// Search a cutoff on the build's largest chunk.
     Auto,
+    /// This cutoff, voxels².
     Fixed(f32),
 }
 

@@ -151,7 +151,9 @@ impl BuildSettings {
 /// Wall-clock seconds and peak memory per stage.
 #[derive(Clone, Debug, Serialize)]
 pub struct StageTime {
+    /// Stage name: `ingest`, `tile`, `voxelize` or `lod+write`.
     pub stage: &'static str,
+    /// Wall time of the stage, seconds.
     pub seconds: f64,
     /// Peak resident memory of the process at the end of the stage (bytes; monotone).
     pub peak_rss: u64,
@@ -162,15 +164,23 @@ pub struct StageTime {
 /// What a build did.
 #[derive(Clone, Debug, Serialize)]
 pub struct BuildSummary {
+    /// The input mesh's path as given.
     pub input: PathBuf,
+    /// The octree file written.
     pub output: PathBuf,
+    /// Input format as detected (e.g. `binary_little_endian PLY`).
     pub input_format: String,
+    /// Triangles read, degenerate ones included.
     pub triangles: u64,
+    /// Zero-area triangles skipped.
     pub degenerate_skipped: u64,
+    /// Voxels per axis of the whole grid.
     pub resolution: u32,
+    /// Conservative or thin.
     pub mode: Mode,
     /// The CPU voxelizer method (the GPU backend computes the overlap tests' set itself).
     pub voxelizer: Method,
+    /// Worker threads used.
     pub threads: usize,
     /// The voxelizer that ran (backend, adapter, method, cutoff).
     pub backend: String,
@@ -188,10 +198,15 @@ pub struct BuildSummary {
     pub chunk_bins: usize,
     /// Triangle records in the bins (a triangle spanning k chunks counts k times).
     pub binned_triangles: u64,
+    /// Nodes and voxels per level, finest first.
     pub levels: Vec<LevelStats>,
+    /// Voxels over all levels.
     pub total_voxels: u64,
+    /// Size of the octree file, bytes.
     pub bytes: u64,
+    /// `bytes / total_voxels`.
     pub bytes_per_voxel: f64,
+    /// How the memory budget was split.
     pub memory_plan: MemoryPlan,
     /// Peak resident memory of the whole process (bytes).
     pub peak_rss: u64,
@@ -207,9 +222,13 @@ pub struct BuildSummary {
     /// Bytes of one triangle record in the spool and bins (40–88: only the attributes the
     /// mesh has).
     pub record_bytes: usize,
+    /// True if the build continued an interrupted one.
     pub resumed: bool,
+    /// Time and peak memory of each stage, in the order they ran.
     pub stages: Vec<StageTime>,
+    /// Wall time of the whole build, seconds.
     pub seconds: f64,
+    /// Warnings (lossy conversions, skipped data).
     pub warnings: Vec<String>,
 }
 
@@ -964,6 +983,12 @@ fn tile_and_voxelize(
                         request_interrupt();
                     }
                     Ok(())
+                },
+                &|i, message| {
+                    anyhow::anyhow!(
+                        "voxelizing leaf chunk {i} {:?} panicked: {message}",
+                        chunks[i].coord
+                    )
                 },
             );
             if let Err(e) = appended {

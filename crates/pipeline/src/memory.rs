@@ -19,6 +19,7 @@ pub const BASE_BYTES: u64 = 64 << 20;
 /// How the budget is spent.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct MemoryPlan {
+    /// The `--memory` budget, bytes.
     pub budget: u64,
     /// Triangles buffered by the scatter pass between flushes.
     pub scatter_buffer: u64,
@@ -29,6 +30,7 @@ pub struct MemoryPlan {
 }
 
 impl MemoryPlan {
+    /// Splits `budget` for `threads` workers; an error if even one chunk voxelizer cannot fit.
     pub fn new(budget: u64, threads: usize) -> Result<MemoryPlan> {
         let minimum = BASE_BYTES + LOD_BYTES + VOXELIZER_BYTES + (16 << 20);
         if budget < minimum {
@@ -57,6 +59,7 @@ impl MemoryPlan {
         })
     }
 
+    /// The plan in one line, as printed before a build.
     pub fn describe(&self) -> String {
         format!(
             "memory plan: {} of {} budget ({} chunk voxelizer(s) × {}, scatter buffer {}, LOD {}, base {})",

@@ -26,8 +26,11 @@ const QUEUE_BYTES: u64 = 64 << 20;
 /// Voxel and node counts of one level.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct LevelStats {
+    /// Level, 0 = finest.
     pub level: u32,
+    /// Nodes (chunks) of the level.
     pub nodes: u64,
+    /// Voxels of the level.
     pub voxels: u64,
 }
 
@@ -74,6 +77,7 @@ pub struct OctreeWriter<'p> {
     queue: VecDeque<Queued>,
     queued_bytes: u64,
     last_leaf: Option<u64>,
+    /// Nodes and voxels per level written so far.
     pub stats: Vec<LevelStats>,
 }
 
@@ -285,6 +289,7 @@ impl<'p> OctreeWriter<'p> {
         Ok((size, stats))
     }
 
+    /// Bytes of the file written so far.
     pub fn bytes_written(&self) -> u64 {
         self.writer.bytes_written()
     }

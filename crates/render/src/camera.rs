@@ -160,9 +160,166 @@ pub fn model_bounds(reader: &voxlod_format::Reader) -> Option<Aabb> {
     reader.root().and_then(|r| reader.node_bounds(r))
 }
 
+/// The up axis a model says by its shape, or `None`: +Z when it is flat in z (its z extent
+/// under a quarter of both its x and y extents: a Z-up city, terrain or floor plan, as GIS
+/// data and many scans are), else nothing (the caller's default, +Y as in glTF). A flat
+/// model standing in the xy plane of a Y-up file (a relief) is taken for Z-up too; `--up`
+/// overrides.
+pub fn up_from_shape(bounds: Aabb) -> Option<[f64; 3]> {
+    let e: [f64; 3] = std::array::from_fn(|a| bounds.max[a] - bounds.min[a]);
+    (e[2] * 4.0 < e[0] && e[2] * 4.0 < e[1]).then_some([0.0, 0.0, 1.0])
+}
+
+/// Voxels sampled for [`robust_bounds`]: the coarsest level with at least this many.
+const ROBUST_SAMPLE: u64 = 20_000;
+
+/// The box holding the bulk of the model, for framing: per axis, the 1st to the 99th
+/// percentile of the voxel centres of a coarse level (the coarsest with at least 20,000
+/// voxels, or level 0), widened by one voxel of that level. Stray fragments (a scan's far
+/// outliers) hold few voxels and fall outside it, so they do not shrink the subject in the
+/// picture. `None` for an empty file.
+pub fn robust_bounds(reader: &voxlod_format::Reader) -> Result<Option<Aabb>, RenderError> {
+    let spec = reader.spec();
+    let mut per_level = vec![0u64; spec.levels as usize];
+    for e in reader.nodes() {
+        per_level[e.level as usize] += e.voxel_count as u64;
+    }
+    let Some(level) = (0..spec.levels)
+        .rev()
+        .find(|&l| per_level[l as usize] >= ROBUST_SAMPLE)
+        .or_else(|| (per_level.first() > Some(&0)).then_some(0))
+    else {
+        return Ok(None);
+    };
+    let edge = spec.voxel_size_at(level);
+    let mut axes: [Vec<f64>; 3] = Default::default();
+    let mut buf = Vec::new();
+    for i in reader.level_nodes(level) {
+        reader.read_node_into(i, &mut buf)?;
+        let e = reader.nodes()[i];
+        for v in &buf {
+            let c = spec.voxel_min_corner(level, e.pos(), v.pos());
+            for a in 0..3 {
+                axes[a].push(c[a] + 0.5 * edge);
+            }
+        }
+    }
+    if axes[0].is_empty() {
+        return Ok(None);
+    }
+    let mut min = [0.0; 3];
+    let mut max = [0.0; 3];
+    for a in 0..3 {
+        min[a] = percentile(&mut axes[a], 0.01) - edge;
+        max[a] = percentile(&mut axes[a], 0.99) + edge;
+    }
+    Ok(Some(Aabb { min, max }))
+}
+
+/// The value at fraction `q` of `v` sorted (nearest rank), reordering `v`.
+fn percentile(v: &mut [f64], q: f64) -> f64 {
+    assert!(!v.is_empty() && (0.0..=1.0).contains(&q));
+    let k = ((v.len() - 1) as f64 * q).round() as usize;
+    *v.select_nth_unstable_by(k, f64::total_cmp).1
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A made-up scene: a 40³ block of voxels (the subject) in chunk (0,0,0) and a stray
+    /// fragment of five voxels in the far corner of chunk (1,1,1), 512³ grid.
+    fn subject_and_stray(path: &std::path::Path) {
+        use voxlod_format::voxel::{pack_color, pack_normal};
+        use voxlod_format::{encode_node, FileSpec, Voxel, Writer, MODE_THIN};
+        let n = pack_normal([0.0, 0.0, 1.0]);
+        let c = pack_color([200, 200, 200, 255]);
+        let node = |mut v: Vec<Voxel>| {
+            v.sort_by_key(|v| v.morton());
+            encode_node(&v, 1).unwrap()
+        };
+        let mut block = Vec::new();
+        for x in 0..40u8 {
+            for y in 0..40u8 {
+                for z in 0..40u8 {
+                    block.push(Voxel::new([x, y, z], 0b010000, n, c));
+                }
+            }
+        }
+        let stray: Vec<Voxel> = (251..=255u8)
+            .map(|x| Voxel::new([x, 255, 255], 0b010000, n, c))
+            .collect();
+        let mut w = Writer::create(path, FileSpec::new(512, MODE_THIN, [0.0; 3], 0.1)).unwrap();
+        w.write_node(0, [0, 0, 0], 0, &node(block)).unwrap();
+        w.write_node(0, [1, 1, 1], 0, &node(stray)).unwrap();
+        let root = vec![
+            Voxel::new([0, 0, 0], 0b010000, n, c),
+            Voxel::new([255, 255, 255], 0b010000, n, c),
+        ];
+        w.write_node(1, [0, 0, 0], 0b1000_0001, &node(root))
+            .unwrap();
+        w.finish(&serde_json::json!({})).unwrap();
+    }
+
+    /// Rows of the picture the box `b` spans, as a fraction of the image height.
+    fn height_fraction(shot: &Shot, b: Aabb) -> f64 {
+        let rows: Vec<f64> = (0..8)
+            .map(|k| {
+                let p = std::array::from_fn(|a| if k >> a & 1 == 0 { b.min[a] } else { b.max[a] });
+                shot.project(p).unwrap()[1]
+            })
+            .collect();
+        let span = rows.iter().cloned().fold(f64::MIN, f64::max)
+            - rows.iter().cloned().fold(f64::MAX, f64::min);
+        span / shot.height as f64
+    }
+
+    #[test]
+    fn a_stray_fragment_does_not_shrink_the_subject() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.voxlod");
+        subject_and_stray(&path);
+        let r = voxlod_format::Reader::open(&path).unwrap();
+        let all = model_bounds(&r).unwrap();
+        assert!(all.max[0] > 50.0, "{all:?}");
+        let robust = robust_bounds(&r).unwrap().unwrap();
+        // the subject: voxels 0..40 of edge 0.1, centres 0.05..3.95
+        let subject = Aabb {
+            min: [0.0; 3],
+            max: [4.0; 3],
+        };
+        for a in 0..3 {
+            assert!(robust.min[a] >= -0.11 && robust.min[a] <= 0.2, "{robust:?}");
+            assert!(robust.max[a] >= 3.8 && robust.max[a] <= 4.2, "{robust:?}");
+        }
+        let view = View::default();
+        let framed = height_fraction(&Shot::frame(robust, &view).unwrap(), subject);
+        let by_box = height_fraction(&Shot::frame(all, &view).unwrap(), subject);
+        assert!(framed > 0.5, "the subject fills {framed} of the height");
+        assert!(by_box < 0.15, "framing by the box: {by_box}");
+    }
+
+    #[test]
+    fn flat_in_z_means_z_up() {
+        let b = |x: f64, y: f64, z: f64| Aabb {
+            min: [0.0; 3],
+            max: [x, y, z],
+        };
+        assert_eq!(up_from_shape(b(100.0, 80.0, 10.0)), Some([0.0, 0.0, 1.0]));
+        assert_eq!(up_from_shape(b(1.0, 1.0, 1.0)), None);
+        // the dragon (long in x, z its smallest extent but not flat) and a Y-up city
+        assert_eq!(up_from_shape(b(0.2, 0.14, 0.09)), None);
+        assert_eq!(up_from_shape(b(100.0, 10.0, 80.0)), None);
+    }
+
+    #[test]
+    fn percentiles_ignore_a_few_outliers() {
+        let mut v: Vec<f64> = (0..1000).map(|i| i as f64 / 1000.0).collect();
+        v.extend([1e6, -1e6, 5e5]);
+        assert!((percentile(&mut v, 0.01) - 0.01).abs() < 0.005);
+        assert!((percentile(&mut v, 0.99) - 0.99).abs() < 0.005);
+        assert_eq!(percentile(&mut [3.0], 0.5), 3.0);
+    }
 
     #[test]
     fn framing_puts_the_centre_in_the_middle_and_the_box_inside() {

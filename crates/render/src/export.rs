@@ -38,6 +38,18 @@ const FACE_BYTES: u64 = 1 + 4 * 4;
 
 /// Writes the voxels of `level` as quads to a binary little-endian PLY at `path`.
 pub fn export_ply(reader: &Reader, level: u32, path: &Path) -> Result<ExportSummary, RenderError> {
+    export_ply_with(reader, level, path, &mut |_| Ok(()))
+}
+
+/// [`export_ply`], calling `before_write` with the counts and the exact file size once the
+/// faces are counted and before anything is written (to tell the user how big the file will
+/// be, or to refuse); an error from it is returned and nothing is written.
+pub fn export_ply_with(
+    reader: &Reader,
+    level: u32,
+    path: &Path,
+    before_write: &mut dyn FnMut(&ExportSummary) -> Result<(), RenderError>,
+) -> Result<ExportSummary, RenderError> {
     let nodes = level_nodes(reader, level)?;
     let mut buf = Vec::new();
     let mut quads = 0u64;
@@ -52,15 +64,6 @@ pub fn export_ply(reader: &Reader, level: u32, path: &Path) -> Result<ExportSumm
             "level {level} has {quads} faces, more than a PLY with int indices can hold; export a coarser level"
         )));
     }
-    let io = |op: &'static str| {
-        move |source| RenderError::Io {
-            path: path.to_owned(),
-            op,
-            source,
-        }
-    };
-    let file = File::create(path).map_err(io("creating"))?;
-    let mut w = BufWriter::with_capacity(1 << 20, file);
     let spec = reader.spec();
     let header = format!(
         "ply\nformat binary_little_endian 1.0\n\
@@ -76,6 +79,22 @@ pub fn export_ply(reader: &Reader, level: u32, path: &Path) -> Result<ExportSumm
         spec.resolution,
         spec.voxel_size_at(level)
     );
+    let summary = ExportSummary {
+        voxels,
+        quads,
+        vertices,
+        bytes: header.len() as u64 + vertices * VERTEX_BYTES + quads * FACE_BYTES,
+    };
+    before_write(&summary)?;
+    let io = |op: &'static str| {
+        move |source| RenderError::Io {
+            path: path.to_owned(),
+            op,
+            source,
+        }
+    };
+    let file = File::create(path).map_err(io("creating"))?;
+    let mut w = BufWriter::with_capacity(1 << 20, file);
     w.write_all(header.as_bytes()).map_err(io("writing"))?;
 
     // vertices, node by node, in the same order as counted
@@ -111,13 +130,7 @@ pub fn export_ply(reader: &Reader, level: u32, path: &Path) -> Result<ExportSumm
         w.write_all(&rec).map_err(io("writing"))?;
     }
     w.flush().map_err(io("writing"))?;
-    let bytes = header.len() as u64 + vertices * VERTEX_BYTES + quads * FACE_BYTES;
-    Ok(ExportSummary {
-        voxels,
-        quads,
-        vertices,
-        bytes,
-    })
+    Ok(summary)
 }
 
 /// The normal a face is drawn with: the voxel's, or the face direction if that is zero.

@@ -5,7 +5,8 @@
 //!   large meshes", WSCG 2014) does: each voxel a small cube of which only the faces in its
 //!   face mask are drawn, shaded with its normal under a directional light and its colour.
 //!   The nodes drawn are one level, or the screen-space error cut for the camera
-//!   ([`Lod`], `Reader::select_by_error`); the camera frames the model by default ([`View`]).
+//!   ([`Lod`], `Reader::select_by_error`); the camera frames the bulk of the model's voxels
+//!   ([`robust_bounds`], so stray fragments do not shrink it) from a [`View`].
 //! - [`export_ply`] writes one level as a quad mesh (binary PLY with normals and colours).
 //!
 //! ```
@@ -38,10 +39,10 @@ mod export;
 mod faces;
 mod picture;
 
-pub use camera::{model_bounds, Shot, View};
+pub use camera::{model_bounds, robust_bounds, up_from_shape, Shot, View};
 pub use draw::{Renderer, BACKGROUND};
 pub use error::RenderError;
-pub use export::{export_ply, shading_normal, ExportSummary};
+pub use export::{export_ply, export_ply_with, shading_normal, ExportSummary};
 pub use faces::{face_direction, node_faces, unit_face_corners, Face};
 pub use picture::Picture;
 
@@ -57,9 +58,12 @@ pub enum Lod {
     Error(f64),
 }
 
-/// The camera framing the model for `view`, and the nodes `lod` selects for it.
+/// The camera framing the model for `view`, and the nodes `lod` selects for it. The model is
+/// framed by its [`robust_bounds`] (the bulk of its voxels, stray fragments left out).
 pub fn frame(reader: &Reader, view: &View, lod: Lod) -> Result<(Shot, Vec<usize>), RenderError> {
-    let bounds = model_bounds(reader)
+    model_bounds(reader)
+        .ok_or_else(|| RenderError::Option("the file has no voxels to draw".into()))?;
+    let bounds = robust_bounds(reader)?
         .ok_or_else(|| RenderError::Option("the file has no voxels to draw".into()))?;
     let shot = Shot::frame(bounds, view)?;
     let nodes = match lod {

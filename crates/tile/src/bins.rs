@@ -469,10 +469,12 @@ impl Bins {
         self.layout
     }
 
+    /// The non-empty chunks, in Morton order.
     pub fn chunks(&self) -> &[ChunkBin] {
         &self.chunks
     }
 
+    /// The bins file.
     pub fn path(&self) -> &Path {
         &self.path
     }

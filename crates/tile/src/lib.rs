@@ -95,21 +95,31 @@ pub fn to_grid(grid: &Grid, t: &Triangle) -> Triangle {
 #[derive(Debug, thiserror::Error)]
 pub enum TileError {
     #[error("{op} {path}: {source}")]
+    /// Reading or writing a temporary file failed.
     Io {
+        /// What was being done (`reading`, `writing`, …).
         op: &'static str,
+        /// The file.
         path: PathBuf,
         #[source]
+        /// The OS error.
         source: std::io::Error,
     },
     #[error("{path} is {len} bytes, not the expected whole number of {record}-byte triangle records (truncated temporary file?)")]
+    /// A spool or bins file is not a whole number of records.
     Truncated {
+        /// The file.
         path: PathBuf,
+        /// Its length, bytes.
         len: u64,
+        /// Bytes per record.
         record: u64,
     },
     #[error("the grid has {0} chunks; at most 2^32 are supported")]
+    /// The grid has more chunks than a `u32` index holds.
     TooManyChunks(u64),
     #[error("{0}")]
+    /// An error from the caller's callback, as text.
     Callback(String),
 }
 

@@ -20,6 +20,7 @@ pub struct Spooler {
 }
 
 impl Spooler {
+    /// Creates the spool file at `path` for records of `layout`.
     pub fn create(path: &Path, layout: RecordLayout) -> Result<Spooler, TileError> {
         let f = File::create(path).map_err(TileError::io("create", path))?;
         Ok(Spooler {
@@ -77,9 +78,13 @@ impl Drop for Spooler {
 /// `layout`.
 #[derive(Debug)]
 pub struct Spool {
+    /// The spool file.
     pub path: PathBuf,
+    /// Triangle records in it.
     pub count: u64,
+    /// Bounds of the triangles' corners.
     pub bounds: Bounds,
+    /// The record layout.
     pub layout: RecordLayout,
 }
 

@@ -55,7 +55,7 @@ pub fn run(a: DiffArgs) -> Result<()> {
     };
     let d = voxlod_check::diff(&a.a, &a.b, &tol)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&d)?);
+        crate::json::print(&d)?;
     } else {
         println!("a: {}\nb: {}", d.a, d.b);
         for f in &d.header {

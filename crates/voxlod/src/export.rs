@@ -28,7 +28,19 @@ pub fn run(a: ExportArgs) -> Result<()> {
     // written under a temporary name: an interrupted export leaves no partial file
     let guard = OutputGuard::acquire(&a.output, &[&a.file], OutputKind::Ply, a.force)?;
     let r = Reader::open(&a.file)?;
-    let s = voxlod_render::export_ply(&r, a.level, guard.staged())?;
+    // the size is known before anything is written: say it first (a fine level of a big
+    // model is gigabytes), without a prompt, as command-line tools that write files do
+    let s = voxlod_render::export_ply_with(&r, a.level, guard.staged(), &mut |s| {
+        eprintln!(
+            "writing level {} of {}: {} quads, {} to {}",
+            a.level,
+            a.file.display(),
+            s.quads,
+            format_size(s.bytes),
+            a.output.display()
+        );
+        Ok(())
+    })?;
     guard.commit()?;
     println!(
         "wrote {}: level {}, {} voxels, {} quads, {} vertices, {}",

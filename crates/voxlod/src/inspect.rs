@@ -81,7 +81,7 @@ fn gather(path: &Path) -> Result<FileInfo> {
 pub fn run(path: &Path, json: bool) -> Result<()> {
     let info = gather(path)?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&info)?);
+        crate::json::print(&info)?;
         return Ok(());
     }
     println!("{}", info.file);

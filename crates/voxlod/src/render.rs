@@ -30,9 +30,11 @@ pub struct RenderArgs {
     /// Direction from the model towards the camera, x,y,z.
     #[arg(long, default_value = "0.55,0.35,1", value_parser = parse_vec3, allow_hyphen_values = true)]
     view: [f64; 3],
-    /// World up vector, x,y,z.
-    #[arg(long, default_value = "0,1,0", value_parser = parse_vec3, allow_hyphen_values = true)]
-    up: [f64; 3],
+    /// World up vector, x,y,z [default: from the file's manifest if it names one (`input.up`),
+    /// else 0,0,1 for a model flat in z (a Z-up city or terrain), else 0,1,0]. The output
+    /// says which was used.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    up: Option<[f64; 3]>,
     /// Vertical field of view in degrees.
     #[arg(long, default_value_t = 35.0)]
     fov: f64,
@@ -78,11 +80,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
         (None, Some(e)) => Lod::Error(e),
         (None, None) => Lod::Error(1.0),
     };
+    let (up, up_from) = pick_up(&r, a.up)?;
     let view = View {
         width: a.size.0,
         height: a.size.1,
         direction: a.view,
-        up: a.up,
+        up,
         fov_y_deg: a.fov,
         zoom: a.zoom,
     };
@@ -98,10 +101,13 @@ pub fn run(a: RenderArgs) -> Result<()> {
     levels.sort_unstable();
     levels.dedup();
     println!(
-        "wrote {}: {}x{}, {} nodes (levels {:?}), {} voxels, {} faces drawn on {} in {:.2}s",
+        "wrote {}: {}x{}, up {},{},{} ({up_from}), {} nodes (levels {:?}), {} voxels, {} faces drawn on {} in {:.2}s",
         a.output.display(),
         pic.width,
         pic.height,
+        up[0],
+        up[1],
+        up[2],
         nodes.len(),
         levels,
         pic.voxels,
@@ -110,4 +116,25 @@ pub fn run(a: RenderArgs) -> Result<()> {
         t.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// The up vector and where it came from: `--up`, the manifest's `input.up` (three numbers),
+/// the model's shape ([`voxlod_render::up_from_shape`] on its robust bounds), or the default +Y.
+fn pick_up(r: &Reader, given: Option<[f64; 3]>) -> Result<([f64; 3], &'static str)> {
+    if let Some(u) = given {
+        return Ok((u, "--up"));
+    }
+    let manifest = r.manifest()?;
+    if let Some(u) = manifest["input"]["up"].as_array() {
+        let v: Vec<f64> = u.iter().filter_map(|x| x.as_f64()).collect();
+        if let [x, y, z] = v[..] {
+            return Ok(([x, y, z], "from the file"));
+        }
+    }
+    if let Some(b) = voxlod_render::robust_bounds(r)? {
+        if let Some(u) = voxlod_render::up_from_shape(b) {
+            return Ok((u, "the model is flat in z; --up to change"));
+        }
+    }
+    Ok(([0.0, 1.0, 0.0], "default; --up to change"))
 }

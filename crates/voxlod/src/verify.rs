@@ -18,7 +18,7 @@ pub struct VerifyArgs {
 pub fn run(a: VerifyArgs) -> Result<()> {
     let r = voxlod_check::verify(&a.file);
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        crate::json::print(&r)?;
     } else {
         println!("{}", a.file.display());
         if r.opened {
