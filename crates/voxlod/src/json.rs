@@ -37,8 +37,9 @@ pub fn build(s: &BuildSummary) -> Result<Value> {
 
 /// The voxelizer that ran, from the summary's description (written by the pipeline's
 /// backend module as `cpu (N chunk voxelizers on T threads, METHOD)[; NOTE]` or
-/// `gpu ADAPTER (METHOD[, cutoff C voxels²[ found by search]])`):
-/// `{kind, adapter, method, chunk_voxelizers, cutoff, cutoff_searched, note, description}`.
+/// `gpu ADAPTER (METHOD[, cutoff C voxels²[ found by search]], f64: …|f32: …)`):
+/// `{kind, adapter, method, chunk_voxelizers, cutoff, cutoff_searched, precision, note,
+/// description}`.
 pub fn backend_object(s: &BuildSummary) -> Value {
     let d = s.backend.as_str();
     let (main, note) = match d.split_once("; ") {
@@ -52,6 +53,7 @@ pub fn backend_object(s: &BuildSummary) -> Value {
         "chunk_voxelizers": null,
         "cutoff": null,
         "cutoff_searched": false,
+        "precision": null,
         "note": note,
         "description": d,
     });
@@ -68,6 +70,11 @@ pub fn backend_object(s: &BuildSummary) -> Value {
             o["adapter"] = body[..i].into();
             o["method"] = method.into();
             let rest = &body[i..];
+            for p in ["f64", "f32"] {
+                if rest.contains(&format!(", {p}: ")) {
+                    o["precision"] = p.into();
+                }
+            }
             if let Some(c) = rest.split(", cutoff ").nth(1) {
                 let num = c.split(' ').next().unwrap_or("");
                 if let Ok(c) = num.parse::<f64>() {
@@ -127,7 +134,8 @@ mod tests {
         assert_eq!(o["adapter"], Value::Null);
 
         let s = summary(
-            "gpu llvmpipe (LLVM 19.1.1, 256 bits) (hybrid, cutoff 12.5 voxels² found by search)",
+            "gpu llvmpipe (LLVM 19.1.1, 256 bits) (hybrid, cutoff 12.5 voxels² found by search, \
+             f64: exact sets, uncertain chunks on the CPU)",
             true,
         );
         let o = backend_object(&s);
@@ -136,11 +144,13 @@ mod tests {
         assert_eq!(o["method"], "hybrid");
         assert_eq!(o["cutoff"], 12.5);
         assert_eq!(o["cutoff_searched"], true);
+        assert_eq!(o["precision"], "f64");
 
         let o = backend_object(&summary("gpu NVIDIA RTX (fragment)", true));
         assert_eq!(o["adapter"], "NVIDIA RTX");
         assert_eq!(o["method"], "fragment");
         assert_eq!(o["cutoff"], Value::Null);
+        assert_eq!(o["precision"], Value::Null);
 
         let v = build(&s).unwrap();
         assert_eq!(v["schema_version"], SCHEMA_VERSION);
