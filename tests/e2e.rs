@@ -840,7 +840,11 @@ fn gpu_backend_writes_the_same_file_as_cpu() {
         if cutoff == "8" {
             assert!(small > 0 && large > 0, "{split}");
         }
-        assert!(used.contains("f64: exact sets"), "{used}");
+        assert_eq!(used["precision"], "f64", "{used}");
+        assert!(
+            used["description"].as_str().unwrap().contains("f64: exact sets"),
+            "{used}"
+        );
         let fallback = summary["gpu_cpu_fallback_chunks"].as_u64().unwrap();
         let uncertain = summary["gpu_uncertain_chunks"].as_u64().unwrap();
         assert!(
