@@ -9,6 +9,7 @@ use clap::{Args, Parser, Subcommand};
 use voxlod_pipeline::{format_size, parse_size, BuildSettings, BuildSummary};
 use voxlod_voxelize::{Method, Mode};
 
+mod clean;
 mod diff;
 mod export;
 mod gen;
@@ -44,6 +45,8 @@ enum Command {
     Render(render::RenderArgs),
     /// Write one level of an octree file as a quad mesh (binary PLY with normals and colours).
     Export(export::ExportArgs),
+    /// List and remove stale work folders of killed builds (`.voxlod-work-*`) in a folder.
+    Clean(clean::CleanArgs),
 }
 
 #[derive(Args)]
@@ -163,6 +166,7 @@ fn main() -> ExitCode {
         Command::Diff(a) => diff::run(a),
         Command::Render(a) => render::run(a),
         Command::Export(a) => export::run(a),
+        Command::Clean(a) => clean::run(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,
