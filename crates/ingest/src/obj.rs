@@ -66,14 +66,16 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
         // tobj reads lines as UTF-8 and fails without a line number ("read error")
         let line = match std::str::from_utf8(&buf) {
             Ok(l) => l,
-            Err(e) => return Err(IngestError::malformed(
-                path,
-                at,
-                format!(
+            Err(e) => {
+                return Err(IngestError::malformed(
+                    path,
+                    at,
+                    format!(
                     "byte {} of the line is not valid UTF-8 text (an OBJ file is UTF-8 or ASCII)",
                     e.valid_up_to() + 1
                 ),
-            )),
+                ))
+            }
         };
         let mut t = tokens(line);
         match t.next() {
