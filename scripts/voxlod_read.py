@@ -2,8 +2,12 @@
 """A second, independent reader for voxlod files, written from docs/FORMAT.md alone.
 
 It exists to prove the format document is complete: nothing here was taken from the Rust
-code. It memory-maps a file, checks the header, index and manifest (section 11 of FORMAT.md),
-lists the nodes and decodes a node's voxels (section 5.2) into numpy arrays.
+code. It reads a file with positioned reads (no memory map, so a file truncated while it is
+open is an error, not SIGBUS: FORMAT.md 11.1), checks the header, index and manifest (section
+11), applies the manifest and zstd frame rules of section 11.2 (the same as the Rust reader
+and `voxlod verify`), lists the nodes and decodes a node's voxels (section 5.2) into numpy
+arrays. Every allocation is bounded by the file size or the spec's 12·n bytes per node, and
+every error names the file.
 
 Needs numpy and zstandard (`pip install numpy zstandard`); CRC-32 comes from zlib.
 
@@ -24,7 +28,8 @@ As a library:
 
 import argparse
 import json
-import mmap
+import os
+import stat
 import struct
 import sys
 import zlib
@@ -36,6 +41,9 @@ MAGIC = b"VOXLOD\x00\x01"
 HEADER_SIZE = 128
 ENTRY_SIZE = 64
 MAX_VOXELS = 256**3
+MAX_MANIFEST_DEPTH = 64  # FORMAT.md 11.2
+ZSTD_MAGIC = 0xFD2FB528
+SKIPPABLE_MAGIC = 0x184D2A50  # ..0x184D2A5F
 
 # Section 3: the header, little-endian.
 HEADER_STRUCT = struct.Struct("<8sIIIIII3ddQQQQQQIIII")
@@ -113,28 +121,116 @@ def _sign_extend10(v):
     return np.where(v >= 512, v - 1024, v)
 
 
+def json_depth(raw):
+    """Deepest nesting of [ and { outside JSON strings (FORMAT.md 11.2), by a byte scan, so
+    that no parser recurses on a hostile manifest."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for b in raw:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif b == 0x5C:  # backslash
+                escaped = True
+            elif b == 0x22:  # quote
+                in_string = False
+        elif b == 0x22:
+            in_string = True
+        elif b in (0x5B, 0x7B):
+            depth += 1
+            deepest = max(deepest, depth)
+        elif b in (0x5D, 0x7D):
+            depth = max(depth - 1, 0)
+    return deepest
+
+
+def check_manifest(raw):
+    """FORMAT.md 11.2, the manifest rules in order: not empty, UTF-8, nesting depth at most
+    64, one JSON value, an object. Returns the parsed object."""
+    if not raw:
+        raise FormatError("bad manifest: it is empty (a manifest is a JSON object)")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise FormatError(f"bad manifest: it is not valid UTF-8 (at byte {e.start})") from None
+    depth = json_depth(raw)
+    if depth > MAX_MANIFEST_DEPTH:
+        raise FormatError(f"bad manifest: its JSON nests {depth} levels deep, more than the "
+                          f"{MAX_MANIFEST_DEPTH} allowed")
+    try:
+        value = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as e:
+        raise FormatError(f"bad manifest: it is not valid JSON: {e}") from None
+    if not isinstance(value, dict):
+        raise FormatError("bad manifest: its JSON is not an object")
+    return value
+
+
+def check_frame(payload, n):
+    """FORMAT.md 11.2, the payload rules in order: the zstd magic (not a skippable frame), a
+    content size in the frame header, equal to 12·n; the rest (one frame, no trailing bytes)
+    is checked while decompressing."""
+    if len(payload) < 4:
+        raise FormatError(f"the payload is {len(payload)} bytes, too short for a zstd frame")
+    magic = struct.unpack_from("<I", payload)[0]
+    if magic & 0xFFFFFFF0 == SKIPPABLE_MAGIC:
+        raise FormatError("the payload starts with a skippable zstd frame")
+    if magic != ZSTD_MAGIC:
+        raise FormatError("the payload does not start with the zstd magic (28 b5 2f fd)")
+    try:
+        size = zstandard.get_frame_parameters(payload).content_size
+    except zstandard.ZstdError:
+        raise FormatError("the zstd frame header is corrupt or cut short") from None
+    if size == getattr(zstandard, "CONTENTSIZE_UNKNOWN", 2**64 - 1):
+        raise FormatError(f"the zstd frame header has no content size (it must say 12·{n})")
+    if size != 12 * n:
+        raise FormatError(f"the zstd frame header's content size is {size} bytes, "
+                          f"expected 12·{n} = {12 * n}")
+
+
 class VoxlodFile:
     """A validated, memory-mapped voxlod file. `header` is a dict, `nodes` a numpy
     structured array of index entries (ENTRY_DTYPE), `manifest` the parsed JSON."""
 
     def __init__(self, path):
-        with open(path, "rb") as fh:
-            size = fh.seek(0, 2)
-            if size == 0:
-                raise FormatError("file is empty (shorter than the 128-byte header)")
-            self._map = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
-        self.size = size
-        self.header = self._read_header()
-        self.nodes = self._read_index()
-        self.manifest = self._read_manifest()
-        self._check_nodes()
+        self.path = str(path)
+        try:
+            self._fh = open(path, "rb")
+        except OSError as e:
+            raise FormatError(f"{path}: cannot open: {e.strerror}") from None
+        try:
+            st = os.fstat(self._fh.fileno())
+            if not stat.S_ISREG(st.st_mode):
+                raise FormatError("not a regular file")
+            self.size = st.st_size
+            self.header = self._read_header()
+            self.nodes = self._read_index()
+            self.manifest = self._read_manifest()
+            self._check_nodes()
+        except FormatError as e:
+            self._fh.close()
+            raise FormatError(f"{self.path}: {e}") from None
         self._dctx = zstandard.ZstdDecompressor()
+
+    def _read(self, offset, size, what):
+        """`size` bytes at `offset` by positioned reads; the callers bound `size` by the
+        file size checked at open (or by 12·n)."""
+        parts = []
+        got = 0
+        while got < size:
+            b = os.pread(self._fh.fileno(), size - got, offset + got)
+            if not b:
+                raise FormatError(f"the file ends before its {what} [{offset}, +{size}): "
+                                  "it was truncated after it was opened")
+            parts.append(b)
+            got += len(b)
+        return b"".join(parts)
 
     # -- section 3 -------------------------------------------------------------------------
     def _read_header(self):
-        m = self._map
         if self.size < HEADER_SIZE:
             raise FormatError(f"file is {self.size} bytes, shorter than the 128-byte header")
+        m = self._read(0, HEADER_SIZE, "header")
         f = HEADER_STRUCT.unpack_from(m, 0)
         (magic, version, header_size, resolution, levels, mode, flags, ox, oy, oz, voxel_size,
          node_count, index_offset, index_size, manifest_offset, manifest_size, total_voxels,
@@ -192,20 +288,17 @@ class VoxlodFile:
     # -- section 4 -------------------------------------------------------------------------
     def _read_index(self):
         h = self.header
-        raw = self._map[h["index_offset"]:h["index_offset"] + h["index_size"]]
+        raw = self._read(h["index_offset"], h["index_size"], "node index")
         if crc32(raw) != h["index_crc32"]:
             raise FormatError("index CRC mismatch")
         return np.frombuffer(raw, dtype=ENTRY_DTYPE, count=h["node_count"])
 
     def _read_manifest(self):
         h = self.header
-        raw = self._map[h["manifest_offset"]:h["manifest_offset"] + h["manifest_size"]]
+        raw = self._read(h["manifest_offset"], h["manifest_size"], "manifest")
         if crc32(raw) != h["manifest_crc32"]:
             raise FormatError("manifest CRC mismatch")
-        try:
-            return json.loads(raw.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise FormatError(f"manifest is not UTF-8 JSON: {e}") from None
+        return check_manifest(raw)
 
     def _check_nodes(self):
         h = self.header
@@ -245,8 +338,8 @@ class VoxlodFile:
             total += n
         if total != h["total_voxels"]:
             raise FormatError(f"sum of voxel counts {total} != total_voxels {h['total_voxels']}")
-        pad = self._map[expected_offset:h["index_offset"]]
-        if len(pad) >= 8 or any(pad):
+        pad_len = h["index_offset"] - expected_offset
+        if pad_len >= 8 or any(self._read(expected_offset, pad_len, "padding")):
             raise FormatError("padding before the index is not 0-7 zero bytes")
         root_level = h["levels"] - 1
         for e in self.nodes:
@@ -282,13 +375,22 @@ class VoxlodFile:
         n = int(entry["voxel_count"])
         off, sz = int(entry["payload_offset"]), int(entry["payload_size"])
         name = f"node (level {int(entry['level'])}, {int(entry['x'])},{int(entry['y'])},{int(entry['z'])})"
-        payload = self._map[off:off + sz]
-        if crc32(payload) != int(entry["payload_crc32"]):
-            raise FormatError(f"{name}: payload CRC mismatch")
         try:
-            block = self._dctx.decompress(payload, max_output_size=12 * n)
-        except zstandard.ZstdError as e:
-            raise FormatError(f"{name}: zstd: {e}") from None
+            payload = self._read(off, sz, "payload")
+            if crc32(payload) != int(entry["payload_crc32"]):
+                raise FormatError("payload CRC mismatch")
+            check_frame(payload, n)
+            try:
+                # check_frame bounded the output to 12·n bytes (the frame's content size)
+                dobj = self._dctx.decompressobj()
+                block = dobj.decompress(payload)
+                if not dobj.eof or dobj.unused_data:
+                    raise FormatError("the zstd frame is cut short or followed by more bytes")
+            except zstandard.ZstdError as e:
+                raise FormatError(f"zstd: {e}") from None
+        except FormatError as e:
+            raise FormatError(f"{self.path}: {name}: {e}") from None
+        name = f"{self.path}: {name}"
         if len(block) != 12 * n:
             raise FormatError(f"{name}: block is {len(block)} bytes, expected {12 * n}")
         if crc32(block) != int(entry["block_crc32"]):
@@ -306,6 +408,9 @@ class VoxlodFile:
             raise FormatError(f"{name}: position word bits 30-31 set")
         if (words[1] >> 30).any():
             raise FormatError(f"{name}: normal word bits 30-31 set")
+        # section 6: components are in [-511, 511]; the field value 0x200 (-512) is invalid
+        if any(((words[1] >> s) & 0x3FF == 0x200).any() for s in (0, 10, 20)):
+            raise FormatError(f"{name}: a normal component is -512")
         delta = (p & 0xFFFFFF).astype(np.uint64)
         if n > 1 and (delta[1:] == 0).any():
             raise FormatError(f"{name}: zero Morton delta (voxels not strictly increasing)")

@@ -7,6 +7,7 @@
 //! it they say they were skipped (the read-only folder then uses permissions instead).
 
 use std::io::Write;
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -775,4 +776,180 @@ fn messages_name_the_problem() {
         stderr(&o)
     );
     ok(&voxlod(&["diff", s(&f), s(&f), "--min-iou", "0.5"], d));
+}
+
+/// Item 10: a killed build followed by a build with other settings leaves a stale work folder;
+/// the build summary says so, `voxlod clean --dry-run` lists it with its size and keeps it,
+/// `voxlod clean` removes it, and a folder held by a running build is listed as in use and
+/// kept.
+#[test]
+fn stale_work_folders_are_reported_and_cleaned() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("bunny.voxlod");
+    let o = voxlod(
+        &[
+            "build",
+            "-q",
+            s(&sample()),
+            "-o",
+            s(&out),
+            "-r",
+            "512",
+            "--debug-interrupt-after-chunks",
+            "1",
+        ],
+        d,
+    );
+    assert!(!o.status.success(), "the interrupted build must fail");
+    let stale = work_folders(d);
+    assert_eq!(
+        stale.len(),
+        1,
+        "the interrupted build keeps its work folder"
+    );
+    // another resolution: a new work folder; the old one is reported in the summary
+    let o = voxlod(
+        &["build", "-q", s(&sample()), "-o", s(&out), "-r", "256"],
+        d,
+    );
+    ok(&o);
+    let summary = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        summary.contains("1 stale work folder") && summary.contains("voxlod clean"),
+        "{summary}"
+    );
+    assert_eq!(work_folders(d), stale);
+    // a folder in use: a running build's lock, held here by flock(1)
+    let busy = d.join(".voxlod-work-other.voxlod-0123456789abcdef");
+    std::fs::create_dir(&busy).unwrap();
+    std::fs::write(busy.join("data"), vec![1u8; 5000]).unwrap();
+    let mut holder = Command::new("flock")
+        .arg(busy.join("lock"))
+        .args(["sleep", "60"])
+        .process_group(0) // with the sleep that inherits the locked descriptor
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while !busy.join("lock").exists() && t.elapsed() < Duration::from_secs(5) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(100));
+
+    let o = voxlod(&["clean", "--dry-run", s(d)], d);
+    ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("stale") && text.contains("would be removed") && text.contains("in use"),
+        "{text}"
+    );
+    assert!(text.contains(&*stale[0].to_string_lossy()), "{text}");
+    assert!(
+        text.contains("KiB") || text.contains("MiB"),
+        "sizes: {text}"
+    );
+    assert_eq!(work_folders(d).len(), 2, "--dry-run removes nothing");
+
+    let o = voxlod(&["clean", s(d)], d);
+    ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("removed 1 stale work folder"), "{text}");
+    assert_eq!(work_folders(d), vec![busy.clone()], "{text}");
+    let _ = Command::new("kill")
+        .args(["-TERM", "--", &format!("-{}", holder.id())])
+        .status();
+    let _ = holder.wait();
+    // no longer held: now it goes too, and a build beside it reports nothing
+    ok(&voxlod(&["clean", s(d)], d));
+    assert!(work_folders(d).is_empty());
+    let o = voxlod(
+        &["build", "-q", s(&sample()), "-o", s(&out), "-r", "256"],
+        d,
+    );
+    ok(&o);
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("stale"));
+    assert!(String::from_utf8_lossy(&voxlod(&["clean", s(d)], d).stdout)
+        .contains("no voxlod work folders"));
+}
+
+/// Messages still open after the first pass (issue 17, "Messages"): each names the file and
+/// the place, in words.
+#[test]
+fn more_messages_name_the_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // an ASCII list count above its declared uchar type
+    let ply = d.join("count.ply");
+    std::fs::write(
+        &ply,
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n300 {}\n",
+            "0 1 2 ".repeat(100)
+        ),
+    )
+    .unwrap();
+    let o = voxlod(&["build", "-q", s(&ply)], d);
+    fails_with(
+        &o,
+        &[
+            "count.ply",
+            "line 13",
+            "300 does not fit the declared type uchar",
+        ],
+    );
+    // OBJ: a normal index past the normals, and text that is not UTF-8 (tobj: "face normal
+    // index out of bounds", "read error", without a line)
+    let obj = d.join("n.obj");
+    std::fs::write(
+        &obj,
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//2\n",
+    )
+    .unwrap();
+    let e = fails_with(
+        &voxlod(&["build", "-q", s(&obj)], d),
+        &["n.obj", "line 5", "normal"],
+    );
+    assert!(!e.contains("out of bounds"), "{e}");
+    let obj = d.join("u.obj");
+    std::fs::write(&obj, b"v 0 0 0\nv 1 0 0\n# caf\xe9\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let e = fails_with(
+        &voxlod(&["build", "-q", s(&obj)], d),
+        &["u.obj", "line 3", "UTF-8"],
+    );
+    assert!(!e.contains("read error"), "{e}");
+    // a gzip PLY declaring 1e19 vertices: no "needs 18446744073709551615 bytes"
+    let gz = d.join("big.ply.gz");
+    std::fs::write(
+        &gz,
+        gzip(b"ply\nformat binary_little_endian 1.0\nelement vertex 10000000000000000000\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"),
+    )
+    .unwrap();
+    let e = fails_with(&voxlod(&["build", "-q", s(&gz)], d), &["big.ply.gz"]);
+    assert!(!e.contains("18446744073709551615"), "{e}");
+    // the memory plan's parts add up to its total
+    let o = voxlod(
+        &[
+            "build",
+            s(&sample()),
+            "-o",
+            s(&d.join("m.voxlod")),
+            "-r",
+            "256",
+            "--memory",
+            "1GiB",
+            "-j",
+            "1",
+        ],
+        d,
+    );
+    ok(&o);
+    let e = stderr(&o);
+    let plan = e
+        .lines()
+        .find(|l| l.contains("memory plan"))
+        .unwrap_or_else(|| panic!("{e}"));
+    assert!(
+        plan.contains("= base 64.00 MiB + LOD 128.00 MiB + "),
+        "{plan}"
+    );
 }

@@ -12,7 +12,7 @@
 
 use std::cell::RefCell;
 
-use crate::voxel::Voxel;
+use crate::voxel::{has_minus_512, Voxel};
 use crate::{FormatError, MAX_NODE_VOXELS};
 
 /// One node's voxels, compressed and checksummed, ready for [`Writer::write_node`](crate::Writer::write_node).
@@ -155,6 +155,12 @@ fn invalid_voxels(voxels: &[Voxel]) -> String {
                 v.pos_mask, v.normal
             );
         }
+        if has_minus_512(v.normal) {
+            return format!(
+                "voxel {i}: a normal component is -512 (normal {:#010x}); components are in [-511, 511]",
+                v.normal
+            );
+        }
         let m = v.morton();
         if prev.is_some_and(|p| m <= p) {
             let why = if Some(m) == prev {
@@ -204,7 +210,7 @@ const STEP: usize = 256;
 
 /// Writes the transformed block (12·n bytes) of `voxels` into `out` and returns the voxels'
 /// tight bounds, or `None` (with `out` unspecified) if they are not in strictly increasing
-/// Morton order or have reserved bits set.
+/// Morton order, have reserved bits set or a normal component of −512.
 ///
 /// Per step of [`STEP`] voxels, a word pass (Morton deltas with the masks, bytewise deltas
 /// of normals and colours, the checks and bounds; branch-free) fills three word arrays, and
@@ -234,6 +240,7 @@ pub(crate) fn shuffle(voxels: &[Voxel], out: &mut Vec<u8>) -> Option<([u8; 3], [
             prev_m = Some(m);
             words[0][j] = delta | (v.pos_mask & 0x3f00_0000);
             reserved |= v.pos_mask | v.normal;
+            ok &= !has_minus_512(v.normal);
             words[1][j] = byte_sub(v.normal, prev_n);
             prev_n = v.normal;
             words[2][j] = byte_sub(v.color, prev_c);
@@ -363,7 +370,7 @@ pub(crate) fn unshuffle(
             bad |= m >= 1 << 24;
             normal = byte_add(normal, words[1][j]);
             color = byte_add(color, words[2][j]);
-            bad |= (w | normal) >> 30 != 0;
+            bad |= (w | normal) >> 30 != 0 || has_minus_512(normal);
             // the position as Voxel::pos_mask packs it (x | y << 8 | z << 16), by table
             let pos = UNMORTON[0][(m & 0xff) as usize]
                 | UNMORTON[1][(m >> 8 & 0xff) as usize]
@@ -408,6 +415,11 @@ fn first_invalid(block: &[u8], n: usize) -> String {
         normal = byte_add(normal, word(1, j));
         if normal >> 30 != 0 {
             return format!("voxel {j}: reserved normal bits 30-31 set");
+        }
+        if has_minus_512(normal) {
+            return format!(
+                "voxel {j}: a normal component is -512 (normal {normal:#010x}); components are in [-511, 511]"
+            );
         }
     }
     unreachable!("first_invalid called on a valid block")
@@ -573,15 +585,21 @@ mod tests {
 
     #[test]
     fn shuffle_layout_of_two_voxels() {
-        // two voxels: positions (1,0,0) → morton 1 and (0,1,0) → morton 2
-        let a = Voxel::new([1, 0, 0], 0x01, 0x0000_01ff, 0x1122_3344);
-        let b = Voxel::new([0, 1, 0], 0x04, 0x0007_fc00, 0x1122_3355);
+        // FORMAT.md section 12, "Two voxels": positions (1,0,0) → morton 1 and (0,1,0) →
+        // morton 2; masks are the normal's faces plus the border caps (section 6)
+        use crate::voxel::{border_caps, face_mask};
+        let (na, nb) = (0x0000_01ff, 0x0007_fc00);
+        let (ma, mb) = (0x29, 0x26);
+        assert_eq!(face_mask(na) | border_caps([1, 0, 0]), ma); // +x | −y −z
+        assert_eq!(face_mask(nb) | border_caps([0, 1, 0]), mb); // +y | −x −z
+        let a = Voxel::new([1, 0, 0], ma, na, 0x1122_3344);
+        let b = Voxel::new([0, 1, 0], mb, nb, 0x1122_3355);
         let mut block = Vec::new();
         assert_eq!(shuffle(&[a, b], &mut block), Some(([0, 0, 0], [1, 1, 0])));
         #[rustfmt::skip]
         let expected: [u8; 24] = [
-            // position planes: deltas 1, 1; masks 0x01, 0x04
-            1, 1, 0, 0, 0, 0, 0x01, 0x04,
+            // position planes: deltas 1, 1; masks 0x29, 0x26
+            1, 1, 0, 0, 0, 0, 0x29, 0x26,
             // normal planes: words 0x000001ff, then bytewise delta 0x0007fc00 − 0x000001ff
             0xff, 0x01, 0x01, 0xfb, 0x00, 0x07, 0x00, 0x00,
             // colour planes: 0x11223344, then delta 0x00000011

@@ -50,6 +50,7 @@ mod block;
 mod error;
 mod layout;
 mod reader;
+pub mod rules;
 mod select;
 mod spec;
 pub mod voxel;

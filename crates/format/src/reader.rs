@@ -18,6 +18,7 @@ use crate::block::unshuffle;
 use crate::layout::{
     child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, NODE_ENTRY_SIZE, VERSION,
 };
+use crate::rules::{check_frame, check_manifest};
 use crate::voxel::Voxel;
 use crate::{FileSpec, FormatError, MAX_NODE_VOXELS};
 
@@ -122,6 +123,11 @@ impl Reader {
                 ),
             });
         }
+        // FORMAT.md 11.2: the manifest rules every reader applies
+        check_manifest(&manifest).map_err(|what| FormatError::Manifest {
+            path: path.to_owned(),
+            what,
+        })?;
         let nodes: Vec<NodeEntry> = index
             .chunks_exact(NODE_ENTRY_SIZE as usize)
             .map(bytemuck::pod_read_unaligned)
@@ -424,6 +430,8 @@ impl Reader {
             ));
         }
         let n = e.voxel_count as usize;
+        // FORMAT.md 11.2: exactly one zstd frame declaring 12·n bytes, before decompressing
+        check_frame(payload, n).map_err(|what| self.node_error(index, what))?;
         let result = SCRATCH.with(|cell| -> Result<(), String> {
             let mut scratch = cell.borrow_mut();
             let (dctx, block) = &mut *scratch;

@@ -156,6 +156,15 @@ pub fn pack_normal_f64(n: [f64; 3]) -> u32 {
     q(n[0]) | q(n[1]) << 10 | q(n[2]) << 20
 }
 
+/// True if a component of the packed normal is −512 (`0x200`), which the 10-bit field can
+/// hold but the format does not allow (FORMAT.md section 6: components are in [−511, 511];
+/// writers refuse it and readers reject it).
+#[inline]
+pub fn has_minus_512(w: u32) -> bool {
+    let f = |s: u32| (w >> s) & 0x3ff == 0x200;
+    f(0) | f(10) | f(20)
+}
+
 /// The three signed 10-bit components of a packed normal, each in [-511, 511].
 #[inline]
 pub fn unpack_normal(w: u32) -> [i32; 3] {

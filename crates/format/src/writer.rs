@@ -203,16 +203,21 @@ impl Writer {
                 });
             }
         }
+        let manifest_bytes = serde_json::to_vec(manifest).map_err(|e| FormatError::Manifest {
+            path: self.path.clone(),
+            what: format!("cannot serialize: {e}"),
+        })?;
+        // refuse what every reader would reject (FORMAT.md 11.2)
+        crate::rules::check_manifest(&manifest_bytes).map_err(|what| FormatError::Manifest {
+            path: self.path.clone(),
+            what: format!("cannot write it: {what}"),
+        })?;
         let pad = (8 - self.offset % 8) % 8;
         self.write(&[0u8; 8][..pad as usize], "padding before the index")?;
         let index_offset = self.offset;
         let entries = std::mem::take(&mut self.entries);
         let index: &[u8] = bytemuck::cast_slice(&entries);
         self.write(index, "writing the node index")?;
-        let manifest_bytes = serde_json::to_vec(manifest).map_err(|e| FormatError::Manifest {
-            path: self.path.clone(),
-            what: format!("cannot serialize: {e}"),
-        })?;
         let manifest_offset = self.offset;
         self.write(&manifest_bytes, "writing the manifest")?;
 

@@ -178,10 +178,10 @@ fn unfinished_writer_leaves_no_file() {
 
     // finishing replaces an existing file atomically
     let w = Writer::create(&path, spec(256)).unwrap();
-    w.finish(&json!("second")).unwrap();
+    w.finish(&json!({"second": true})).unwrap();
     assert_eq!(
         Reader::open(&path).unwrap().manifest().unwrap(),
-        json!("second")
+        json!({"second": true})
     );
 }
 
@@ -471,6 +471,15 @@ fn crafted_payloads_with_valid_checksums_are_rejected() {
     b = reference_block(&good);
     b[12 + 9] = 0x40; // normal plane 3 of voxel 0
     check(one(raw(&b, 3)), "reserved normal bits");
+    // a normal component of −512 (FORMAT.md section 6: [−511, 511]); and the encoder refuses it
+    b = reference_block(&[
+        v([1, 0, 0]),
+        Voxel::new([0, 1, 0], 1, 0x200 << 10, 0),
+        v([1, 1, 0]),
+    ]);
+    check(one(raw(&b, 3)), "normal component is -512");
+    let e = err_of(encode_node(&[Voxel::new([0, 1, 0], 1, 0x200, 0)], 3));
+    assert!(e.contains("-512"), "{e}");
     // bounds that are not tight
     let mut n = RawNode::from_voxels(0, [0; 3], 0, &good, 3);
     n.bounds_max = [2, 1, 0];
@@ -481,8 +490,25 @@ fn crafted_payloads_with_valid_checksums_are_rejected() {
     // not zstd at all, and a zstd frame claiming a huge size
     let mut n = raw(&reference_block(&good), 3);
     n.payload = b"definitely not a zstd frame".to_vec();
-    check(one(n), "zstd decompression failed");
+    check(one(n), "does not start with the zstd magic");
     let mut n = raw(&reference_block(&good), 3);
     n.payload = zstd::bulk::compress(&vec![0u8; 1 << 20], 3).unwrap();
-    check(one(n), "zstd decompression failed");
+    check(one(n), "content size is 1048576 bytes, expected 12·3 = 36");
+    // FORMAT.md 11.2: one frame, nothing before or after it, a content size
+    let frame = zstd::bulk::compress(&reference_block(&good), 3).unwrap();
+    let mut n = raw(&reference_block(&good), 3);
+    n.payload = [&frame[..], &zstd::bulk::compress(&[], 3).unwrap()].concat();
+    check(one(n), "a second frame or trailing bytes follow");
+    let mut n = raw(&reference_block(&good), 3);
+    n.payload = [&frame[..], &[0]].concat();
+    check(one(n), "trailing bytes");
+    let mut n = raw(&reference_block(&good), 3);
+    n.payload = [&[0x5e, 0x2a, 0x4d, 0x18, 1, 0, 0, 0, 9][..], &frame].concat();
+    check(one(n), "skippable");
+    let mut n = raw(&reference_block(&good), 3);
+    let mut e = zstd::stream::Encoder::new(Vec::new(), 3).unwrap();
+    e.include_contentsize(false).unwrap();
+    std::io::Write::write_all(&mut e, &reference_block(&good)).unwrap();
+    n.payload = e.finish().unwrap();
+    check(one(n), "no content size");
 }

@@ -13,7 +13,9 @@
 //! * **STL** (`.stl`): binary and ASCII; the facet normal is ignored.
 //!
 //! Memory: binary PLY and binary STL are memory-mapped and vertices are read in place —
-//! memory use does not grow with the mesh. ASCII and gzip PLY can only be read front to back,
+//! memory use does not grow with the mesh. An input truncated while it is mapped ends the
+//! process with a message naming it and exit status [`TRUNCATED_EXIT`], not a bare SIGBUS
+//! (the first map installs a SIGBUS handler for the process). ASCII and gzip PLY can only be read front to back,
 //! so their vertices are parsed into a compact array (12 bytes per vertex, +12 with normals,
 //! +4 with colours): O(vertices) memory, freed when [`MeshSource::stream`] returns. ASCII
 //! STL needs no vertex array. OBJ is loaded whole by `tobj`: O(file size) memory.
@@ -48,6 +50,7 @@
 mod batch;
 mod bounds;
 mod error;
+mod map_guard;
 mod obj;
 mod ply;
 mod ply_faces;
@@ -58,6 +61,7 @@ mod stl;
 
 pub use batch::BATCH;
 pub use error::{IngestError, Location};
+pub use map_guard::TRUNCATED_EXIT;
 
 use std::io::Read;
 use std::path::{Path, PathBuf};

@@ -25,6 +25,7 @@ pub(crate) struct ObjSource {
 struct Scan {
     vertices: u64,
     normals: u64,
+    texcoords: u64,
     colored_vertices: u64,
     faces: u64,
     corners_without_normal: u64,
@@ -43,6 +44,7 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
     let mut s = Scan {
         vertices: 0,
         normals: 0,
+        texcoords: 0,
         colored_vertices: 0,
         faces: 0,
         corners_without_normal: 0,
@@ -61,8 +63,21 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
         }
         line_no += 1;
         let at = Location::Line(line_no);
-        let line = String::from_utf8_lossy(&buf);
-        let mut t = tokens(&line);
+        // tobj reads lines as UTF-8 and fails without a line number ("read error")
+        let line = match std::str::from_utf8(&buf) {
+            Ok(l) => l,
+            Err(e) => {
+                return Err(IngestError::malformed(
+                    path,
+                    at,
+                    format!(
+                    "byte {} of the line is not valid UTF-8 text (an OBJ file is UTF-8 or ASCII)",
+                    e.valid_up_to() + 1
+                ),
+                ))
+            }
+        };
+        let mut t = tokens(line);
         match t.next() {
             Some("v") => {
                 let vals: Vec<&str> = t.collect();
@@ -71,6 +86,27 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                         path,
                         at,
                         "a vertex needs at least 3 coordinates",
+                    ));
+                }
+                // what tobj accepts after x y z: nothing, a weight w ≠ 0, or a colour r g b
+                if !matches!(vals.len(), 3 | 4 | 6) {
+                    return Err(IngestError::malformed(
+                        path,
+                        at,
+                        format!(
+                            "a vertex has {} values; expected x y z, x y z w or x y z r g b",
+                            vals.len()
+                        ),
+                    ));
+                }
+                if vals.len() == 4 && vals[3].parse::<f32>().map_or(true, |w| w == 0.0) {
+                    return Err(IngestError::malformed(
+                        path,
+                        at,
+                        format!(
+                            "the vertex weight w = {} is not a non-zero number",
+                            crate::error::quoted(vals[3])
+                        ),
                     ));
                 }
                 let mut p = [0f64; 3];
@@ -96,13 +132,64 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                 }
                 s.vertices += 1;
             }
-            Some("vn") => s.normals += 1,
+            Some(kw @ ("vn" | "vt")) => {
+                let (need, what) = if kw == "vn" {
+                    (3, "a normal needs 3 numbers (vn x y z)")
+                } else {
+                    (2, "a texture coordinate needs 2 numbers (vt u v)")
+                };
+                let vals: Vec<&str> = t.take(need).collect();
+                if vals.len() < need || vals.iter().any(|v| v.parse::<f32>().is_err()) {
+                    return Err(IngestError::malformed(path, at, what));
+                }
+                if kw == "vn" {
+                    s.normals += 1;
+                } else {
+                    s.texcoords += 1;
+                }
+            }
             Some("f") => {
                 for (corner, c) in t.enumerate() {
                     let corner = corner as u64;
-                    let mut parts = c.split('/');
-                    let v = parts.next().unwrap_or("");
-                    let has_normal = parts.nth(1).is_some_and(|n| !n.is_empty());
+                    let parts: Vec<&str> = c.split('/').collect();
+                    if parts.len() > 3 {
+                        return Err(IngestError::malformed(
+                            path,
+                            at,
+                            format!(
+                                "face corner {} has more than three /-separated indices (v/vt/vn)",
+                                crate::error::quoted(c)
+                            ),
+                        ));
+                    }
+                    // texture coordinate and normal indices: tobj checks them only after the
+                    // whole file, without a line number
+                    for (k, kind, count) in [
+                        (1, "texture coordinate", s.texcoords),
+                        (2, "normal", s.normals),
+                    ] {
+                        let Some(p) = parts.get(k).filter(|p| !p.is_empty()) else {
+                            continue;
+                        };
+                        let idx: Option<i64> = p.parse().ok();
+                        let ok = idx.is_some_and(|i| {
+                            let r = if i < 0 { count as i64 + i } else { i - 1 };
+                            i != 0 && r >= 0 && (r as u64) < count
+                        });
+                        if !ok {
+                            return Err(IngestError::malformed(
+                                path,
+                                at,
+                                format!(
+                                    "face corner {} refers to {kind} {}, but {count} {kind}s are defined before this line (indices are 1..={count}, or -1..=-{count} counting back)",
+                                    crate::error::quoted(c),
+                                    crate::error::quoted(p)
+                                ),
+                            ));
+                        }
+                    }
+                    let v = parts[0];
+                    let has_normal = parts.get(2).is_some_and(|n| !n.is_empty());
                     let idx: i64 = v.parse().map_err(|_| {
                         IngestError::malformed(
                             path,
@@ -226,7 +313,8 @@ impl ObjSource {
             tobj::load_obj_buf(&mut reader, &opts, |m| tobj::load_mtl(dir.join(m))).map_err(
                 |e| IngestError::Obj {
                     path: path.to_path_buf(),
-                    message: e.to_string(),
+                    // the scan at open checks each line for what tobj refuses, so this is rare
+                    message: format!("{e} (tobj does not say on which line)"),
                 },
             )?;
         // a missing MTL was reported as a warning at open; its materials get the default colour

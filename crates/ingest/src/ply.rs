@@ -5,6 +5,7 @@
 
 use crate::batch::Emitter;
 use crate::bounds::parallel_bounds;
+use crate::map_guard::MappedFile;
 use crate::ply_faces::{stream_faces, stream_triangles_parallel};
 use crate::ply_header::{parse_header, Element, Encoding, Header};
 use crate::ply_records::{
@@ -13,7 +14,6 @@ use crate::ply_records::{
 use crate::ply_vertices::{CompactVertices, MappedVertices, VertexSource};
 use crate::{IngestError, Location, MeshInfo};
 use flate2::read::MultiGzDecoder;
-use memmap2::Mmap;
 use std::cell::Cell;
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
@@ -27,7 +27,7 @@ pub(crate) struct PlySource {
     gz: bool,
     file_len: u64,
     /// The whole file, for binary (not gzip) input.
-    map: Option<Mmap>,
+    map: Option<MappedFile>,
     /// Byte offset of each element needed from the map (vertex and face elements).
     offsets: Vec<Option<usize>>,
     /// Passes over the file that front-to-back reading needs (2 if faces precede vertices).
@@ -55,9 +55,8 @@ impl PlySource {
         let mut offsets = vec![None; header.elements.len()];
         if !gz && header.encoding != Encoding::Ascii {
             let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
-            // SAFETY: the map is read-only; like every mmap reader we rely on nobody
-            // truncating or rewriting the input file while it is being read.
-            let m = unsafe { Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
+            // a truncation while it is mapped ends the process with a message (map_guard)
+            let m = MappedFile::map(path, &file).map_err(|e| IngestError::io(path, e))?;
             offsets = match header.encoding {
                 Encoding::BinaryBe => element_offsets::<true>(path, &header, &m)?,
                 _ => element_offsets::<false>(path, &header, &m)?,
@@ -133,7 +132,10 @@ impl PlySource {
         if let Some(m) = &self.map {
             // SAFETY: the map is a read-only shared file mapping; after MADV_DONTNEED its pages
             // are read back from the file on the next access, with the same contents.
-            let _ = unsafe { m.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
+            let _ = unsafe {
+                m.mmap()
+                    .unchecked_advise(memmap2::UncheckedAdvice::DontNeed)
+            };
         }
     }
 

@@ -47,6 +47,18 @@ impl Scalar {
             Scalar::F64 => 8,
         }
     }
+    /// The values an integer type holds (`None` for floats).
+    pub fn int_range(self) -> Option<std::ops::RangeInclusive<i64>> {
+        Some(match self {
+            Scalar::I8 => i8::MIN as i64..=i8::MAX as i64,
+            Scalar::U8 => 0..=u8::MAX as i64,
+            Scalar::I16 => i16::MIN as i64..=i16::MAX as i64,
+            Scalar::U16 => 0..=u16::MAX as i64,
+            Scalar::I32 => i32::MIN as i64..=i32::MAX as i64,
+            Scalar::U32 => 0..=u32::MAX as i64,
+            Scalar::F32 | Scalar::F64 => return None,
+        })
+    }
     pub fn is_float(self) -> bool {
         matches!(self, Scalar::F32 | Scalar::F64)
     }

@@ -595,7 +595,22 @@ impl<R: BufRead> Records for AsciiRecords<'_, R> {
     fn int(&mut self, ty: Scalar) -> Result<i64, IngestError> {
         let t = self.token(ty)?;
         match parse_int(t) {
-            Some(v) => Ok(v),
+            // an ASCII value must fit its declared type, as it would in a binary file (a
+            // list count of 300 declared `uchar` is an error, not 300)
+            Some(v) if ty.int_range().is_none_or(|r| r.contains(&v)) => Ok(v),
+            Some(v) => {
+                let r = ty.int_range().expect("an integer type");
+                Err(IngestError::malformed(
+                    self.path,
+                    Location::Line(self.line_no),
+                    format!(
+                        "{v} does not fit the declared type {} ({}..={})",
+                        ty.name(),
+                        r.start(),
+                        r.end()
+                    ),
+                ))
+            }
             None => {
                 let t = t.to_vec();
                 Err(self.bad_number(&t, ty))

@@ -6,9 +6,9 @@
 
 use crate::batch::Emitter;
 use crate::bounds::parallel_bounds;
+use crate::map_guard::MappedFile;
 use crate::ply_records::{Counter, CountingReader};
 use crate::{IngestError, Location, MeshInfo};
-use memmap2::Mmap;
 use std::cell::Cell;
 use std::fs::File;
 use std::io::{BufRead, BufReader};
@@ -28,7 +28,7 @@ fn facet_corners(data: &[u8], i: usize) -> [[f32; 3]; 3] {
 pub(crate) struct StlSource {
     path: PathBuf,
     /// The mapped file and its facet count, for binary STL.
-    binary: Option<(Mmap, u64)>,
+    binary: Option<(MappedFile, u64)>,
 }
 
 /// True if `head` (the first bytes of a file of `len` bytes) is an ASCII STL.
@@ -102,8 +102,8 @@ impl StlSource {
             ));
         }
         let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
-        // SAFETY: read-only map; the input must not be truncated while it is read.
-        let map = unsafe { Mmap::map(&file) }.map_err(|e| IngestError::io(path, e))?;
+        // a truncation while it is mapped ends the process with a message (map_guard)
+        let map = MappedFile::map(path, &file).map_err(|e| IngestError::io(path, e))?;
         if (map.len() as u64) < need {
             return Err(IngestError::malformed(
                 path,
@@ -136,7 +136,10 @@ impl StlSource {
         if let Some((m, _)) = &self.binary {
             // SAFETY: the map is a read-only shared file mapping; after MADV_DONTNEED its pages
             // are read back from the file on the next access, with the same contents.
-            let _ = unsafe { m.unchecked_advise(memmap2::UncheckedAdvice::DontNeed) };
+            let _ = unsafe {
+                m.mmap()
+                    .unchecked_advise(memmap2::UncheckedAdvice::DontNeed)
+            };
         }
     }
 

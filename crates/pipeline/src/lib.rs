@@ -30,6 +30,7 @@ pub use octree_writer::{LevelStats, OctreeWriter};
 pub use output::{OutputGuard, OutputKind};
 pub use size::{format_size, parse_size};
 pub use system::{interrupted, peak_rss, request_interrupt};
+pub use work::{find_work_folders, remove_stale_work_folder, WorkFolder, WORK_PREFIX};
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -325,8 +326,25 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
         &source, input, &guard, s, threads, plan, &work, resumed, t0, warnings,
     );
     match r {
-        Ok(summary) => {
+        Ok(mut summary) => {
             work.remove()?;
+            // work folders of earlier builds that were killed and not resumed (issue 17)
+            let stale: Vec<_> = find_work_folders(tmp_parent)
+                .unwrap_or_default()
+                .into_iter()
+                .filter(WorkFolder::is_stale)
+                .collect();
+            if !stale.is_empty() {
+                let bytes = stale.iter().map(|f| f.bytes).sum();
+                summary.warnings.push(format!(
+                    "{} stale work folder{} of earlier interrupted builds ({}) in {}: `voxlod clean {}` lists and removes them",
+                    stale.len(),
+                    if stale.len() == 1 { "" } else { "s" },
+                    format_size(bytes),
+                    tmp_parent.display(),
+                    tmp_parent.display()
+                ));
+            }
             Ok(summary)
         }
         Err(_) if interrupted() => Err(interrupted_error(work.path())),

@@ -59,17 +59,39 @@ impl MemoryPlan {
         })
     }
 
-    /// The plan in one line, as printed before a build.
+    /// The plan in words, its parts adding up to its total: base + LOD + the larger of the
+    /// voxelizers and the scatter buffer (the scatter pass runs before the voxelizers exist,
+    /// so the two share their memory).
     pub fn describe(&self) -> String {
+        let voxelizers = self.voxelizers as u64 * VOXELIZER_BYTES;
+        let (shared, other) = if voxelizers >= self.scatter_buffer {
+            (
+                format!(
+                    "{} chunk voxelizer(s) × {}",
+                    self.voxelizers,
+                    format_size(VOXELIZER_BYTES)
+                ),
+                format!(
+                    "before them the scatter buffer, {}",
+                    format_size(self.scatter_buffer)
+                ),
+            )
+        } else {
+            (
+                format!("scatter buffer {}", format_size(self.scatter_buffer)),
+                format!(
+                    "after it {} chunk voxelizer(s) × {}",
+                    self.voxelizers,
+                    format_size(VOXELIZER_BYTES)
+                ),
+            )
+        };
         format!(
-            "memory plan: {} of {} budget ({} chunk voxelizer(s) × {}, scatter buffer {}, LOD {}, base {})",
+            "memory plan: {} of {} budget = base {} + LOD {} + {shared} (in the same memory, {other})",
             format_size(self.planned),
             format_size(self.budget),
-            self.voxelizers,
-            format_size(VOXELIZER_BYTES),
-            format_size(self.scatter_buffer),
+            format_size(BASE_BYTES),
             format_size(LOD_BYTES),
-            format_size(BASE_BYTES)
         )
     }
 }
@@ -86,6 +108,18 @@ mod tests {
                 let p = MemoryPlan::new(budget, threads).unwrap();
                 assert!(p.planned <= budget, "{p:?}");
                 assert!(p.voxelizers >= 1 && p.voxelizers <= threads);
+                // the parts the description adds up give the total
+                let shared = (p.voxelizers as u64 * VOXELIZER_BYTES).max(p.scatter_buffer);
+                assert_eq!(BASE_BYTES + LOD_BYTES + shared, p.planned);
+                let d = p.describe();
+                assert!(
+                    d.contains(&format!(
+                        "= base {} + LOD {} + ",
+                        format_size(BASE_BYTES),
+                        format_size(LOD_BYTES)
+                    )),
+                    "{d}"
+                );
             }
         }
     }

@@ -393,7 +393,8 @@ mod tests {
                             Voxel::new(
                                 p,
                                 (r & 63) as u8,
-                                (r >> 8) as u32 & 0x3fff_ffff,
+                                // no −512 component (FORMAT.md section 6)
+                                ((r >> 8) as u32 & 0x3fff_ffff) & !0x2008_0200,
                                 pack_color([r as u8, (r >> 8) as u8, 7, 255]),
                             )
                         })

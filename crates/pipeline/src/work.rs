@@ -146,6 +146,116 @@ impl WorkDir {
     }
 }
 
+/// Prefix of every work folder's name (`.voxlod-work-<output name>-<key>`).
+pub const WORK_PREFIX: &str = ".voxlod-work-";
+
+/// A work folder found by [`find_work_folders`].
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct WorkFolder {
+    pub path: PathBuf,
+    /// Bytes of the files in it.
+    pub bytes: u64,
+    /// Seconds since it was last modified.
+    pub age_seconds: u64,
+    /// The pid of the running build that holds its lock, if one does; a folder without a
+    /// holder is stale: its build was killed and was not run again with the same arguments
+    /// (running it again resumes from the folder; `voxlod clean` removes it).
+    pub in_use_by: Option<Option<u32>>,
+}
+
+impl WorkFolder {
+    /// True if no running build holds it.
+    pub fn is_stale(&self) -> bool {
+        self.in_use_by.is_none()
+    }
+}
+
+/// The voxlod work folders directly inside `dir` (the folder of the outputs, or a `--tmp`),
+/// sorted by name, each with its size and whether a running build holds its lock (tested by
+/// taking the lock and releasing it at once).
+pub fn find_work_folders(dir: &Path) -> Result<Vec<WorkFolder>> {
+    let entries = std::fs::read_dir(dir).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: cannot list it: {}",
+            dir.display(),
+            crate::output::os_text(&e)
+        )
+    })?;
+    let mut found = Vec::new();
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
+        if !is_dir || !name.to_string_lossy().starts_with(WORK_PREFIX) {
+            continue;
+        }
+        let path = entry.path();
+        let in_use_by = match crate::output::lock_or_name_holder(&path.join("lock")) {
+            Ok(_lock) => None, // released here
+            Err(crate::output::LockError::Held(pid)) => Some(pid),
+            // unreadable or not ours to lock: count it as in use, never remove it
+            Err(crate::output::LockError::Io(_)) => Some(None),
+        };
+        let age_seconds = entry
+            .metadata()
+            .ok()
+            .and_then(|m| m.modified().ok())
+            .and_then(|t| t.elapsed().ok())
+            .map_or(0, |d| d.as_secs());
+        found.push(WorkFolder {
+            bytes: tree_bytes(&path),
+            path,
+            age_seconds,
+            in_use_by,
+        });
+    }
+    found.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(found)
+}
+
+/// Removes a stale work folder, holding its lock while it does so that a build starting on
+/// it meanwhile is refused instead of losing its files; a folder in use is refused.
+pub fn remove_stale_work_folder(path: &Path) -> Result<()> {
+    match crate::output::lock_or_name_holder(&path.join("lock")) {
+        Ok(_lock) => std::fs::remove_dir_all(path).map_err(|e| {
+            anyhow::anyhow!(
+                "removing {}: {}",
+                path.display(),
+                crate::output::os_text(&e)
+            )
+        }),
+        Err(crate::output::LockError::Held(pid)) => bail!(
+            "{} is in use by a running voxlod build ({}): not removed",
+            path.display(),
+            pid.map_or("pid unknown".to_string(), |p| format!("pid {p}"))
+        ),
+        Err(crate::output::LockError::Io(e)) => bail!(
+            "locking {}: {}: not removed",
+            path.display(),
+            crate::output::os_text(&e)
+        ),
+    }
+}
+
+/// Bytes of the regular files under `path` (symbolic links not followed; unreadable parts
+/// count 0).
+fn tree_bytes(path: &Path) -> u64 {
+    let mut total = 0;
+    let mut stack = vec![path.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            match e.file_type() {
+                Ok(t) if t.is_dir() => stack.push(e.path()),
+                Ok(t) if t.is_file() => total += e.metadata().map_or(0, |m| m.len()),
+                _ => {}
+            }
+        }
+    }
+    total
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

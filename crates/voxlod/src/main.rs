@@ -10,6 +10,7 @@ use clap::{Args, Parser, Subcommand};
 use voxlod_pipeline::{format_size, parse_size, BuildSettings, BuildSummary};
 use voxlod_voxelize::{Method, Mode};
 
+mod clean;
 mod diff;
 mod export;
 mod gen;
@@ -59,6 +60,8 @@ enum Command {
     /// Write one level of an octree file as a quad mesh (binary PLY with normals and colours).
     #[command(after_help = EXAMPLES_EXPORT)]
     Export(export::ExportArgs),
+    /// List and remove stale work folders of killed builds (`.voxlod-work-*`) in a folder.
+    Clean(clean::CleanArgs),
 }
 
 // Examples shown after each command's --help (as ripgrep does), each one a command that works
@@ -246,6 +249,7 @@ fn main() -> ExitCode {
         Command::Diff(a) => diff::run(a),
         Command::Render(a) => render::run(a),
         Command::Export(a) => export::run(a),
+        Command::Clean(a) => clean::run(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,

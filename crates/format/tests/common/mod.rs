@@ -37,6 +37,18 @@ pub fn unmorton(m: u32) -> [u8; 3] {
     p
 }
 
+/// `w` with every normal component of −512 (`0x200`, not allowed by FORMAT.md section 6)
+/// made −511.
+pub fn no_minus_512(w: u32) -> u32 {
+    (0..3).fold(w, |w, a| {
+        if (w >> (10 * a)) & 0x3ff == 0x200 {
+            w | 1 << (10 * a)
+        } else {
+            w
+        }
+    })
+}
+
 /// `n` random voxels (n ≤ 2^24) at distinct positions, sorted by Morton code, with random
 /// mask, normal (bits 0–29) and colour.
 pub fn random_voxels(rng: &mut Rng, n: usize) -> Vec<Voxel> {
@@ -68,7 +80,7 @@ pub fn random_voxels(rng: &mut Rng, n: usize) -> Vec<Voxel> {
             Voxel::new(
                 unmorton(m),
                 (r & 0x3f) as u8,
-                (r >> 6) as u32 & 0x3fff_ffff,
+                no_minus_512((r >> 6) as u32 & 0x3fff_ffff),
                 (r >> 32) as u32,
             )
         })
@@ -143,6 +155,7 @@ pub fn reference_block(voxels: &[Voxel]) -> Vec<u8> {
 }
 
 /// One node for [`assemble`].
+#[derive(Clone)]
 pub struct RawNode {
     pub level: u32,
     pub pos: [u32; 3],
