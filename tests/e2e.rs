@@ -842,7 +842,10 @@ fn gpu_backend_writes_the_same_file_as_cpu() {
         }
         assert_eq!(used["precision"], "f64", "{used}");
         assert!(
-            used["description"].as_str().unwrap().contains("f64: exact sets"),
+            used["description"]
+                .as_str()
+                .unwrap()
+                .contains("f64: exact sets"),
             "{used}"
         );
         let fallback = summary["gpu_cpu_fallback_chunks"].as_u64().unwrap();

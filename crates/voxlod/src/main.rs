@@ -61,6 +61,7 @@ enum Command {
     #[command(after_help = EXAMPLES_EXPORT)]
     Export(export::ExportArgs),
     /// List and remove stale work folders of killed builds (`.voxlod-work-*`) in a folder.
+    #[command(after_help = EXAMPLES_CLEAN)]
     Clean(clean::CleanArgs),
 }
 
@@ -116,6 +117,12 @@ Examples:
   voxlod export bunny.voxlod -o bunny.ply         # the finest level
   voxlod export bunny.voxlod --level 2 -o coarse.ply
 The size of the PLY is printed before it is written.";
+
+const EXAMPLES_CLEAN: &str = "\
+Examples:
+  voxlod clean --dry-run                         # list the stale work folders here
+  voxlod clean /scratch                          # remove those under a build's --tmp folder
+A folder that a running build holds (its lock is taken) is never removed.";
 
 /// A clap parser accepting only `values` (listed in --help and in errors), parsed by `T`'s
 /// `FromStr`: enum settings whose type lives in another crate.
@@ -556,7 +563,23 @@ mod tests {
             EXAMPLES_DIFF,
             EXAMPLES_RENDER,
             EXAMPLES_EXPORT,
+            EXAMPLES_CLEAN,
         ];
+        // every subcommand shows examples (a new one without them fails here)
+        for sub in Cli::command()
+            .get_subcommands()
+            .filter(|s| s.get_name() != "help")
+        {
+            let after = sub
+                .get_after_help()
+                .map(|h| h.to_string())
+                .unwrap_or_default();
+            assert!(
+                after.contains(&format!("  voxlod {} ", sub.get_name())),
+                "`voxlod {} --help` has no example",
+                sub.get_name()
+            );
+        }
         let mut n = 0;
         for text in all {
             for line in text.lines().filter(|l| l.starts_with("  voxlod ")) {
