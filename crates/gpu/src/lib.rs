@@ -167,22 +167,47 @@ pub enum GpuError {
     NoAdapter(String),
     /// The adapter refused to create a device.
     #[error("cannot create the GPU device on {adapter}: {reason}")]
-    Device { adapter: String, reason: String },
+    Device {
+        /// The GPU adapter's name.
+        adapter: String,
+        /// What the driver or wgpu reported.
+        reason: String,
+    },
     /// A wgpu validation or out-of-memory error.
     #[error("GPU error on {adapter}: {reason}")]
-    Wgpu { adapter: String, reason: String },
+    Wgpu {
+        /// The GPU adapter's name.
+        adapter: String,
+        /// What the driver or wgpu reported.
+        reason: String,
+    },
     /// Reading a buffer back failed (device lost, or polling failed).
     #[error("GPU read-back failed on {adapter}: {reason}")]
-    Readback { adapter: String, reason: String },
+    Readback {
+        /// The GPU adapter's name.
+        adapter: String,
+        /// What the driver or wgpu reported.
+        reason: String,
+    },
     /// Some occupied voxels received no attributes in the accumulation pass: a shader
     /// invocation was cut short by the driver (lavapipe stops an invocation after 65535 loop
     /// iterations). A bug of this crate if it ever happens.
     #[error("GPU voxelization incomplete on {adapter}: {voxels} marked voxels got no attributes")]
-    Incomplete { adapter: String, voxels: usize },
+    Incomplete {
+        /// The GPU adapter's name.
+        adapter: String,
+        /// Marked voxels that got no attributes.
+        voxels: usize,
+    },
     /// A replay of [`GpuVoxelizer::voxelize_chunk_streamed`] yielded a different number of
     /// (finite) triangles than the first one.
     #[error("the chunk's triangles were replayed differently: {first} triangles, then {again}")]
-    Replay { first: u64, again: u64 },
+    Replay {
+        /// Triangles in the first replay.
+        first: u64,
+        /// Triangles in the later replay.
+        again: u64,
+    },
     /// The chunk origin is not a multiple of 256 or too large for the i32 coordinates of the
     /// shaders.
     #[error("chunk origin {0:?} is not a multiple of 256 below 2^31")]

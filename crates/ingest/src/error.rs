@@ -13,8 +13,11 @@ pub enum Location {
     /// Record `index` (0-based) of PLY element `element`, starting at byte `offset`
     /// (decompressed offset for gzip input).
     Record {
+        /// The PLY element.
         element: String,
+        /// The record's index in the element (0-based).
         index: u64,
+        /// Byte offset where the record starts.
         offset: u64,
     },
     /// Nowhere more precise than the file itself.
@@ -44,41 +47,67 @@ pub enum IngestError {
     /// The operating system refused to open, map or read the file.
     #[error("{}: cannot read: {source}", .path.display())]
     Io {
+        /// The input file.
         path: PathBuf,
+        /// The underlying error.
         #[source]
         source: std::io::Error,
     },
     /// The input is a directory, device or FIFO: a mesh is read more than once.
     #[error("{}: it is {what}, not a mesh file (the input must be a regular file)", .path.display())]
-    NotAFile { path: PathBuf, what: &'static str },
+    NotAFile {
+        /// The input file.
+        path: PathBuf,
+        /// What it is instead (a directory, a device, a FIFO, …).
+        what: &'static str,
+    },
     /// The file has no bytes at all.
     #[error("{}: the file is empty", .path.display())]
-    Empty { path: PathBuf },
+    Empty {
+        /// The input file.
+        path: PathBuf,
+    },
     /// Neither the extension nor the first bytes say PLY, OBJ or STL.
     #[error("{}: unknown mesh format: {reason}", .path.display())]
-    UnknownFormat { path: PathBuf, reason: String },
+    UnknownFormat {
+        /// The input file.
+        path: PathBuf,
+        /// Why the format was not recognized.
+        reason: String,
+    },
     /// The PLY header (or the STL preamble) is not well formed.
     #[error("{}: malformed header at line {line}: {message}", .path.display())]
     Header {
+        /// The input file.
         path: PathBuf,
+        /// 1-based line number.
         line: u64,
+        /// What is wrong, in words.
         message: String,
     },
     /// A value in the body cannot be parsed or makes no sense (bad number, absurd list count,
     /// missing or extra values on a line, unknown keyword).
     #[error("{}: {at}: {message}", .path.display())]
     Malformed {
+        /// The input file.
         path: PathBuf,
+        /// Where in the file.
         at: Location,
+        /// What is wrong, in words.
         message: String,
     },
     /// The file ends before the data its header (or its own counts) promise.
     #[error("{}: truncated at {at}: {what} needs {expected} bytes but only {got} are left", .path.display())]
     Truncated {
+        /// The input file.
         path: PathBuf,
+        /// Where in the file.
         at: Location,
+        /// What was being read.
         what: String,
+        /// Bytes needed.
         expected: u64,
+        /// Bytes left in the file.
         got: u64,
     },
     /// A face refers to a vertex that does not exist.
@@ -87,24 +116,39 @@ pub enum IngestError {
         .path.display()
     )]
     IndexOutOfRange {
+        /// The input file.
         path: PathBuf,
+        /// Where in the file.
         at: Location,
+        /// The face (0-based).
         face: u64,
+        /// The corner within the face (0-based).
         corner: u64,
+        /// The vertex index as written.
         index: i64,
+        /// Vertices in the file.
         vertices: u64,
     },
     /// A vertex coordinate is NaN or infinite. Such input is refused, not silently dropped.
     #[error("{}: {at}: vertex {vertex} has a non-finite coordinate {coords:?}", .path.display())]
     NonFinite {
+        /// The input file.
         path: PathBuf,
+        /// Where in the file.
         at: Location,
+        /// The vertex (0-based).
         vertex: u64,
+        /// Its coordinates as read.
         coords: [f64; 3],
     },
     /// The OBJ reader (tobj) failed; tobj does not report where, so neither can we.
     #[error("{}: OBJ reader (tobj) failed: {message}", .path.display())]
-    Obj { path: PathBuf, message: String },
+    Obj {
+        /// The input file.
+        path: PathBuf,
+        /// What is wrong, in words.
+        message: String,
+    },
     /// The caller's batch callback failed; streaming stopped there.
     #[error("triangle consumer failed: {0}")]
     Callback(String),

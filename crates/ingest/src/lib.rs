@@ -70,6 +70,7 @@ use voxlod_geom::{Bounds, Triangle};
 /// What [`MeshSource::open`] learnt about a mesh before reading its body.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct MeshInfo {
+    /// The file, as given.
     pub path: PathBuf,
     /// `"ply ascii"`, `"ply binary_little_endian"`, `"ply binary_big_endian"` (each with
     /// `" (gzip)"` appended for `.ply.gz`), `"obj"`, `"stl binary"` or `"stl ascii"`.
@@ -225,6 +226,7 @@ impl MeshSource {
         })
     }
 
+    /// What was learnt from the header (format, counts, properties).
     pub fn info(&self) -> &MeshInfo {
         &self.info
     }

@@ -152,6 +152,7 @@ pub const WORK_PREFIX: &str = ".voxlod-work-";
 /// A work folder found by [`find_work_folders`].
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct WorkFolder {
+    /// The folder.
     pub path: PathBuf,
     /// Bytes of the files in it.
     pub bytes: u64,

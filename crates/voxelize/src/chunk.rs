@@ -204,10 +204,15 @@ fn values(n: [f64; 3], c: [f64; 4]) -> [f32; 8] {
 /// `c = Σ w_i·colour_i`; if `w == 0` (every weight zero), `n` and `c` are the unweighted sums.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct VoxelSums {
+    /// Position in the chunk.
     pub pos: [u8; 3],
+    /// Number of contributions.
     pub k: u32,
+    /// `Σ w_i`, the summed clipped areas.
     pub w: f32,
+    /// `Σ w_i·normal_i`.
     pub n: [f32; 3],
+    /// `Σ w_i·colour_i` (RGBA, 0–255 scale).
     pub c: [f32; 4],
 }
 

@@ -15,7 +15,9 @@ pub const MAX_POLY: usize = 9;
 /// A convex polygon of at most [`MAX_POLY`] vertices.
 #[derive(Clone, Copy, Debug)]
 pub struct Poly {
+    /// Number of vertices in use.
     pub len: usize,
+    /// Vertices; the first `len` are the polygon's.
     pub p: [[f64; 3]; MAX_POLY],
 }
 
@@ -34,6 +36,7 @@ impl Poly {
         Poly { len: 3, p }
     }
 
+    /// The polygon's vertices.
     #[inline]
     pub fn vertices(&self) -> &[[f64; 3]] {
         &self.p[..self.len]

@@ -15,6 +15,7 @@ use crate::{ChunkVoxelizer, Mode, TriSetup};
 /// coordinates, each with its voxels as [`ChunkVoxelizer::finish`] returns them.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct GridVoxels {
+    /// Non-empty chunks: chunk coordinates and voxels.
     pub chunks: Vec<([u32; 3], Vec<Voxel>)>,
     /// Zero-area or non-finite triangles.
     pub skipped: u64,
@@ -25,6 +26,7 @@ impl GridVoxels {
     pub fn len(&self) -> usize {
         self.chunks.iter().map(|c| c.1.len()).sum()
     }
+    /// True if no chunk holds a voxel.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

@@ -196,6 +196,7 @@ fn at_least_zero(f: f64, b: f64, exact: impl FnOnce() -> bool) -> bool {
 /// ([`crate::predicates`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TriSetup {
+    /// Conservative (26-separating) or thin (6-separating).
     pub mode: Mode,
     /// Dominant axis in original coordinates (0 = x, 1 = y, 2 = z).
     pub axis: usize,
@@ -221,10 +222,12 @@ pub struct TriSetup {
     /// `n_z·p_z ≤ d_hi − n_x p_x − n_y p_y` (evaluated exactly; in f64 up to `bp`).
     /// Conservative: `d_min`, `d_max`; thin: both `d_cen`.
     pub d_lo: f64,
+    /// Upper depth offset of the depth test above.
     pub d_hi: f64,
     /// Closed voxel bounding box (swizzled): voxels `i` with `[i, i+1]` meeting the triangle's
     /// bounding box, `ceil(min) − 1 ..= floor(max)`, clamped to the i32 range.
     pub bmin: [i32; 3],
+    /// Maximum corner of that box (inclusive).
     pub bmax: [i32; 3],
     /// Exact orientation (−1, 0, 1) of projection `k` (numbering of `ne`), before `n` is made
     /// to point up: the sign `s` of the edge tests, `ne·(q − v_i) = s·orient2d(v_i, v_{i+1}, q)`.
