@@ -43,6 +43,7 @@ fn all_meshes(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
+/// Reads the whole mesh: its source, every triangle and the ingest statistics.
 pub fn read_all(path: &Path) -> (MeshSource, Vec<Triangle>, IngestStats) {
     let src = MeshSource::open(path).unwrap_or_else(|e| panic!("{e}"));
     let mut tris = Vec::new();
