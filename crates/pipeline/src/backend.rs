@@ -1,14 +1,19 @@
 //! Which voxelizer runs the chunks: the CPU `ChunkVoxelizer` on every core, or the GPU hybrid
-//! voxelizer (`voxlod-gpu`, feature `gpu`), and the GPU cutoff search.
+//! voxelizer (`voxlod-gpu`, feature `gpu`), both behind one [`Voxelize`] trait, and the GPU
+//! cutoff search.
 
+use std::ops::ControlFlow;
 use std::sync::Mutex;
 
 use anyhow::{Context, Result};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use voxlod_format::Voxel;
-use voxlod_tile::Bins;
-use voxlod_voxelize::{ChunkVoxelizer, Method, Mode};
+use voxlod_geom::Triangle;
+use voxlod_tile::{Bins, TileError};
+use voxlod_voxelize::ChunkVoxelizer;
+
+use crate::error::StageError;
+use crate::BuildSettings;
 
 /// `--backend`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -24,6 +29,78 @@ pub enum Backend {
     Gpu,
 }
 
+#[cfg(feature = "clap")]
+impl clap::ValueEnum for Backend {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[Backend::Auto, Backend::Cpu, Backend::Gpu]
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
+}
+
+/// `--gpu-method`: how the GPU voxelizer covers a chunk's triangles.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GpuMethod {
+    /// Small triangles in the classification pass, large ones rasterized.
+    #[default]
+    Hybrid,
+    /// Every triangle in compute passes.
+    Triangle,
+    /// Every triangle rasterized.
+    Fragment,
+}
+
+impl GpuMethod {
+    /// Every method, as named in settings and on the command line.
+    pub const ALL: [GpuMethod; 3] = [GpuMethod::Hybrid, GpuMethod::Triangle, GpuMethod::Fragment];
+
+    /// The method's name, as settings and the command line spell it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            GpuMethod::Hybrid => "hybrid",
+            GpuMethod::Triangle => "triangle",
+            GpuMethod::Fragment => "fragment",
+        }
+    }
+
+    #[cfg(feature = "gpu")]
+    fn to_gpu(self) -> voxlod_gpu::GpuMethod {
+        match self {
+            GpuMethod::Hybrid => voxlod_gpu::GpuMethod::Hybrid,
+            GpuMethod::Triangle => voxlod_gpu::GpuMethod::Triangle,
+            GpuMethod::Fragment => voxlod_gpu::GpuMethod::Fragment,
+        }
+    }
+}
+
+impl std::str::FromStr for GpuMethod {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        GpuMethod::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown GPU method '{s}' (hybrid, triangle or fragment)"))
+    }
+}
+
+impl std::fmt::Display for GpuMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(feature = "clap")]
+impl clap::ValueEnum for GpuMethod {
+    fn value_variants<'a>() -> &'a [Self] {
+        &GpuMethod::ALL
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
+}
+
 impl std::str::FromStr for Backend {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
@@ -36,13 +113,20 @@ impl std::str::FromStr for Backend {
     }
 }
 
-impl std::fmt::Display for Backend {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
+impl Backend {
+    /// The backend's name, as settings and the command line spell it.
+    pub const fn name(self) -> &'static str {
+        match self {
             Backend::Auto => "auto",
             Backend::Cpu => "cpu",
             Backend::Gpu => "gpu",
-        })
+        }
+    }
+}
+
+impl std::fmt::Display for Backend {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
     }
 }
 
@@ -110,11 +194,116 @@ impl<'de> Deserialize<'de> for Cutoff {
     }
 }
 
-/// The voxelizers of one build.
-pub(crate) enum Voxelizers {
-    Cpu(Vec<Mutex<ChunkVoxelizer>>),
-    #[cfg(feature = "gpu")]
-    Gpu(Box<Mutex<GpuRun>>),
+/// One leaf chunk's triangles, readable as often as a voxelizer needs them (the CPU reads them
+/// once, the GPU once per phase).
+pub(crate) trait ChunkSource {
+    /// The chunk's index in Morton order.
+    fn index(&self) -> usize;
+    /// Its chunk coordinates.
+    fn coord(&self) -> [u32; 3];
+    /// Its first voxel (grid coordinates).
+    fn origin(&self) -> [u32; 3] {
+        self.coord().map(|c| c * voxlod_geom::CHUNK)
+    }
+    /// Feeds the triangles to `f` in batches, from the first, until `f` breaks.
+    fn replay(&self, f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>) -> Result<(), StageError>;
+}
+
+/// Chunk `index` of the tile stage's bins.
+pub(crate) struct BinChunk<'a> {
+    pub bins: &'a Bins,
+    pub index: usize,
+}
+
+impl ChunkSource for BinChunk<'_> {
+    fn index(&self) -> usize {
+        self.index
+    }
+    fn coord(&self) -> [u32; 3] {
+        self.bins.chunks()[self.index].coord
+    }
+    fn origin(&self) -> [u32; 3] {
+        self.bins.chunks()[self.index].origin()
+    }
+    fn replay(&self, f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>) -> Result<(), StageError> {
+        // the tile crate's callback can only stop a read with an error: a break is one that
+        // is recognised by this flag, not by its text
+        let mut stopped = false;
+        let r = self.bins.read_chunk(self.index, READ_BATCH, &mut |tris| {
+            if f(tris).is_break() {
+                stopped = true;
+                return Err(TileError::Callback("stopped by the voxelizer".into()));
+            }
+            Ok(())
+        });
+        match r {
+            Err(_) if stopped => Ok(()),
+            r => r.map_err(StageError::from),
+        }
+    }
+}
+
+/// A leaf chunk's result: its voxels (sorted by Morton code) and the triangles the voxelizer
+/// skipped (zero area after the move to grid coordinates).
+pub(crate) struct ChunkVoxels {
+    pub voxels: Vec<Voxel>,
+    pub skipped: u64,
+}
+
+/// A chunk voxelizer of the voxelize stage: begins a chunk at its origin, takes its triangles
+/// (once, or replayed per phase) and finishes with the chunk's voxels. Called from several
+/// worker threads at once; an implementation serializes what it must.
+pub(crate) trait Voxelize: Sync {
+    /// Voxelizes one chunk.
+    fn voxelize(&self, chunk: &dyn ChunkSource) -> Result<ChunkVoxels, StageError>;
+
+    /// For the GPU backend, what it did over the chunks voxelized so far ([`GpuStats`]);
+    /// None for the CPU.
+    fn gpu_stats(&self) -> Result<Option<GpuStats>, StageError> {
+        Ok(None)
+    }
+}
+
+/// The CPU backend: one `ChunkVoxelizer` per worker slot (its scratch memory is reused from
+/// chunk to chunk).
+pub(crate) struct CpuVoxelizers {
+    slots: Vec<Mutex<ChunkVoxelizer>>,
+}
+
+impl CpuVoxelizers {
+    pub(crate) fn new(s: &BuildSettings, workers: usize) -> CpuVoxelizers {
+        assert!(workers > 0, "at least one chunk voxelizer");
+        let slots = (0..workers)
+            .map(|_| {
+                let mut cv = ChunkVoxelizer::new(s.mode);
+                cv.set_method(s.voxelizer);
+                Mutex::new(cv)
+            })
+            .collect();
+        CpuVoxelizers { slots }
+    }
+}
+
+impl Voxelize for CpuVoxelizers {
+    fn voxelize(&self, chunk: &dyn ChunkSource) -> Result<ChunkVoxels, StageError> {
+        let slot = rayon::current_thread_index().unwrap_or(0) % self.slots.len();
+        // a panic on another chunk left this voxelizer mid-chunk: an error, not a guess
+        let mut vz = self.slots[slot].lock().map_err(|_| StageError::Poisoned {
+            chunk: chunk.index(),
+            coord: chunk.coord(),
+        })?;
+        let before = vz.skipped();
+        vz.begin(chunk.origin());
+        chunk.replay(&mut |tris| {
+            vz.add(tris);
+            ControlFlow::Continue(())
+        })?;
+        let voxels = vz.finish();
+        Ok(ChunkVoxels {
+            voxels,
+            skipped: vz.skipped() - before,
+        })
+    }
 }
 
 /// The GPU voxelizer and the build's running totals.
@@ -130,7 +319,48 @@ pub(crate) struct GpuRun {
     uncertain: u64,
 }
 
-/// What the GPU backend did, summed over the chunks `Voxelizers::run` voxelized.
+/// The GPU backend: one device, the chunks one after another.
+#[cfg(feature = "gpu")]
+pub(crate) struct GpuVoxelizers(Mutex<GpuRun>);
+
+#[cfg(feature = "gpu")]
+impl Voxelize for GpuVoxelizers {
+    fn voxelize(&self, chunk: &dyn ChunkSource) -> Result<ChunkVoxels, StageError> {
+        let mut gpu = self.0.lock().map_err(|_| StageError::Poisoned {
+            chunk: chunk.index(),
+            coord: chunk.coord(),
+        })?;
+        let voxels = voxelize_streamed(&mut gpu.vz, chunk, u64::MAX)
+            .with_context(|| format!("GPU voxelization of chunk {:?}", chunk.coord()))?;
+        let (small, large) = gpu.vz.last_split();
+        gpu.split.0 += small;
+        gpu.split.1 += large;
+        gpu.fallback += gpu.vz.last_fell_back() as u64;
+        gpu.uncertain += gpu.vz.last_uncertain() as u64;
+        Ok(ChunkVoxels { voxels, skipped: 0 })
+    }
+
+    /// The triangles voxelized in the classification pass (small, under the cutoff) and those
+    /// deferred to the second pass (the fragment pass; the sweep pass of `--gpu-method
+    /// triangle`), summed over the chunks voxelized (the cutoff search not included). A
+    /// triangle spanning several chunks counts once per chunk; zero-area triangles and parts
+    /// outside a chunk count in neither. With them, the chunks re-voxelized on the CPU and
+    /// those with an uncertain decision.
+    fn gpu_stats(&self) -> Result<Option<GpuStats>, StageError> {
+        let g = self.0.lock().map_err(|_| {
+            StageError::Other(anyhow::anyhow!(
+                "the GPU voxelizer was left unusable by a panic"
+            ))
+        })?;
+        Ok(Some(GpuStats {
+            split: [g.split.0, g.split.1],
+            cpu_fallback_chunks: g.fallback,
+            uncertain_chunks: g.uncertain,
+        }))
+    }
+}
+
+/// What the GPU backend did, summed over the chunks it voxelized.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct GpuStats {
     /// triangles voxelized in the classification pass / deferred to the second pass
@@ -145,232 +375,148 @@ pub(crate) struct GpuStats {
 /// re-batches to its own size).
 const READ_BATCH: usize = 64 * 1024;
 
-/// Result of one chunk: its voxels and the triangles the voxelizer skipped.
-pub(crate) type ChunkResult = Result<(Vec<Voxel>, u64)>;
-
-impl Voxelizers {
-    /// Creates the voxelizers for `backend`; returns them with a description for the summary
-    /// and any warning.
-    #[allow(unused_variables, clippy::too_many_arguments)]
-    pub(crate) fn new(
-        backend: Backend,
-        mode: Mode,
-        method: Method,
-        cpu_workers: usize,
-        threads: usize,
-        gpu_method: &str,
-        cutoff: Cutoff,
-        bins: &Bins,
-    ) -> Result<(Voxelizers, String)> {
-        let cpu = || {
-            let v = Voxelizers::Cpu(
-                (0..cpu_workers)
-                    .map(|_| {
-                        let mut cv = ChunkVoxelizer::new(mode);
-                        cv.set_method(method);
-                        Mutex::new(cv)
-                    })
-                    .collect(),
-            );
-            (
-                v,
-                format!("cpu ({cpu_workers} chunk voxelizers on {threads} threads, {method})"),
-            )
-        };
-        // the GPU computes the overlap tests' set; the approximate method runs on the CPU only
-        match (backend, method.is_exact()) {
-            (Backend::Gpu, false) => {
-                anyhow::bail!("--voxelizer {method} runs on the CPU only (--backend cpu or auto)")
-            }
-            (Backend::Auto, false) => return Ok(cpu()),
-            _ => {}
-        }
-        match backend {
-            Backend::Cpu => Ok(cpu()),
-            #[cfg(feature = "gpu")]
-            Backend::Auto | Backend::Gpu => {
-                let method: voxlod_gpu::GpuMethod =
-                    gpu_method
-                        .parse()
-                        .map_err(|e: voxlod_gpu::ParseMethodError| {
-                            anyhow::anyhow!("--gpu-method: {}", e.0)
-                        })?;
-                let fixed = match cutoff {
-                    Cutoff::Fixed(c) => c,
-                    Cutoff::Auto => DEFAULT_CUTOFF,
-                };
-                if backend == Backend::Auto {
-                    // decide from the adapter alone: creating the device and its pipelines
-                    // costs half a second on lavapipe, for an adapter auto would not use
-                    match voxlod_gpu::probe_adapter() {
-                        Err(e) => {
-                            let (v, d) = cpu();
-                            return Ok((v, format!("{d}; no GPU: {e}")));
-                        }
-                        Ok(a) if a.software => {
-                            let (v, d) = cpu();
-                            return Ok((
-                                v,
-                                format!(
-                                    "{d}; skipped the software GPU adapter {} (--backend gpu forces it)",
-                                    a.name
-                                ),
-                            ));
-                        }
-                        Ok(_) => {}
-                    }
-                }
-                let gpu = match voxlod_gpu::GpuVoxelizer::new(mode, method, fixed) {
-                    Ok(g) => g,
-                    Err(e) if backend == Backend::Auto => {
-                        let (v, d) = cpu();
-                        return Ok((v, format!("{d}; no GPU: {e}")));
-                    }
-                    Err(e) => return Err(e).context("--backend gpu"),
-                };
-                let mut gpu = gpu;
-                let mut desc = format!("gpu {} ({method}", gpu.adapter_name());
-                if method == voxlod_gpu::GpuMethod::Hybrid {
-                    let c = match cutoff {
-                        Cutoff::Fixed(c) => c,
-                        Cutoff::Auto => search_cutoff(&mut gpu, bins)?,
-                    };
-                    gpu.set_method(method, c);
-                    desc += &format!(
-                        ", cutoff {c} voxels²{}",
-                        if cutoff == Cutoff::Auto {
-                            " found by search"
-                        } else {
-                            ""
-                        }
-                    );
-                }
-                // the contract of the voxel sets (crates/gpu docs, "Exactness")
-                desc += match gpu.precision() {
-                    voxlod_gpu::shaders::Precision::F64 => {
-                        ", f64: exact sets, uncertain chunks on the CPU)"
-                    }
-                    voxlod_gpu::shaders::Precision::F32 => ", f32: conservative superset)",
-                };
-                Ok((
-                    Voxelizers::Gpu(Box::new(Mutex::new(GpuRun {
-                        vz: gpu,
-                        split: (0, 0),
-                        fallback: 0,
-                        uncertain: 0,
-                    }))),
-                    desc,
-                ))
-            }
-            #[cfg(not(feature = "gpu"))]
-            Backend::Auto => {
-                let (v, d) = cpu();
-                Ok((v, format!("{d}; built without the gpu feature")))
-            }
-            #[cfg(not(feature = "gpu"))]
+/// The voxelizer of one build for `s.backend`, with a description for the summary.
+/// `cpu_workers` CPU voxelizers run on `threads` threads; `bins` is for the cutoff search.
+pub(crate) fn select(
+    s: &BuildSettings,
+    cpu_workers: usize,
+    threads: usize,
+    bins: &Bins,
+) -> Result<(Box<dyn Voxelize>, String)> {
+    let cpu = || -> (Box<dyn Voxelize>, String) {
+        (
+            Box::new(CpuVoxelizers::new(s, cpu_workers)),
+            format!(
+                "cpu ({cpu_workers} chunk voxelizers on {threads} threads, {})",
+                s.voxelizer
+            ),
+        )
+    };
+    // the GPU computes the overlap tests' set; the approximate method runs on the CPU only
+    match (s.backend, s.voxelizer.is_exact()) {
+        (Backend::Gpu, false) => anyhow::bail!(
+            "--voxelizer {} runs on the CPU only (--backend cpu or auto)",
+            s.voxelizer
+        ),
+        (Backend::Auto, false) | (Backend::Cpu, _) => return Ok(cpu()),
+        _ => {}
+    }
+    #[cfg(feature = "gpu")]
+    {
+        select_gpu(s, bins, cpu)
+    }
+    #[cfg(not(feature = "gpu"))]
+    {
+        let _ = bins;
+        match s.backend {
             Backend::Gpu => {
                 anyhow::bail!("--backend gpu: this voxlod was built without the `gpu` feature")
             }
-        }
-    }
-
-    /// Voxelizes chunks `range` of `bins`: in parallel on the CPU, one after another on the GPU.
-    pub(crate) fn run(
-        &self,
-        pool: &rayon::ThreadPool,
-        bins: &Bins,
-        range: std::ops::Range<usize>,
-    ) -> Vec<ChunkResult> {
-        let chunks = bins.chunks();
-        match self {
-            Voxelizers::Cpu(workers) => pool.install(|| {
-                range
-                    .into_par_iter()
-                    .map(|i| {
-                        let slot = rayon::current_thread_index().unwrap_or(0) % workers.len();
-                        let mut vz = workers[slot].lock().unwrap_or_else(|p| p.into_inner());
-                        let before = vz.skipped();
-                        vz.begin(chunks[i].origin());
-                        bins.read_chunk(i, READ_BATCH, &mut |tris| {
-                            vz.add(tris);
-                            Ok(())
-                        })?;
-                        let voxels = vz.finish();
-                        Ok((voxels, vz.skipped() - before))
-                    })
-                    .collect()
-            }),
-            #[cfg(feature = "gpu")]
-            Voxelizers::Gpu(gpu) => {
-                let mut gpu = gpu.lock().unwrap_or_else(|p| p.into_inner());
-                range
-                    .map(|i| {
-                        let voxels = voxelize_streamed(&mut gpu.vz, bins, i, u64::MAX)
-                            .with_context(|| {
-                                format!("GPU voxelization of chunk {:?}", chunks[i].coord)
-                            })?;
-                        let (small, large) = gpu.vz.last_split();
-                        gpu.split.0 += small;
-                        gpu.split.1 += large;
-                        gpu.fallback += gpu.vz.last_fell_back() as u64;
-                        gpu.uncertain += gpu.vz.last_uncertain() as u64;
-                        Ok((voxels, 0))
-                    })
-                    .collect()
-            }
-        }
-    }
-
-    /// For the GPU backend, the triangles voxelized in the classification pass (small, under
-    /// the cutoff) and those deferred to the second pass (the fragment pass; the sweep pass of
-    /// `--gpu-method triangle`), summed over the chunks `run` has voxelized (the cutoff search
-    /// not included). A triangle spanning several chunks counts once per chunk; zero-area
-    /// triangles and parts outside a chunk count in neither. With them, the chunks re-voxelized
-    /// on the CPU and those with an uncertain decision. None for the CPU backend.
-    pub(crate) fn gpu_stats(&self) -> Option<GpuStats> {
-        match self {
-            Voxelizers::Cpu(_) => None,
-            #[cfg(feature = "gpu")]
-            Voxelizers::Gpu(gpu) => {
-                let g = gpu.lock().unwrap_or_else(|p| p.into_inner());
-                Some(GpuStats {
-                    split: [g.split.0, g.split.1],
-                    cpu_fallback_chunks: g.fallback,
-                    uncertain_chunks: g.uncertain,
-                })
+            _ => {
+                let (v, d) = cpu();
+                Ok((v, format!("{d}; built without the gpu feature")))
             }
         }
     }
 }
 
-/// Voxelizes the first `limit` triangles of chunk `i` of `bins` on the GPU, streaming them
-/// from the bins file (replayed once per GPU phase), so that only bounded batches are in
-/// memory whatever the chunk's size.
+/// [`select`] for `--backend auto` or `gpu`: a hardware GPU (any adapter for `gpu`), else the
+/// CPU for `auto`.
+#[cfg(feature = "gpu")]
+fn select_gpu(
+    s: &BuildSettings,
+    bins: &Bins,
+    cpu: impl Fn() -> (Box<dyn Voxelize>, String),
+) -> Result<(Box<dyn Voxelize>, String)> {
+    let backend = s.backend;
+    let method = s.gpu_method.to_gpu();
+    let fixed = match s.cutoff {
+        Cutoff::Fixed(c) => c,
+        Cutoff::Auto => DEFAULT_CUTOFF,
+    };
+    if backend == Backend::Auto {
+        // decide from the adapter alone: creating the device and its pipelines
+        // costs half a second on lavapipe, for an adapter auto would not use
+        match voxlod_gpu::probe_adapter() {
+            Err(e) => {
+                let (v, d) = cpu();
+                return Ok((v, format!("{d}; no GPU: {e}")));
+            }
+            Ok(a) if a.software => {
+                let (v, d) = cpu();
+                return Ok((
+                    v,
+                    format!(
+                        "{d}; skipped the software GPU adapter {} (--backend gpu forces it)",
+                        a.name
+                    ),
+                ));
+            }
+            Ok(_) => {}
+        }
+    }
+    let mut gpu = match voxlod_gpu::GpuVoxelizer::new(s.mode, method, fixed) {
+        Ok(g) => g,
+        Err(e) if backend == Backend::Auto => {
+            let (v, d) = cpu();
+            return Ok((v, format!("{d}; no GPU: {e}")));
+        }
+        Err(e) => return Err(e).context("--backend gpu"),
+    };
+    let mut desc = format!("gpu {} ({method}", gpu.adapter_name());
+    if method == voxlod_gpu::GpuMethod::Hybrid {
+        let c = match s.cutoff {
+            Cutoff::Fixed(c) => c,
+            Cutoff::Auto => search_cutoff(&mut gpu, bins)?,
+        };
+        gpu.set_method(method, c);
+        desc += &format!(
+            ", cutoff {c} voxels²{}",
+            if s.cutoff == Cutoff::Auto {
+                " found by search"
+            } else {
+                ""
+            }
+        );
+    }
+    // the contract of the voxel sets (crates/gpu docs, "Exactness")
+    desc += match gpu.precision() {
+        voxlod_gpu::shaders::Precision::F64 => ", f64: exact sets, uncertain chunks on the CPU)",
+        voxlod_gpu::shaders::Precision::F32 => ", f32: conservative superset)",
+    };
+    let run = GpuRun {
+        vz: gpu,
+        split: (0, 0),
+        fallback: 0,
+        uncertain: 0,
+    };
+    Ok((Box::new(GpuVoxelizers(Mutex::new(run))), desc))
+}
+
+/// Voxelizes the first `limit` triangles of `chunk` on the GPU, streaming them from the bins
+/// file (replayed once per GPU phase), so that only bounded batches are in memory whatever
+/// the chunk's size.
 #[cfg(feature = "gpu")]
 fn voxelize_streamed(
     gpu: &mut voxlod_gpu::GpuVoxelizer,
-    bins: &Bins,
-    i: usize,
+    chunk: &dyn ChunkSource,
     limit: u64,
 ) -> Result<Vec<Voxel>> {
-    /// Ends a read early once `limit` triangles were fed (not an error).
-    const ENOUGH: &str = "voxlod: enough triangles read";
-    let origin = bins.chunks()[i].origin();
-    gpu.voxelize_chunk_streamed(origin, &mut |feed: &mut voxlod_gpu::Feed<'_>| {
+    gpu.voxelize_chunk_streamed(chunk.origin(), &mut |feed: &mut voxlod_gpu::Feed<'_>| {
         let mut left = limit;
-        let r = bins.read_chunk(i, READ_BATCH, &mut |tris| {
-            let n = (tris.len() as u64).min(left) as usize;
-            feed(&tris[..n]);
-            left -= n as u64;
-            if left == 0 {
-                return Err(voxlod_tile::TileError::Callback(ENOUGH.to_string()));
-            }
-            Ok(())
-        });
-        match r {
-            Err(voxlod_tile::TileError::Callback(m)) if m == ENOUGH => Ok(()),
-            r => r.map_err(anyhow::Error::from),
-        }
+        chunk
+            .replay(&mut |tris| {
+                let n = (tris.len() as u64).min(left) as usize;
+                feed(&tris[..n]);
+                left -= n as u64;
+                // ends the read early once `limit` triangles were fed
+                if left == 0 {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            })
+            .map_err(anyhow::Error::from)
     })
 }
 
@@ -386,7 +532,8 @@ fn search_cutoff(gpu: &mut voxlod_gpu::GpuVoxelizer, bins: &Bins) -> Result<f32>
     let mut time = |c: f32| -> Result<f64> {
         gpu.set_method(voxlod_gpu::GpuMethod::Hybrid, c);
         let t = std::time::Instant::now();
-        voxelize_streamed(gpu, bins, i, 256 * 1024).context("timing a cutoff")?;
+        voxelize_streamed(gpu, &BinChunk { bins, index: i }, 256 * 1024)
+            .context("timing a cutoff")?;
         Ok(t.elapsed().as_secs_f64())
     };
     time(DEFAULT_CUTOFF)?; // warm-up: pipelines, buffers

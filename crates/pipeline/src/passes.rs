@@ -1,11 +1,14 @@
 //! The triangle passes of the tile stage ([`voxlod_tile::Passes`]): over the input itself when
-//! it is cheap to parse again, and a wrapper that stops any pass on Ctrl-C.
+//! it is cheap to parse again, and a wrapper that stops any pass on Ctrl-C. Both stop a pass
+//! with a typed reason ([`StageError::InputChanged`], [`StageError::Interrupted`]) kept in the
+//! build's [`StopReason`]; the tile crate only sees its text.
 
 use voxlod_geom::Triangle;
 use voxlod_ingest::{IngestError, MeshSource};
 use voxlod_tile::{Passes, TileError};
 
-use crate::system::interrupted;
+use crate::error::{StageError, StopReason};
+use crate::stages::BuildContext;
 
 /// Passes over a memory-mapped input (see [`MeshSource::rereadable`]): parsing it again costs
 /// what reading a spool would, and saves writing one.
@@ -13,6 +16,8 @@ pub(crate) struct InputPasses<'a> {
     pub source: &'a MeshSource,
     /// Triangles of the first pass: every later pass must yield as many.
     pub count: u64,
+    /// Where a changed input is reported.
+    pub stop: &'a StopReason,
 }
 
 impl Passes for InputPasses<'_> {
@@ -35,11 +40,12 @@ impl Passes for InputPasses<'_> {
         );
         match r {
             Ok(st) if st.triangles == self.count => Ok(()),
-            Ok(st) => Err(TileError::Callback(format!(
-                "{}: yielded {} triangles, {} on the first pass: the file changed during the build",
-                self.source.info().path.display(),
-                st.triangles,
-                self.count
+            Ok(st) => Err(TileError::Callback(self.stop.set(
+                StageError::InputChanged {
+                    path: self.source.info().path.clone(),
+                    now: st.triangles,
+                    first: self.count,
+                },
             ))),
             Err(e) => Err(inner.take().unwrap_or(TileError::Callback(e.to_string()))),
         }
@@ -50,8 +56,12 @@ impl Passes for InputPasses<'_> {
     }
 }
 
-/// Any passes, stopped with an error between batches once Ctrl-C was pressed.
-pub(crate) struct Interruptible<'a>(pub &'a dyn Passes);
+/// Any passes, stopped with [`StageError::Interrupted`] between batches once Ctrl-C was
+/// pressed.
+pub(crate) struct Interruptible<'a> {
+    pub inner: &'a dyn Passes,
+    pub ctx: &'a BuildContext<'a>,
+}
 
 impl Passes for Interruptible<'_> {
     fn for_each_prepared(
@@ -59,15 +69,15 @@ impl Passes for Interruptible<'_> {
         prepare: &(dyn Fn(&mut [Triangle]) -> Vec<u32> + Sync),
         f: &mut dyn FnMut(&[Triangle], Vec<u32>) -> Result<(), TileError>,
     ) -> Result<(), TileError> {
-        self.0.for_each_prepared(prepare, &mut |tris, p| {
-            if interrupted() {
-                return Err(TileError::Callback("interrupted".into()));
+        self.inner.for_each_prepared(prepare, &mut |tris, p| {
+            if let Err(e) = self.ctx.check_interrupt() {
+                return Err(TileError::Callback(self.ctx.stop.set(e)));
             }
             f(tris, p)
         })
     }
 
     fn count(&self) -> u64 {
-        self.0.count()
+        self.inner.count()
     }
 }

@@ -18,6 +18,44 @@ use crate::BuildSettings;
 /// no spool for memory-mapped inputs.
 pub const WORK_FORMAT: u32 = 2;
 
+/// The files of a work folder: the one place that names them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum WorkFile {
+    /// The ingest stage's triangles (only for an input that cannot be read again cheaply).
+    Spool,
+    /// The ingest stage's marker ([`crate::stages::ingest::Ingested`]).
+    SpoolMarker,
+    /// The tile stage's chunk bins.
+    Bins,
+    /// The tile stage's marker (the bins layout).
+    BinsMarker,
+    /// The voxelize stage's leaf log.
+    Leaves,
+    /// The voxelize stage's marker (its totals).
+    LeavesMarker,
+}
+
+impl WorkFile {
+    /// The file's name in the folder.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            WorkFile::Spool => "spool.tri",
+            WorkFile::SpoolMarker => "spool.json",
+            WorkFile::Bins => "bins.tri",
+            WorkFile::BinsMarker => "bins.json",
+            WorkFile::Leaves => "leaves.bin",
+            WorkFile::LeavesMarker => "leaves.json",
+        }
+    }
+}
+
+/// A stage's artifact as saved in its marker file: it exists only once the stage's data is
+/// complete, and a resumed build takes the stage's result from it.
+pub(crate) trait Marker: Serialize + DeserializeOwned {
+    /// The marker's file.
+    const FILE: WorkFile;
+}
+
 pub struct WorkDir {
     path: PathBuf,
     /// The folder's advisory lock (`lock` inside it), held while the build runs, so two
@@ -114,21 +152,31 @@ impl WorkDir {
         &self.path
     }
 
-    pub fn file(&self, name: &str) -> PathBuf {
-        self.path.join(name)
+    /// The path of one of the folder's files.
+    pub(crate) fn file(&self, f: WorkFile) -> PathBuf {
+        self.path.join(f.name())
     }
 
-    /// A stage marker, or None when it is missing or unreadable (then the stage runs again).
-    pub fn marker<T: DeserializeOwned>(&self, name: &str) -> Option<T> {
-        let bytes = std::fs::read(self.file(name)).ok()?;
+    /// A stage's marker, or None when it is missing or unreadable (then the stage runs again).
+    pub(crate) fn marker<M: Marker>(&self) -> Option<M> {
+        self.read_json(M::FILE.name())
+    }
+
+    /// Writes a stage's marker (see [`WorkDir::write_json`]).
+    pub(crate) fn set_marker<M: Marker>(&self, m: &M) -> Result<()> {
+        self.write_json(M::FILE.name(), m)
+    }
+
+    fn read_json<T: DeserializeOwned>(&self, name: &str) -> Option<T> {
+        let bytes = std::fs::read(self.path.join(name)).ok()?;
         serde_json::from_slice(&bytes).ok()
     }
 
-    /// Writes a stage marker atomically (temporary name, fsync, rename), so a marker exists
+    /// Writes a JSON file atomically (temporary name, fsync, rename), so a marker exists
     /// only once its stage's data is complete.
-    pub fn set_marker<T: Serialize>(&self, name: &str, value: &T) -> Result<()> {
-        let tmp = self.file(&format!("{name}.tmp"));
-        let fin = self.file(name);
+    fn write_json<T: Serialize>(&self, name: &str, value: &T) -> Result<()> {
+        let tmp = self.path.join(format!("{name}.tmp"));
+        let fin = self.path.join(name);
         let bytes = serde_json::to_vec(value)?;
         let write = || -> std::io::Result<()> {
             let f = std::fs::File::create(&tmp)?;
@@ -140,7 +188,7 @@ impl WorkDir {
     }
 
     /// Removes the folder and everything in it.
-    pub fn remove(self) -> Result<()> {
+    pub(crate) fn remove(self) -> Result<()> {
         std::fs::remove_dir_all(&self.path)
             .with_context(|| format!("removing the work folder {}", self.path.display()))
     }
@@ -286,8 +334,8 @@ mod tests {
             vals.push(f32::from_bits((seed >> 32) as u32) as f64);
         }
         vals.retain(|v| v.is_finite());
-        w.set_marker("floats.json", &vals).unwrap();
-        let back: Vec<f64> = w.marker("floats.json").unwrap();
+        w.write_json("floats.json", &vals).unwrap();
+        let back: Vec<f64> = w.read_json("floats.json").unwrap();
         assert_eq!(back.len(), vals.len());
         for (a, b) in vals.iter().zip(&back) {
             assert_eq!(a.to_bits(), b.to_bits(), "{a:e} came back as {b:e}");

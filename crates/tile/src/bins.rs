@@ -5,7 +5,7 @@ use std::fs::File;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
-use voxlod_geom::{morton3, Grid, Triangle};
+use voxlod_geom::{morton3, Grid, Triangle, CHUNK};
 
 use crate::{Passes, RecordLayout, TileError};
 
@@ -70,7 +70,7 @@ pub fn scatter(
     sc.finish()
 }
 
-/// Triangle counts per leaf chunk of one grid, dense over its `(R/256)³` chunks: what the count
+/// Triangle counts per leaf chunk of one grid, dense over its `(R/CHUNK)³` chunks: what the count
 /// pass ([`count`]) makes, or a caller that already passes over the triangles (e.g. the ingest
 /// pass, when the grid is known before it) with [`ChunkCounts::add_triangles`], or with
 /// [`ChunkCounts::add_keyed`] and keys taken on the threads that read the triangles.
@@ -230,7 +230,7 @@ impl ChunkKeys {
 /// One non-empty leaf chunk and its region in the bins file (in triangles).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ChunkBin {
-    /// Chunk coordinates (units of 256 voxels).
+    /// Chunk coordinates (units of [`CHUNK`] voxels).
     pub coord: [u32; 3],
     /// `morton3(coord)`.
     pub morton: u64,
@@ -243,11 +243,7 @@ pub struct ChunkBin {
 impl ChunkBin {
     /// Minimum voxel corner of the chunk in grid coordinates.
     pub fn origin(&self) -> [u32; 3] {
-        [
-            self.coord[0] * 256,
-            self.coord[1] * 256,
-            self.coord[2] * 256,
-        ]
+        self.coord.map(|c| c * CHUNK)
     }
 }
 

@@ -152,6 +152,55 @@ pub enum Mode {
     Thin,
 }
 
+impl Mode {
+    /// Both modes, in the order of their codes.
+    pub const ALL: [Mode; 2] = [Mode::Conservative, Mode::Thin];
+
+    /// The mode's number in the octree file's header ([`voxlod_format::MODE_CONSERVATIVE`],
+    /// [`voxlod_format::MODE_THIN`]; the GPU shaders' mode parameter uses the same numbers).
+    pub const fn code(self) -> u32 {
+        match self {
+            Mode::Conservative => voxlod_format::MODE_CONSERVATIVE,
+            Mode::Thin => voxlod_format::MODE_THIN,
+        }
+    }
+
+    /// The mode's name, as `FromStr`, `Display`, serde and the command line spell it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Mode::Conservative => "conservative",
+            Mode::Thin => "thin",
+        }
+    }
+
+    /// The mode of a file header's code; None for a code no mode has.
+    pub fn from_code(code: u32) -> Option<Mode> {
+        Mode::ALL.into_iter().find(|m| m.code() == code)
+    }
+}
+
+/// `--mode` on the command line (the same names as `Display` and serde).
+#[cfg(feature = "clap")]
+impl clap::ValueEnum for Mode {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Mode::ALL
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
+}
+
+/// `--voxelizer` on the command line (the names of [`Method::NAMES`]).
+#[cfg(feature = "clap")]
+impl clap::ValueEnum for Method {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Method::ALL
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
+}
+
 /// A string that is neither `conservative` nor `thin`.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("unknown voxelization mode {0:?} (expected \"conservative\" or \"thin\")")]
@@ -170,10 +219,7 @@ impl FromStr for Mode {
 
 impl fmt::Display for Mode {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Mode::Conservative => "conservative",
-            Mode::Thin => "thin",
-        })
+        f.write_str(self.name())
     }
 }
 
@@ -201,6 +247,12 @@ impl Method {
     pub const ALL: [Method; 3] = [Method::Sat, Method::Scanline, Method::ScanlineIlv];
     /// The names `FromStr` and `Display` use.
     pub const NAMES: [&'static str; 3] = ["sat", "scanline", "scanline-ilv"];
+
+    /// The method's name, one of [`Method::NAMES`].
+    pub fn name(self) -> &'static str {
+        let i = Method::ALL.iter().position(|&m| m == self).unwrap_or(0);
+        Method::NAMES[i]
+    }
 
     /// Whether this method gives exactly the overlap tests' voxels (not an approximation).
     pub fn is_exact(self) -> bool {
@@ -231,14 +283,26 @@ impl FromStr for Method {
 
 impl fmt::Display for Method {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let i = Method::ALL.iter().position(|m| m == self).unwrap_or(0);
-        f.pad(Method::NAMES[i])
+        f.pad(self.name())
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The codes are the file format's, and each names its mode back; the two crates' chunk
+    /// sizes are the same constant.
+    #[test]
+    fn mode_codes_are_the_formats() {
+        assert_eq!(Mode::Conservative.code(), voxlod_format::MODE_CONSERVATIVE);
+        assert_eq!(Mode::Thin.code(), voxlod_format::MODE_THIN);
+        for m in Mode::ALL {
+            assert_eq!(Mode::from_code(m.code()), Some(m));
+        }
+        assert_eq!(Mode::from_code(2), None);
+        assert_eq!(voxlod_format::CHUNK, voxlod_geom::CHUNK);
+    }
 
     #[test]
     fn mode_strings_roundtrip() {

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
-use voxlod_pipeline::{format_size, parse_size, BuildSettings, BuildSummary};
+use voxlod_pipeline::{format_size, parse_size, Backend, BuildSettings, BuildSummary, GpuMethod};
 use voxlod_voxelize::{Method, Mode};
 
 mod clean;
@@ -124,18 +124,6 @@ Examples:
   voxlod clean /scratch                          # remove those under a build's --tmp folder
 A folder that a running build holds (its lock is taken) is never removed.";
 
-/// A clap parser accepting only `values` (listed in --help and in errors), parsed by `T`'s
-/// `FromStr`: enum settings whose type lives in another crate.
-fn one_of<T>(values: &'static [&'static str]) -> impl clap::builder::TypedValueParser<Value = T>
-where
-    T: std::str::FromStr + Clone + Send + Sync + 'static,
-    T::Err: std::fmt::Display,
-{
-    use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(values)
-        .try_map(|s: String| s.parse::<T>().map_err(|e| e.to_string()))
-}
-
 #[derive(Args)]
 struct GenArgs {
     /// Output PLY file.
@@ -190,13 +178,13 @@ struct BuildArgs {
     resolution: Option<u32>,
     /// conservative (26-separating: every voxel the triangle touches) or thin (6-separating)
     /// [default: conservative].
-    #[arg(short, long, value_parser = one_of::<Mode>(&["conservative", "thin"]))]
+    #[arg(short, long, value_enum)]
     mode: Option<Mode>,
     /// CPU voxelizer: sat (overlap tests of every column of a triangle's bounding box),
     /// scanline (Zhang et al.'s projected scanline: the same voxels, faster on triangles spanning
     /// many voxels), or scanline-ilv
     /// (integer-only, approximate, conservative mode only) [default: scanline].
-    #[arg(long, value_parser = one_of::<Method>(&["sat", "scanline", "scanline-ilv"]))]
+    #[arg(long, value_enum)]
     voxelizer: Option<Method>,
     /// Worker threads; 0 = one per core [default: 0].
     #[arg(short = 'j', long)]
@@ -209,12 +197,12 @@ struct BuildArgs {
     zstd_level: Option<i32>,
     /// Voxelizer: auto (a hardware GPU if one is found, else the CPU), cpu, or gpu (any adapter,
     /// software ones such as lavapipe included) [default: auto].
-    #[arg(long, value_parser = one_of::<voxlod_pipeline::Backend>(&["auto", "cpu", "gpu"]))]
-    backend: Option<voxlod_pipeline::Backend>,
+    #[arg(long, value_enum)]
+    backend: Option<Backend>,
     /// GPU method: hybrid (classify, small triangles at once, large ones rasterized),
     /// triangle or fragment [default: hybrid].
-    #[arg(long, value_parser = one_of::<String>(&["hybrid", "triangle", "fragment"]))]
-    gpu_method: Option<String>,
+    #[arg(long, value_enum)]
+    gpu_method: Option<GpuMethod>,
     /// GPU hybrid cutoff: projected area in voxels² from which a triangle is deferred to the
     /// fragment pass, or `auto` to search per mesh [default: 8].
     #[arg(long)]
@@ -299,7 +287,7 @@ fn run_build(a: BuildArgs) -> Result<()> {
     if let Some(v) = a.backend {
         s.backend = v;
     }
-    if let Some(v) = a.gpu_method.clone() {
+    if let Some(v) = a.gpu_method {
         s.gpu_method = v;
     }
     if let Some(v) = a.cutoff {

@@ -1,0 +1,284 @@
+//! The ingest stage: one pass over the input for the triangles' bounds (which fix the grid),
+//! spooling the triangles (world coordinates) to `spool.tri` unless the input is memory-mapped
+//! and can be parsed again by the tile passes. When the grid is known before the pass (from the
+//! vertex list's bounds) the tile stage's chunk counts are taken during it too.
+//!
+//! Artifact and resume marker: [`SpoolMarker`] (`spool.json`).
+
+use std::time::Instant;
+
+use anyhow::Context;
+use serde::{Deserialize, Serialize};
+use voxlod_geom::{Bounds, Grid, Triangle};
+use voxlod_ingest::IngestError;
+use voxlod_tile::{ChunkCounts, RecordLayout, Spooler};
+
+use super::voxelize::LeavesMarker;
+use super::BuildContext;
+use crate::error::StageError;
+use crate::progress::Stage;
+use crate::size::format_size;
+use crate::stages::tile::BinsMarker;
+use crate::work::{Marker, WorkFile};
+
+/// What the ingest stage leaves for a resumed run (`spool.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(crate) struct SpoolMarker {
+    /// True if the triangles were written to `spool.tri`; false if the tile stage reads the
+    /// input again.
+    pub spooled: bool,
+    /// Non-degenerate triangles (those the tile stage bins).
+    pub count: u64,
+    /// The triangles' bounds.
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+    /// Triangles read, degenerate ones included.
+    pub triangles: u64,
+    /// Zero-area triangles skipped.
+    pub degenerate_skipped: u64,
+    /// The stage's warnings (shown again by a resumed build).
+    pub warnings: Vec<String>,
+}
+
+impl Marker for SpoolMarker {
+    const FILE: WorkFile = WorkFile::SpoolMarker;
+}
+
+/// The ingest stage's artifact: its marker and what follows from it.
+pub(crate) struct Ingested {
+    pub marker: SpoolMarker,
+    /// Which attributes the triangle records hold (those the mesh has).
+    pub layout: RecordLayout,
+    /// The grid fitted to the triangles' bounds.
+    pub grid: Grid,
+    /// The tile stage's chunk counts, if this pass took them on `grid` (then the tile stage
+    /// has no count pass; it takes them).
+    pub early_counts: Option<ChunkCounts>,
+    /// True if the ingest pass took the chunk counts (the tile stage has no count pass).
+    pub counted_during_ingest: bool,
+    /// Largest temporary disk use planned (bytes): spool (if one is written) plus bins.
+    pub temp_disk: u64,
+}
+
+impl Ingested {
+    /// The triangles' bounds.
+    pub(crate) fn bounds(&self) -> Bounds {
+        Bounds {
+            min: self.marker.min,
+            max: self.marker.max,
+        }
+    }
+}
+
+/// Runs the ingest stage, or takes its marker from the work folder.
+pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
+    let info = ctx.source.info();
+    let input = ctx.input.display().to_string();
+    ctx.warnings
+        .extend(info.warnings.iter().map(|w| format!("{input}: {w}")));
+    // Records hold only the attributes the mesh has; an input that is memory-mapped is read
+    // again by the tile passes instead of being copied to a spool.
+    let layout = RecordLayout {
+        normals: info.has_normals,
+        colors: info.has_colors,
+    };
+    let spooled = !ctx.source.rereadable();
+    let temp_disk = check_temp_disk(ctx, layout, spooled)?;
+    let t = Instant::now();
+    // a later stage's marker: the spool is not needed again, nor are counts
+    let later_done =
+        ctx.work.marker::<LeavesMarker>().is_some() || ctx.work.marker::<BinsMarker>().is_some();
+    let resumed = ctx.work.marker::<SpoolMarker>().filter(|m| {
+        m.spooled == spooled
+            && (later_done
+                || !m.spooled
+                || std::fs::metadata(ctx.work.file(WorkFile::Spool))
+                    .is_ok_and(|md| md.len() == m.count * layout.bytes() as u64))
+    });
+    let (marker, early_counts) = match resumed {
+        Some(m) => {
+            ctx.stage_done("ingest", t, true);
+            (m, None)
+        }
+        None => {
+            let (m, counts) = read_input(ctx, layout, spooled, !later_done)?;
+            ctx.work.set_marker(&m)?;
+            ctx.stage_done("ingest", t, false);
+            (m, counts)
+        }
+    };
+    ctx.warnings.extend(marker.warnings.iter().cloned());
+    if marker.count == 0 {
+        return Err(StageError::NoTriangles(ctx.input.to_path_buf()));
+    }
+    let bounds = Bounds {
+        min: marker.min,
+        max: marker.max,
+    };
+    let grid = Grid::fit(&bounds, ctx.settings.resolution)
+        .with_context(|| format!("{input}: fitting the grid"))?;
+    // counts on the vertex list's grid serve if it is the grid of the triangles' bounds
+    let early_counts = early_counts.filter(|c| *c.grid() == grid);
+    Ok(Ingested {
+        marker,
+        layout,
+        grid,
+        counted_during_ingest: early_counts.is_some(),
+        early_counts,
+        temp_disk,
+    })
+}
+
+/// Temporary disk: the bins (the triangles plus those that straddle chunk borders, at most
+/// about 1.5× for fine meshes; faces counted twice in case they are quads), and the spool if
+/// one is written, which exists during the scatter pass too. This is an upper bound: the build
+/// is refused here only if even one record per face cannot fit, and the exact size of the bins
+/// is checked once the count pass knows it (before anything is written to them). Returns the
+/// upper bound.
+fn check_temp_disk(
+    ctx: &mut BuildContext,
+    layout: RecordLayout,
+    spooled: bool,
+) -> Result<u64, StageError> {
+    let rec = layout.bytes() as u64;
+    let faces = ctx.source.info().faces;
+    let input_len = std::fs::metadata(ctx.input).map(|m| m.len()).unwrap_or(0);
+    let (est_triangles, min_triangles) = if faces > 0 {
+        (faces * 2, faces)
+    } else {
+        (input_len / 12, input_len / 50)
+    };
+    let temp_disk = est_triangles * rec * if spooled { 5 } else { 3 } / 2;
+    let min_disk = min_triangles * rec * if spooled { 2 } else { 1 };
+    let work = ctx.work.path();
+    let Some(free) = crate::system::free_disk(work) else {
+        return Ok(temp_disk);
+    };
+    if ctx.progress {
+        eprintln!(
+            "temporary disk: up to about {} in {} ({} free; {}-byte triangle records{})",
+            format_size(temp_disk),
+            work.display(),
+            format_size(free),
+            rec,
+            if spooled {
+                ", spool and bins"
+            } else {
+                ", bins only: the mapped input is read again"
+            }
+        );
+    }
+    if min_disk > free {
+        return Err(StageError::TempDisk(format!(
+            "not enough disk space for the temporary files: at least {} needed in {}, {} free (choose another folder with --tmp)",
+            format_size(min_disk),
+            work.display(),
+            format_size(free)
+        )));
+    }
+    if temp_disk > free {
+        ctx.warnings.push(format!(
+            "the temporary files may need up to about {} in {}, {} free: the exact size is checked after the count pass",
+            format_size(temp_disk),
+            work.display(),
+            format_size(free)
+        ));
+    }
+    Ok(temp_disk)
+}
+
+/// The pass over the input: bounds and count of the triangles, spooled or (for a mapped
+/// input, if `may_count`) counted per chunk on the vertex list's grid.
+fn read_input(
+    ctx: &BuildContext,
+    layout: RecordLayout,
+    spooled: bool,
+    may_count: bool,
+) -> Result<(SpoolMarker, Option<ChunkCounts>), StageError> {
+    let input_len = std::fs::metadata(ctx.input).map(|m| m.len()).unwrap_or(0);
+    let bar = Stage::bytes(ctx.progress, "ingest", input_len);
+    let mut spooler = if spooled {
+        Some(Spooler::create(&ctx.work.file(WorkFile::Spool), layout)?)
+    } else {
+        None
+    };
+    let mut count = 0u64;
+    let mut bounds = Bounds::default();
+    let mut early_counts = if !spooled && may_count {
+        vertex_grid_counts(ctx)
+    } else {
+        None
+    };
+    // Inside the pool: a mapped binary PLY is decoded on its threads, and each batch's bounds
+    // and chunk keys are taken there too (`prepare`); the callback, on this thread, only adds
+    // them up (or spools the batch).
+    let keys = early_counts.as_ref().map(|c| c.keys());
+    let prepare = |tris: &mut [Triangle]| {
+        let mut b = Bounds::default();
+        if spooled {
+            return (b, None);
+        }
+        b.add_triangles(tris);
+        (b, keys.map(|k| k.of_world(tris)))
+    };
+    let stats = ctx
+        .pool
+        .install(|| {
+            ctx.source.stream_prepared(
+                &prepare,
+                &mut |tris, (b, k)| {
+                    if ctx.check_interrupt().is_err() {
+                        return Err(IngestError::Callback(ctx.stop.set(ctx.interrupted())));
+                    }
+                    match &mut spooler {
+                        Some(sp) => sp
+                            .push(tris)
+                            .map_err(|e| IngestError::Callback(e.to_string())),
+                        None => {
+                            count += tris.len() as u64;
+                            bounds.merge(&b);
+                            if let (Some(c), Some(k)) = (&mut early_counts, k) {
+                                c.add_keyed(tris, &k);
+                            }
+                            Ok(())
+                        }
+                    }
+                },
+                &mut |done, total| bar.set(done, total),
+            )
+        })
+        .map_err(|e| ctx.stop.lift(e))?;
+    if let Some(sp) = spooler {
+        let spool = sp.finish()?;
+        (count, bounds) = (spool.count, spool.bounds);
+    }
+    bar.finish();
+    let warnings = match stats.degenerate_skipped {
+        0 => vec![],
+        n => vec![format!(
+            "{}: {n} degenerate (zero-area) triangles skipped",
+            ctx.input.display()
+        )],
+    };
+    let marker = SpoolMarker {
+        spooled,
+        count,
+        min: bounds.min,
+        max: bounds.max,
+        triangles: stats.triangles,
+        degenerate_skipped: stats.degenerate_skipped,
+        warnings,
+    };
+    Ok((marker, early_counts))
+}
+
+/// Empty chunk counts on the grid of the vertex list's bounds, for the tile stage's counts to
+/// be taken during the ingest pass: the grid is the triangles' grid unless some vertex is
+/// unused (checked once the triangles' bounds are known). None when the reader cannot give
+/// the vertex bounds before the pass.
+fn vertex_grid_counts(ctx: &BuildContext) -> Option<ChunkCounts> {
+    ctx.pool
+        .install(|| ctx.source.vertex_bounds())
+        .and_then(|vb| Grid::fit(&vb, ctx.settings.resolution).ok())
+        .and_then(|g| ChunkCounts::new(&g).ok())
+}

@@ -1,0 +1,186 @@
+//! The LOD + write stage: the leaves from the leaf log in Morton order (decoded on a second
+//! thread, one leaf ahead), their parents by sort-and-compact (`octree_writer.rs`, `voxlod_lod`),
+//! written in post-order as soon as their last child is done; then the manifest, and the
+//! output renamed into place.
+//!
+//! Artifact: [`Written`] (the file's size and levels); no marker: the output file is the
+//! result.
+
+use std::time::Instant;
+
+use anyhow::Context;
+use voxlod_format::{EncodedNode, FileSpec, Voxel, Writer};
+
+use super::ingest::Ingested;
+use super::voxelize::Voxelized;
+use super::BuildContext;
+use crate::error::StageError;
+use crate::leaf_log;
+use crate::octree_writer::{LevelStats, OctreeWriter};
+use crate::progress::Stage;
+use crate::size::format_size;
+use crate::work::WorkFile;
+
+/// The LOD + write stage's artifact.
+pub(crate) struct Written {
+    /// Size of the octree file, bytes.
+    pub bytes: u64,
+    /// Nodes and voxels per level, finest first.
+    pub levels: Vec<LevelStats>,
+}
+
+/// Writes the octree file from the leaf log and renames it into place.
+pub(crate) fn run(
+    ctx: &mut BuildContext,
+    ingested: &Ingested,
+    voxelized: &Voxelized,
+) -> Result<Written, StageError> {
+    let t = Instant::now();
+    let s = ctx.settings;
+    let grid = &ingested.grid;
+    check_output_space(ctx, voxelized.marker.records)?;
+    let spec = FileSpec {
+        resolution: grid.resolution,
+        levels: grid.levels(),
+        mode: s.mode.code(),
+        origin: grid.origin,
+        voxel_size: grid.voxel_size,
+    };
+    let writer = Writer::create(ctx.output.staged(), spec)?;
+    let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &ctx.pool);
+    write_leaves(ctx, &mut octree, voxelized.marker.records)?;
+    let manifest = manifest_fields(ctx, ingested);
+    let (bytes, levels) = octree.finish(|levels| {
+        let mut m = manifest;
+        m["levels"] = serde_json::json!(levels);
+        m
+    })?;
+    ctx.output
+        .commit()
+        .map_err(|e| StageError::Output(crate::chain_text(&e)))?;
+    ctx.stage_done("lod+write", t, false);
+    Ok(Written { bytes, levels })
+}
+
+/// The file holds every leaf payload: refuses before writing if the output's folder cannot
+/// hold even those (the work folder is kept, see `build`), warns if it may not hold the rest.
+fn check_output_space(ctx: &mut BuildContext, records: u64) -> Result<(), StageError> {
+    let leaves = ctx.work.file(WorkFile::Leaves);
+    let leaf_payloads = std::fs::metadata(&leaves)
+        .map_or(0, |m| m.len())
+        .saturating_sub(leaf_log::RECORD_HEADER_BYTES * records);
+    let output = ctx.output.output();
+    let out_dir = crate::output::output_dir(output);
+    let Some(free) = crate::system::free_disk(out_dir) else {
+        return Ok(());
+    };
+    if free < leaf_payloads {
+        return Err(StageError::Output(format!(
+            "not enough disk space for {}: it holds at least {} of leaf chunks, {} free in {}",
+            output.display(),
+            format_size(leaf_payloads),
+            format_size(free),
+            out_dir.display()
+        )));
+    }
+    if free < leaf_payloads / 3 * 4 {
+        ctx.warnings.push(format!(
+            "{} free in {} may not hold {} (at least {} of leaf chunks, about a third more with the coarser levels)",
+            format_size(free),
+            out_dir.display(),
+            output.display(),
+            format_size(leaf_payloads)
+        ));
+    }
+    Ok(())
+}
+
+/// A decoded leaf: chunk coordinates, voxels, encoded payload (None when empty).
+type Leaf = ([u32; 3], Vec<Voxel>, Option<EncodedNode>);
+
+/// Feeds the leaf log to `octree`. The log is read and decoded on a second thread, one leaf
+/// ahead of the merges and parent encodes of this one (two decoded leaves in flight at most).
+fn write_leaves(
+    ctx: &BuildContext,
+    octree: &mut OctreeWriter,
+    records: u64,
+) -> Result<(), StageError> {
+    let leaves = ctx.work.file(WorkFile::Leaves);
+    let bar = Stage::items(ctx.progress, "lod+write", records);
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Leaf, StageError>>(1);
+    std::thread::scope(|scope| -> Result<(), StageError> {
+        scope.spawn(|| {
+            let r = leaf_log::read_log(&leaves, &mut |h, payload| {
+                if let Err(e) = ctx.check_interrupt() {
+                    return Err(anyhow::anyhow!(ctx.stop.set(e)));
+                }
+                let leaf = decode_leaf(h, payload)?;
+                // a closed channel means the writer failed: stop reading
+                tx.send(Ok(leaf))
+                    .map_err(|_| anyhow::anyhow!("the octree writer stopped"))
+            });
+            if let Err(e) = r {
+                let _ = tx.send(Err(ctx.stop.lift(e)));
+            }
+            drop(tx);
+        });
+        // owned here, so that an early return closes the channel and stops the reader
+        let rx = rx;
+        let mut n = 0u64;
+        for leaf in rx.iter() {
+            let (coord, voxels, enc) = leaf?;
+            octree.push_leaf(coord, voxels, enc)?;
+            n += 1;
+            bar.set(n, records);
+        }
+        Ok(())
+    })?;
+    bar.finish();
+    Ok(())
+}
+
+/// A leaf log record decoded.
+fn decode_leaf(h: &leaf_log::RecordHeader, payload: Vec<u8>) -> anyhow::Result<Leaf> {
+    if h.voxel_count == 0 {
+        return Ok((h.coord, Vec::new(), None));
+    }
+    let mut voxels: Vec<Voxel> = Vec::new();
+    let enc = EncodedNode::from_payload(payload, h.voxel_count, h.payload_crc32, &mut voxels)
+        .with_context(|| format!("leaf log record {}", h.chunk))?;
+    Ok((h.coord, voxels, Some(enc)))
+}
+
+/// The manifest without its `levels` (known once the file is written).
+fn manifest_fields(ctx: &BuildContext, ingested: &Ingested) -> serde_json::Value {
+    let s = ctx.settings;
+    let grid = &ingested.grid;
+    let mut settings = serde_json::json!({
+        "resolution": s.resolution,
+        "mode": s.mode.to_string(),
+        "zstd_level": s.zstd_level,
+    });
+    // the exact methods write the same bytes; the approximate one says so in the file
+    if !s.voxelizer.is_exact() {
+        settings["voxelizer"] = s.voxelizer.to_string().into();
+    }
+    let input_name = ctx
+        .input
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let m = &ingested.marker;
+    serde_json::json!({
+        "tool": "voxlod",
+        "tool_version": env!("CARGO_PKG_VERSION"),
+        "input": { "file": input_name, "format": ctx.source.info().format, "triangles": m.triangles,
+                   "degenerate_skipped": m.degenerate_skipped },
+        "settings": settings,
+        "grid": {
+            "origin": grid.origin,
+            "voxel_size": grid.voxel_size,
+            "resolution": grid.resolution,
+            "levels": grid.levels(),
+        },
+        "levels": serde_json::Value::Null,
+    })
+}

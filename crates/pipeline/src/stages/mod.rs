@@ -1,0 +1,345 @@
+//! The build as a sequence of stages: ingest → tile → voxelize → LOD + write.
+//!
+//! Each stage is one file with one entry, `run(&mut BuildContext, previous artifact) →
+//! artifact`. A stage's artifact is also its resume marker: it is saved in the work folder
+//! (`spool.json`, `bins.json`, `leaves.json`) once the stage's data is complete, and a build
+//! started again with the same arguments takes the artifact from there instead of running the
+//! stage ([`run`] decides which stages a resumed build skips).
+
+pub(crate) mod ingest;
+pub(crate) mod lod_write;
+pub(crate) mod tile;
+pub(crate) mod voxelize;
+
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use voxlod_ingest::MeshSource;
+
+use crate::error::{StageError, StopReason};
+use crate::memory::MemoryPlan;
+use crate::output::OutputGuard;
+use crate::work::WorkDir;
+use crate::{BuildSettings, StageTime};
+
+/// What every stage of one build shares.
+pub(crate) struct BuildContext<'a> {
+    /// The build's settings.
+    pub settings: &'a BuildSettings,
+    /// The input mesh, opened.
+    pub source: &'a MeshSource,
+    /// The input's path as given.
+    pub input: &'a Path,
+    /// The locked output (written to its staged name, renamed at the end).
+    pub output: &'a OutputGuard,
+    /// The worker threads.
+    pub pool: rayon::ThreadPool,
+    /// The work folder with the intermediates and the markers.
+    pub work: &'a WorkDir,
+    /// How the memory budget is split.
+    pub plan: MemoryPlan,
+    /// Show progress on stderr.
+    pub progress: bool,
+    /// Time and peak memory of each stage, in the order they ran.
+    pub times: Vec<StageTime>,
+    /// Warnings for the summary.
+    pub warnings: Vec<String>,
+    /// Set by Ctrl-C; checked between batches.
+    pub interrupt: &'static AtomicBool,
+    /// The typed reason a callback of another crate's loop stopped it.
+    pub stop: StopReason,
+}
+
+impl BuildContext<'_> {
+    /// The error to stop with once an interrupt was requested.
+    pub(crate) fn interrupted(&self) -> StageError {
+        StageError::Interrupted {
+            work: self.work.path().to_path_buf(),
+        }
+    }
+
+    /// `Err(Interrupted)` once an interrupt was requested.
+    pub(crate) fn check_interrupt(&self) -> Result<(), StageError> {
+        if self.interrupt.load(Ordering::SeqCst) {
+            return Err(self.interrupted());
+        }
+        Ok(())
+    }
+
+    /// Records a stage's time, started at `t`; `resumed` if its artifact came from the work
+    /// folder.
+    pub(crate) fn stage_done(&mut self, stage: &'static str, t: Instant, resumed: bool) {
+        self.times.push(StageTime {
+            stage,
+            seconds: t.elapsed().as_secs_f64(),
+            peak_rss: crate::system::peak_rss(),
+            resumed,
+        });
+    }
+}
+
+/// What the stages produced, for the summary.
+pub(crate) struct Built {
+    pub ingested: ingest::Ingested,
+    pub voxelized: voxelize::Voxelized,
+    pub written: lod_write::Written,
+}
+
+/// Runs the stages in order, each from the previous one's artifact; a stage whose marker is
+/// in the work folder is skipped (the voxelize stage's marker skips the tile stage too).
+pub(crate) fn run(ctx: &mut BuildContext) -> Result<Built, StageError> {
+    let mut ingested = ingest::run(ctx)?;
+    let voxelized = match voxelize::Voxelized::resume(ctx) {
+        Some(v) => v,
+        None => {
+            let tiled = tile::run(ctx, &mut ingested)?;
+            voxelize::run(ctx, tiled)?
+        }
+    };
+    if voxelized.marker.skipped > 0 {
+        ctx.warnings.push(format!(
+            "{} triangle/chunk pairs skipped by the voxelizer (zero area after the move to grid coordinates)",
+            voxelized.marker.skipped
+        ));
+    }
+    let written = lod_write::run(ctx, &ingested, &voxelized)?;
+    Ok(Built {
+        ingested,
+        voxelized,
+        written,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::ops::ControlFlow;
+    use std::path::PathBuf;
+    use std::sync::atomic::AtomicBool;
+
+    use super::*;
+    use crate::backend::{ChunkSource, ChunkVoxels, CpuVoxelizers, Voxelize};
+    use crate::output::OutputKind;
+    use crate::work::Marker;
+
+    /// A small mesh in a temporary folder, opened as a build would open it.
+    struct Fixture {
+        dir: tempfile::TempDir,
+        settings: BuildSettings,
+        source: MeshSource,
+        guard: OutputGuard,
+        work: WorkDir,
+        input: PathBuf,
+    }
+
+    /// An ASCII PLY of a tetrahedron and a triangle across the unit cube: at 512³ its
+    /// triangles touch several of the 2×2×2 leaf chunks.
+    fn fixture() -> Fixture {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("t.ply");
+        let v = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+        ];
+        let f = [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3], [1, 2, 4]];
+        let mut text = format!(
+            "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+            v.len(),
+            f.len()
+        );
+        for p in v {
+            text += &format!("{} {} {}\n", p[0], p[1], p[2]);
+        }
+        for t in f {
+            text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+        }
+        std::fs::write(&input, text).unwrap();
+        let settings = BuildSettings {
+            resolution: 512,
+            backend: crate::Backend::Cpu,
+            ..Default::default()
+        };
+        let output = dir.path().join("t.voxlod");
+        let guard = OutputGuard::acquire(&output, &[&input], OutputKind::Octree, false).unwrap();
+        let source = MeshSource::open(&input).unwrap();
+        let key = WorkDir::key(&input, &settings).unwrap();
+        let (work, _) = WorkDir::open(dir.path(), &output, &key).unwrap();
+        Fixture {
+            dir,
+            settings,
+            source,
+            guard,
+            work,
+            input,
+        }
+    }
+
+    impl Fixture {
+        fn ctx(&self, interrupt: &'static AtomicBool) -> BuildContext<'_> {
+            BuildContext {
+                settings: &self.settings,
+                source: &self.source,
+                input: &self.input,
+                output: &self.guard,
+                pool: rayon::ThreadPoolBuilder::new()
+                    .num_threads(2)
+                    .build()
+                    .unwrap(),
+                work: &self.work,
+                plan: MemoryPlan::new(2 << 30, 2).unwrap(),
+                progress: false,
+                times: Vec::new(),
+                warnings: Vec::new(),
+                interrupt,
+                stop: StopReason::default(),
+            }
+        }
+    }
+
+    fn flag() -> &'static AtomicBool {
+        Box::leak(Box::new(AtomicBool::new(false)))
+    }
+
+    /// Each stage's artifact, saved as its marker, is what a resumed build takes back: the
+    /// markers round-trip, the bins marker reopens the same bins, and a second run of each
+    /// stage reports itself resumed instead of running again.
+    #[test]
+    fn stage_artifacts_round_trip_as_resume_markers() {
+        let fx = fixture();
+        let mut ctx = fx.ctx(flag());
+        let mut ingested = ingest::run(&mut ctx).unwrap();
+        assert_eq!(ingested.marker.count, 5);
+        assert_eq!(
+            ctx.work.marker::<ingest::SpoolMarker>(),
+            Some(ingested.marker.clone())
+        );
+        let tiled = tile::run(&mut ctx, &mut ingested).unwrap();
+        let chunks = tiled.bins.chunks().to_vec();
+        assert!(chunks.len() > 1, "{} chunks", chunks.len());
+        let bins_marker = ctx.work.marker::<tile::BinsMarker>().unwrap();
+        assert_eq!(bins_marker, tile::BinsMarker::of(&tiled.bins));
+        let back = bins_marker.chunks().unwrap();
+        assert_eq!(back.len(), chunks.len());
+        for (a, b) in back.iter().zip(&chunks) {
+            assert_eq!(
+                (a.coord, a.morton, a.start, a.count),
+                (b.coord, b.morton, b.start, b.count)
+            );
+        }
+        drop(tiled);
+        // a second build on the same folder takes both artifacts from the markers
+        let mut again = fx.ctx(flag());
+        let mut ingested2 = ingest::run(&mut again).unwrap();
+        assert_eq!(ingested2.marker, ingested.marker);
+        assert_eq!(ingested2.grid, ingested.grid);
+        let tiled2 = tile::run(&mut again, &mut ingested2).unwrap();
+        assert_eq!(
+            tiled2.bins.total(),
+            chunks.iter().map(|c| c.count).sum::<u64>()
+        );
+        let resumed: Vec<_> = again.times.iter().map(|t| (t.stage, t.resumed)).collect();
+        assert_eq!(resumed, [("ingest", true), ("tile", true)]);
+        // the voxelize stage's marker is its artifact, and skips tile and voxelize
+        let v = voxelize::run(&mut again, tiled2).unwrap();
+        assert_eq!(v.marker.records, chunks.len() as u64);
+        assert_eq!(
+            again.work.marker::<voxelize::LeavesMarker>(),
+            Some(v.marker.clone())
+        );
+        let mut third = fx.ctx(flag());
+        let r = voxelize::Voxelized::resume(&mut third).unwrap();
+        assert_eq!(r.marker, v.marker);
+        // a marker whose chunk coordinates no u32 holds is not taken
+        let bad: tile::BinsMarker =
+            serde_json::from_str(r#"{"chunks":[[4294967296,0,0,0,1]]}"#).unwrap();
+        assert!(bad.chunks().is_none());
+        assert_eq!(tile::BinsMarker::FILE.name(), "bins.json");
+        drop(fx.dir);
+    }
+
+    /// A voxelizer that panics on one chunk.
+    struct PanicsOn(usize);
+
+    impl Voxelize for PanicsOn {
+        fn voxelize(&self, chunk: &dyn ChunkSource) -> Result<ChunkVoxels, StageError> {
+            assert!(chunk.index() != self.0, "test panic on chunk {}", self.0);
+            let mut n = 0;
+            chunk.replay(&mut |t| {
+                n += t.len();
+                ControlFlow::Continue(())
+            })?;
+            Ok(ChunkVoxels {
+                voxels: Vec::new(),
+                skipped: n as u64,
+            })
+        }
+    }
+
+    /// A panic in a worker of the voxelize stage ends the stage with an error naming the
+    /// chunk (a watchdog aborts the test if it hangs instead), the chunks before it are in the
+    /// leaf log, and no marker is written; with the real voxelizer the stage then completes.
+    #[test]
+    fn worker_panic_in_voxelize_stage_is_an_error_naming_the_chunk() {
+        let (done, watch) = std::sync::mpsc::channel::<()>();
+        std::thread::spawn(move || {
+            if watch
+                .recv_timeout(std::time::Duration::from_secs(120))
+                .is_err()
+            {
+                eprintln!("the voxelize stage hung after a worker panic");
+                std::process::abort();
+            }
+        });
+        let fx = fixture();
+        let mut ctx = fx.ctx(flag());
+        let mut ingested = ingest::run(&mut ctx).unwrap();
+        let tiled = tile::run(&mut ctx, &mut ingested).unwrap();
+        let n = tiled.bins.chunks().len();
+        assert!(n > 2);
+        let e = voxelize::run_with(&mut ctx, &tiled, &PanicsOn(1))
+            .err()
+            .expect("a panic must fail the stage");
+        let coord = tiled.bins.chunks()[1].coord;
+        match &e {
+            StageError::Panicked {
+                chunk,
+                coord: c,
+                message,
+            } => {
+                assert_eq!((*chunk, *c), (1, coord));
+                assert!(message.contains("test panic on chunk 1"), "{message}");
+            }
+            other => panic!("expected Panicked, got {other:?}"),
+        }
+        assert!(e
+            .to_string()
+            .starts_with(&format!("voxelizing leaf chunk 1 {coord:?} panicked")));
+        assert!(ctx.work.marker::<voxelize::LeavesMarker>().is_none());
+        // the log holds chunk 0 only; the real voxelizer continues from there
+        let cpu = CpuVoxelizers::new(&fx.settings, 2);
+        let (m, gpu) = voxelize::run_with(&mut ctx, &tiled, &cpu).unwrap();
+        assert_eq!((m.records, gpu), (n as u64, None));
+        assert_eq!(
+            ctx.times.last().map(|t| (t.stage, t.resumed)),
+            Some(("voxelize", true))
+        );
+        done.send(()).unwrap();
+    }
+
+    /// An interrupt stops a stage with the typed error naming the work folder.
+    #[test]
+    fn interrupt_is_a_typed_error() {
+        let fx = fixture();
+        let stop = flag();
+        stop.store(true, Ordering::SeqCst);
+        let mut ctx = fx.ctx(stop);
+        let e = ingest::run(&mut ctx).err().expect("interrupted");
+        assert!(
+            matches!(&e, StageError::Interrupted { work } if work == fx.work.path()),
+            "{e:?}"
+        );
+    }
+}

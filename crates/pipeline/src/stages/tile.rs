@@ -1,0 +1,189 @@
+//! The tile stage: counts the triangles per leaf chunk (unless the ingest stage did), then
+//! scatters them into pre-sized on-disk bins (`bins.tri`), one contiguous run per chunk in
+//! Morton order (`voxlod_tile`). Reads the spool, or the memory-mapped input again.
+//!
+//! Artifact: the open [`Bins`]; resume marker: their layout, [`BinsMarker`] (`bins.json`).
+
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use voxlod_tile::{Bins, ChunkBin, ChunkCounts, Passes, RecordLayout, Spool};
+
+use super::ingest::Ingested;
+use super::BuildContext;
+use crate::error::StageError;
+use crate::passes::{InputPasses, Interruptible};
+use crate::progress::Stage;
+use crate::size::format_size;
+use crate::work::{Marker, WorkFile};
+
+/// The bins layout (`bins.json`): `[x, y, z, start, count]` per non-empty chunk.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(crate) struct BinsMarker {
+    chunks: Vec<[u64; 5]>,
+}
+
+impl Marker for BinsMarker {
+    const FILE: WorkFile = WorkFile::BinsMarker;
+}
+
+impl BinsMarker {
+    /// The layout of `bins`.
+    pub(crate) fn of(bins: &Bins) -> BinsMarker {
+        let chunks = bins
+            .chunks()
+            .iter()
+            .map(|c| {
+                let [x, y, z] = c.coord.map(u64::from);
+                [x, y, z, c.start, c.count]
+            })
+            .collect();
+        BinsMarker { chunks }
+    }
+
+    /// The chunks of the layout (None if a coordinate is out of range: the marker is not ours).
+    pub(crate) fn chunks(&self) -> Option<Vec<ChunkBin>> {
+        self.chunks
+            .iter()
+            .map(|c| {
+                let coord = [
+                    u32::try_from(c[0]).ok()?,
+                    u32::try_from(c[1]).ok()?,
+                    u32::try_from(c[2]).ok()?,
+                ];
+                Some(ChunkBin {
+                    coord,
+                    morton: voxlod_geom::morton3(coord[0], coord[1], coord[2]),
+                    start: c[3],
+                    count: c[4],
+                })
+            })
+            .collect()
+    }
+}
+
+/// The tile stage's artifact.
+pub(crate) struct Tiled {
+    /// The bins, open for reading.
+    pub bins: Bins,
+}
+
+/// Runs the tile stage, or opens the bins its marker describes. Takes the chunk counts the
+/// ingest stage left, if any. Removes the spool once the bins are complete.
+pub(crate) fn run(ctx: &mut BuildContext, ingested: &mut Ingested) -> Result<Tiled, StageError> {
+    let t = Instant::now();
+    let bins_path = ctx.work.file(WorkFile::Bins);
+    let resumed = ctx
+        .work
+        .marker::<BinsMarker>()
+        .and_then(|m| m.chunks())
+        .and_then(|chunks| Bins::open(&bins_path, chunks, ingested.layout).ok());
+    let bins = match resumed {
+        Some(b) => {
+            ctx.stage_done("tile", t, true);
+            b
+        }
+        None => {
+            let counts = ingested.early_counts.take();
+            let bins = tile(ctx, ingested, counts)?;
+            ctx.work.set_marker(&BinsMarker::of(&bins))?;
+            ctx.stage_done("tile", t, false);
+            bins
+        }
+    };
+    let spool = ctx.work.file(WorkFile::Spool);
+    if spool.exists() {
+        std::fs::remove_file(&spool).map_err(StageError::io("removing", &spool))?;
+    }
+    Ok(Tiled { bins })
+}
+
+/// The count pass (unless `counts` are given) and the scatter pass.
+fn tile(
+    ctx: &BuildContext,
+    ing: &Ingested,
+    counts: Option<ChunkCounts>,
+) -> Result<Bins, StageError> {
+    let count = ing.marker.count;
+    let spool;
+    let input;
+    let src: &dyn Passes = if ing.marker.spooled {
+        spool = Spool {
+            path: ctx.work.file(WorkFile::Spool),
+            count,
+            bounds: ing.bounds(),
+            layout: ing.layout,
+        };
+        &spool
+    } else {
+        input = InputPasses {
+            source: ctx.source,
+            count,
+            stop: &ctx.stop,
+        };
+        &input
+    };
+    let src = Interruptible { inner: src, ctx };
+    let counts = match counts {
+        Some(c) => c,
+        None => {
+            let bar = Stage::items(ctx.progress, "count", count);
+            let c = ctx
+                .pool
+                .install(|| voxlod_tile::count(&src, &ing.grid, &mut |d, n| bar.set(d, n)))
+                .map_err(|e| ctx.stop.lift(e))?;
+            bar.finish();
+            c
+        }
+    };
+    ctx.check_interrupt()?;
+    check_bins_space(ctx, &counts, ing.layout)?;
+    let bar = Stage::items(ctx.progress, "scatter", count);
+    let bins = ctx
+        .pool
+        .install(|| {
+            voxlod_tile::scatter(
+                &src,
+                &ing.grid,
+                &counts,
+                &ctx.work.file(WorkFile::Bins),
+                ing.layout,
+                ctx.plan.scatter_buffer,
+                &mut |d, n| bar.set(d, n),
+            )
+        })
+        .map_err(|e| ctx.stop.lift(e))?;
+    bar.finish();
+    Ok(bins)
+}
+
+/// Refuses the scatter pass if the bins, whose exact size the counts give, cannot fit.
+fn check_bins_space(
+    ctx: &BuildContext,
+    counts: &ChunkCounts,
+    layout: RecordLayout,
+) -> Result<(), StageError> {
+    let rec = layout.bytes() as u64;
+    let bins_bytes = counts.total() * rec;
+    let work = ctx.work.path();
+    if let Some(free) = crate::system::free_disk(work) {
+        if bins_bytes > free {
+            return Err(StageError::TempDisk(format!(
+                "not enough disk space for the chunk bins: {} needed in {} ({} records of {} bytes), {} free (choose another folder with --tmp)",
+                format_size(bins_bytes),
+                work.display(),
+                counts.total(),
+                rec,
+                format_size(free)
+            )));
+        }
+    }
+    if ctx.progress {
+        eprintln!(
+            "chunk bins: {} ({} triangle records)",
+            format_size(bins_bytes),
+            counts.total()
+        );
+    }
+    Ok(())
+}
