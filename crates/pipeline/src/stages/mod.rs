@@ -300,8 +300,7 @@ mod tests {
         let n = tiled.bins.chunks().len();
         assert!(n > 2);
         let e = voxelize::run_with(&mut ctx, &tiled, &PanicsOn(1))
-            .err()
-            .expect("a panic must fail the stage");
+            .expect_err("a panic must fail the stage");
         let coord = tiled.bins.chunks()[1].coord;
         match &e {
             StageError::Panicked {
