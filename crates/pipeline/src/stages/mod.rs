@@ -299,7 +299,7 @@ mod tests {
         let tiled = tile::run(&mut ctx, &mut ingested).unwrap();
         let n = tiled.bins.chunks().len();
         assert!(n > 2);
-        let e = voxelize::run_with(&mut ctx, &tiled, &PanicsOn(1))
+        let e = voxelize::run_with(&mut ctx, &tiled, Box::new(PanicsOn(1)))
             .expect_err("a panic must fail the stage");
         let coord = tiled.bins.chunks()[1].coord;
         match &e {
@@ -318,8 +318,8 @@ mod tests {
             .starts_with(&format!("voxelizing leaf chunk 1 {coord:?} panicked")));
         assert!(ctx.work.marker::<voxelize::LeavesMarker>().is_none());
         // the log holds chunk 0 only; the real voxelizer continues from there
-        let cpu = CpuVoxelizers::new(&fx.settings, 2);
-        let (m, gpu) = voxelize::run_with(&mut ctx, &tiled, &cpu).unwrap();
+        let cpu = Box::new(CpuVoxelizers::new(&fx.settings, 2));
+        let (m, gpu) = voxelize::run_with(&mut ctx, &tiled, cpu).unwrap();
         assert_eq!((m.records, gpu), (n as u64, None));
         assert_eq!(
             ctx.times.last().map(|t| (t.stage, t.resumed)),

@@ -66,8 +66,7 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, Sta
     let threads = ctx.pool.current_num_threads();
     let (vz, backend) =
         crate::backend::select(ctx.settings, ctx.plan.voxelizers, threads, &tiled.bins)?;
-    let (marker, gpu_stats) = run_with(ctx, &tiled, &*vz)?;
-    drop(vz);
+    let (marker, gpu_stats) = run_with(ctx, &tiled, vz)?;
     tiled.bins.remove()?;
     Ok(Voxelized {
         marker,
@@ -77,20 +76,22 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, Sta
 }
 
 /// The stage with the voxelizer `vz`: continues the leaf log where it ends, writes the marker.
+/// The voxelizer is dropped (its memory freed) before the stage's peak memory is taken.
 pub(crate) fn run_with(
     ctx: &mut BuildContext,
     tiled: &Tiled,
-    vz: &dyn Voxelize,
+    vz: Box<dyn Voxelize>,
 ) -> Result<(LeavesMarker, Option<GpuStats>), StageError> {
     let t = Instant::now();
     let leaves_path = ctx.work.file(WorkFile::Leaves);
     let mut log = LeafLog::open(&leaves_path)?;
     let start = log.records() as usize;
-    if let Err(e) = append_chunks(ctx, &tiled.bins, vz, &mut log) {
+    if let Err(e) = append_chunks(ctx, &tiled.bins, &*vz, &mut log) {
         log.finish()?;
         return Err(e);
     }
     let gpu_stats = vz.gpu_stats()?;
+    drop(vz);
     let records = log.records();
     log.finish()?;
     let mut skipped = 0u64;
