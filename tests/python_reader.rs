@@ -18,16 +18,10 @@ fn ci() -> bool {
     std::env::var("CI").is_ok_and(|v| v == "true")
 }
 
+/// The shared test meshes (`voxlod_testkit::shared_meshes`: skipped with a note without
+/// `../shared`, a failure under CI).
 fn shared_meshes() -> Option<PathBuf> {
-    let p = Path::new(REPO).join("../shared/data/meshes");
-    if p.is_dir() {
-        return Some(p);
-    }
-    if ci() {
-        panic!("../shared/data/meshes is missing, and CI=true requires it");
-    }
-    eprintln!("python_reader: SKIPPED: ../shared/data/meshes is not beside this clone");
-    None
+    voxlod_testkit::shared_meshes(module_path!())
 }
 
 /// True if python3 with numpy and zstandard runs; otherwise fails under CI, skips elsewhere.

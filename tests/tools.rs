@@ -13,16 +13,10 @@ use voxlod_format::{encode_node, Reader, Writer};
 const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
 const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
 
+/// The shared test meshes (`voxlod_testkit::shared_meshes`: skipped with a note without
+/// `../shared`, a failure under CI).
 fn shared_meshes(test: &str) -> Option<PathBuf> {
-    let p = Path::new(REPO).join("../shared/data/meshes");
-    if p.is_dir() {
-        return Some(p);
-    }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("{test}: ../shared/data/meshes is missing, and CI=true requires it");
-    }
-    eprintln!("{test}: SKIPPED: ../shared/data/meshes is not beside this clone");
-    None
+    voxlod_testkit::shared_meshes(test)
 }
 
 fn voxlod(args: &[&str]) -> Output {

@@ -87,7 +87,7 @@ fn mutate(rng: &mut Rng, data: &mut Vec<u8>) {
         match rng.below(6) {
             0 if at < data.len() => data[at] ^= 1 << rng.below(8),
             1 => data.truncate(at),
-            2 => data.insert(at, rng.next() as u8),
+            2 => data.insert(at, rng.next_u64() as u8),
             3 if at < data.len() => {
                 data.remove(at);
             }

@@ -11,26 +11,10 @@ use std::path::{Path, PathBuf};
 use voxlod_format::voxel::{border_caps, face_mask, pack_color, pack_normal};
 use voxlod_format::{encode_node, FileSpec, Reader, Writer, DEFAULT_ZSTD_LEVEL, MODE_CONSERVATIVE};
 
+/// The shared test meshes (`voxlod_testkit::shared_meshes`: skipped with a note without
+/// `../shared`, a failure under CI).
 fn meshes() -> Option<PathBuf> {
-    let dir = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/meshes"
-    ))
-    .to_path_buf();
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    if std::env::var("CI").as_deref() == Ok("true") {
-        panic!(
-            "CI=true but the shared test data is missing at {}",
-            dir.display()
-        );
-    }
-    eprintln!(
-        "skipped: shared test meshes not found at {} (they live beside the repository)",
-        dir.display()
-    );
-    None
+    voxlod_testkit::shared_meshes(module_path!())
 }
 
 /// Vertices (x, y, z, intensity) and triangles of an ASCII PLY with `x y z [confidence]

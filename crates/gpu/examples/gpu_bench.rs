@@ -64,14 +64,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     scenes.push((
         "bun_zipper (69,451 tris)",
         common::to_grid(
-            &common::load_ply(&dir.join("stanford-bunny/bun_zipper.ply")),
+            &common::load_mesh(&dir.join("stanford-bunny/bun_zipper.ply")),
             256,
         ),
     ));
     scenes.push((
         "sponza (Dabrovic, 66,450 tris)",
         common::to_grid(
-            &common::load_obj(&dir.join("mcguire-sponza-dabrovic/sponza.obj")),
+            &common::load_mesh(&dir.join("mcguire-sponza-dabrovic/sponza.obj")),
             256,
         ),
     ));

@@ -92,7 +92,11 @@ fn o(origin: [u32; 3], p: [f32; 3]) -> [f32; 3] {
 fn random_point(rng: &mut Rng, origin: [u32; 3], lo: f32, hi: f32) -> [f32; 3] {
     o(
         origin,
-        [rng.range(lo, hi), rng.range(lo, hi), rng.range(lo, hi)],
+        [
+            rng.range_f32(lo, hi),
+            rng.range_f32(lo, hi),
+            rng.range_f32(lo, hi),
+        ],
     )
 }
 
@@ -107,9 +111,9 @@ fn small_triangles() {
         let s = if i % 4 == 0 { 3.0 } else { 1.0 };
         let v = [0, 1, 2].map(|_| {
             [
-                c[0] + rng.range(-s, s),
-                c[1] + rng.range(-s, s),
-                c[2] + rng.range(-s, s),
+                c[0] + rng.range_f32(-s, s),
+                c[1] + rng.range_f32(-s, s),
+                c[2] + rng.range_f32(-s, s),
             ]
         });
         let mut t = Triangle::new(v);
@@ -144,13 +148,13 @@ fn slivers() {
         let a = random_point(&mut rng, origin, 0.0, 256.0);
         let len = if i % 3 == 0 { 200.0 } else { 20.0 };
         let d = [
-            rng.range(-len, len),
-            rng.range(-len, len),
-            rng.range(-len, len),
+            rng.range_f32(-len, len),
+            rng.range_f32(-len, len),
+            rng.range_f32(-len, len),
         ];
         let b = [a[0] + d[0], a[1] + d[1], a[2] + d[2]];
-        let t_ = rng.f();
-        let w = 10f32.powf(rng.range(-3.0, -1.0));
+        let t_ = rng.f32();
+        let w = 10f32.powf(rng.range_f32(-3.0, -1.0));
         let c = [
             a[0] + t_ * d[0] + w,
             a[1] + t_ * d[1] - w,
@@ -172,11 +176,11 @@ fn axis_aligned_ties() {
     let origin = [0, 0, 0];
     let mut tris = Vec::new();
     for i in 0..600 {
-        let q = |rng: &mut Rng, s: f32| (rng.range(-s, s) * 2.0).round() / 2.0;
+        let q = |rng: &mut Rng, s: f32| (rng.range_f32(-s, s) * 2.0).round() / 2.0;
         let c = [
-            rng.range(2.0, 250.0).round(),
-            rng.range(2.0, 250.0).round(),
-            rng.range(2.0, 250.0).round(),
+            rng.range_f32(2.0, 250.0).round(),
+            rng.range_f32(2.0, 250.0).round(),
+            rng.range_f32(2.0, 250.0).round(),
         ];
         let axis = i % 3;
         let s = if i % 5 == 0 { 12.0 } else { 3.0 };
@@ -268,7 +272,7 @@ fn mesh_test(name: &str, tris: Vec<[[f32; 3]; 3]>, res: u32) {
 #[test]
 fn npm_bunny_two_resolutions() {
     let Some(dir) = meshes_dir() else { return };
-    let tris = load_ply(&dir.join("npm-bunny/bunny.ply"));
+    let tris = load_mesh(&dir.join("npm-bunny/bunny.ply"));
     assert_eq!(tris.len(), 3674);
     mesh_test("npm-bunny@256", tris.clone(), 256);
     mesh_test("npm-bunny@512", tris, 512);
@@ -277,7 +281,7 @@ fn npm_bunny_two_resolutions() {
 #[test]
 fn stanford_bunny() {
     let Some(dir) = meshes_dir() else { return };
-    let tris = load_ply(&dir.join("stanford-bunny/bun_zipper.ply"));
+    let tris = load_mesh(&dir.join("stanford-bunny/bun_zipper.ply"));
     assert_eq!(tris.len(), 69451);
     mesh_test("bun_zipper@256", tris, 256);
 }

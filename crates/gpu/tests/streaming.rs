@@ -82,7 +82,7 @@ fn same_as_one_batch(name: &str, origin: [u32; 3], tris: &[Triangle], batch: usi
 #[test]
 fn npm_bunny_in_small_batches() {
     let Some(dir) = meshes_dir() else { return };
-    let tris = load_ply(&dir.join("npm-bunny/bunny.ply"));
+    let tris = load_mesh(&dir.join("npm-bunny/bunny.ply"));
     assert_eq!(tris.len(), 3674);
     let mut rng = Rng(7);
     let tris: Vec<Triangle> = to_grid(&tris, 256)
@@ -116,8 +116,8 @@ fn many_windows_in_small_batches() {
             tris.push(t);
         }
         for _ in 0..40 {
-            let c = [0, 1, 2].map(|a| origin[a] as f32 + rng.range(0.0, 256.0));
-            let mut t = Triangle::new([0, 1, 2].map(|_| c.map(|x| x + rng.range(-2.0, 2.0))));
+            let c = [0, 1, 2].map(|a| origin[a] as f32 + rng.range_f32(0.0, 256.0));
+            let mut t = Triangle::new([0, 1, 2].map(|_| c.map(|x| x + rng.range_f32(-2.0, 2.0))));
             decorate(&mut t, &mut rng, true);
             tris.push(t);
         }
@@ -225,9 +225,9 @@ fn split_matches_cpu_classification() {
     let mut rng = Rng(0x5eed);
     let mut tris = Vec::new();
     while tris.len() < 1500 {
-        let c = [0, 1, 2].map(|a| origin[a] as f32 + rng.range(12.0, 244.0));
-        let s = rng.range(0.3, 10.0);
-        let mut t = Triangle::new([0, 1, 2].map(|_| c.map(|x| x + rng.range(-s, s))));
+        let c = [0, 1, 2].map(|a| origin[a] as f32 + rng.range_f32(12.0, 244.0));
+        let s = rng.range_f32(0.3, 10.0);
+        let mut t = Triangle::new([0, 1, 2].map(|_| c.map(|x| x + rng.range_f32(-s, s))));
         let (class, area, tie) = classify_cpu(&t, origin, DEFAULT_CUTOFF);
         let near = |c: f64| (area - c).abs() < 1e-3 * c.max(1.0);
         if class.is_none() || tie || [2.0, DEFAULT_CUTOFF as f64, 32.0].into_iter().any(near) {

@@ -11,43 +11,31 @@ use common::*;
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-/// xorshift64*: the mutation choices.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
+use voxlod_testkit::Rng;
 
 /// One random mutation of `data`.
 fn mutate(rng: &mut Rng, data: &[u8]) -> Vec<u8> {
     let mut d = data.to_vec();
-    let rounds = 1 + rng.below(3);
+    let rounds = 1 + rng.index(3);
     for _ in 0..rounds {
-        let at = rng.below(d.len() + 1);
-        match rng.below(7) {
+        let at = rng.index(d.len() + 1);
+        match rng.index(7) {
             0 if !d.is_empty() => {
                 let i = at.min(d.len() - 1);
-                d[i] ^= 1 << rng.below(8);
+                d[i] ^= 1 << rng.index(8);
             }
             1 => d.truncate(at),
             2 => {
-                let byte = [0u8, b' ', b'\n', b'-', b'9', 0xff, rng.next() as u8][rng.below(7)];
+                let byte = [0u8, b' ', b'\n', b'-', b'9', 0xff, rng.next_u64() as u8][rng.index(7)];
                 d.insert(at, byte);
             }
             3 if at < d.len() => {
-                let end = (at + 1 + rng.below(8)).min(d.len());
+                let end = (at + 1 + rng.index(8)).min(d.len());
                 d.drain(at..end);
             }
             4 if at < d.len() => {
                 // duplicate a span (repeated lines, elements, records)
-                let end = (at + 1 + rng.below(40)).min(d.len());
+                let end = (at + 1 + rng.index(40)).min(d.len());
                 let span = d[at..end].to_vec();
                 d.splice(at..at, span);
             }
@@ -60,7 +48,7 @@ fn mutate(rng: &mut Rng, data: &[u8]) -> Vec<u8> {
                     b"300",
                     b"-1",
                     b"1e19",
-                ][rng.below(6)];
+                ][rng.index(6)];
                 if let Some(s) = (at..d.len()).find(|&i| d[i].is_ascii_digit()) {
                     let e = (s..d.len())
                         .find(|&i| !d[i].is_ascii_digit())
@@ -71,7 +59,7 @@ fn mutate(rng: &mut Rng, data: &[u8]) -> Vec<u8> {
             _ if d.len() >= 4 => {
                 // a big 4-byte field (binary counts and indices)
                 let i = at.min(d.len() - 4);
-                let v: u32 = [u32::MAX, 0x8000_0000, 0x7fff_ffff, 1 << 20][rng.below(4)];
+                let v: u32 = [u32::MAX, 0x8000_0000, 0x7fff_ffff, 1 << 20][rng.index(4)];
                 d[i..i + 4].copy_from_slice(&v.to_le_bytes());
             }
             _ => {}

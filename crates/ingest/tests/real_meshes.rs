@@ -6,25 +6,10 @@ use std::path::{Path, PathBuf};
 use voxlod_geom::{Bounds, Triangle};
 use voxlod_ingest::{IngestStats, MeshSource};
 
+/// The shared test meshes (`voxlod_testkit::shared_meshes`: skipped with a note without
+/// `../shared`, a failure under CI).
 fn mesh_dir() -> Option<PathBuf> {
-    let dir = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/meshes"
-    ));
-    if dir.join("stats.json").is_file() {
-        return Some(dir);
-    }
-    if std::env::var("CI").as_deref() == Ok("true") {
-        panic!(
-            "CI=true but the shared meshes are missing at {}",
-            dir.display()
-        );
-    }
-    eprintln!(
-        "SKIPPED: shared test meshes not found at {} (the `shared` folder beside the repo)",
-        dir.display()
-    );
-    None
+    voxlod_testkit::shared_meshes(module_path!())
 }
 
 fn is_mesh(p: &Path) -> bool {

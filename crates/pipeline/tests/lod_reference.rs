@@ -10,26 +10,10 @@ use voxlod_format::voxel::{border_caps, morton8, pack_normal, unpack_normal};
 use voxlod_format::{Reader, Voxel};
 use voxlod_pipeline::{build, Backend, BuildSettings};
 
+/// The shared test meshes (`voxlod_testkit::shared_meshes`: skipped with a note without
+/// `../shared`, a failure under CI).
 fn meshes() -> Option<PathBuf> {
-    let dir = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/meshes"
-    ))
-    .to_path_buf();
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    if std::env::var("CI").as_deref() == Ok("true") {
-        panic!(
-            "CI=true but the shared test data is missing at {}",
-            dir.display()
-        );
-    }
-    eprintln!(
-        "skipped: shared test meshes not found at {} (they live beside the repository)",
-        dir.display()
-    );
-    None
+    voxlod_testkit::shared_meshes(module_path!())
 }
 
 /// Brute force: map, sort by parent code, group, reduce.

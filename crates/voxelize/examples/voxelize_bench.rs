@@ -32,81 +32,12 @@ use voxlod_voxelize::{
     voxelize_grid, voxelize_triangle, voxelize_triangle_with, ChunkVoxelizer, Method, Mode,
 };
 
-fn icosphere(subdiv: u32) -> Vec<[[f64; 3]; 3]> {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let norm = |p: [f64; 3]| {
-        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        [p[0] / l, p[1] / l, p[2] / l]
-    };
-    let mut v: Vec<[f64; 3]> = [
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ]
-    .map(norm)
-    .to_vec();
-    let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..subdiv {
-        let mut mid = HashMap::new();
-        let mut nf = Vec::with_capacity(f.len() * 4);
-        for tri in &f {
-            let mut m = [0usize; 3];
-            for i in 0..3 {
-                let (a, b) = (tri[i], tri[(i + 1) % 3]);
-                m[i] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    let (pa, pb) = (v[a], v[b]);
-                    v.push(norm([pa[0] + pb[0], pa[1] + pb[1], pa[2] + pb[2]]));
-                    v.len() - 1
-                });
-            }
-            nf.extend([
-                [tri[0], m[0], m[2]],
-                [tri[1], m[1], m[0]],
-                [tri[2], m[2], m[1]],
-                [m[0], m[1], m[2]],
-            ]);
-        }
-        f = nf;
-    }
-    f.iter().map(|t| t.map(|i| v[i])).collect()
-}
-
 /// The icosphere filling 90% of the grid, vertex colours red, green, blue.
 fn sphere(subdiv: u32, res: u32) -> Vec<Triangle> {
     let r = 0.45 * res as f64;
     let c = 0.5 * res as f64 + 0.123;
     println!("icosphere subdiv {subdiv}, radius {r:.0}");
-    icosphere(subdiv)
+    voxlod_testkit::mesh::triangles(&voxlod_testkit::mesh::icosphere(subdiv))
         .iter()
         .map(|t| {
             let mut tri = Triangle::new(t.map(|p| p.map(|x| (c + r * x) as f32)));

@@ -226,7 +226,7 @@ fn f32_sums_within_the_bound_on_the_npm_bunny() {
     let Some(dir) = shared_meshes() else {
         return;
     };
-    let (v, f) = read_simple_ply(&dir.join("npm-bunny/bunny.ply"));
+    let (v, f) = read_ply(&dir.join("npm-bunny/bunny.ply"));
     // into a 512³ grid, with vertex colours from the position and smooth-ish vertex normals
     // on every other triangle
     let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);

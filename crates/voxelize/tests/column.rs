@@ -148,7 +148,7 @@ fn fast_chunk_voxelizer_gives_the_same_records_on_the_npm_bunny() {
     let Some(dir) = shared_meshes() else {
         return;
     };
-    let (v, f) = read_simple_ply(&dir.join("npm-bunny/bunny.ply"));
+    let (v, f) = read_ply(&dir.join("npm-bunny/bunny.ply"));
     // fitted to a 1024³ grid; the chunk at the bunny's centre
     let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
     for p in &v {

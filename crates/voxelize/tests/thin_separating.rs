@@ -251,7 +251,7 @@ impl RayInside {
 fn thin_bunny_does_not_leak() {
     let Some(dir) = shared_meshes() else { return };
     let path = dir.join("npm-bunny/bunny.ply");
-    let (v0, f) = read_simple_ply(&path);
+    let (v0, f) = read_ply(&path);
     // the npm bunny is closed: every undirected edge is used exactly twice, once each way
     let mut edges = HashSet::new();
     for t in &f {

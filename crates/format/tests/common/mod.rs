@@ -11,20 +11,7 @@ use std::collections::BTreeMap;
 use voxlod_format::voxel::{border_caps, morton8, pack_normal, unpack_normal, Voxel};
 use voxlod_format::FileSpec;
 
-/// xorshift64* — deterministic, no dependency.
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    pub fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-}
+pub use voxlod_testkit::Rng;
 
 /// Inverse of morton8, by bit loop (independent of the crate's).
 pub fn unmorton(m: u32) -> [u8; 3] {
@@ -76,7 +63,7 @@ pub fn random_voxels(rng: &mut Rng, n: usize) -> Vec<Voxel> {
     codes
         .iter()
         .map(|&m| {
-            let r = rng.next();
+            let r = rng.next_u64();
             Voxel::new(
                 unmorton(m),
                 (r & 0x3f) as u8,

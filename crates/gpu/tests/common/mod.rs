@@ -1,5 +1,5 @@
-//! Test helpers: minimal mesh loaders (binary/ASCII PLY with float x y z and a face list, OBJ
-//! `v`/`f` lines), grid fitting, a deterministic RNG and the CPU-vs-GPU comparison.
+//! Test helpers of the GPU tests: mesh loading and the RNG from `voxlod-testkit`, grid fitting,
+//! random attributes and the CPU-vs-GPU comparison.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
@@ -8,152 +8,18 @@ use voxlod_format::voxel::unpack_normal;
 use voxlod_format::Voxel;
 use voxlod_geom::{Bounds, Grid, Triangle};
 
+pub use voxlod_testkit::Rng;
+
 /// The shared meshes folder, or None (test skipped, with a message) when it is missing;
 /// with CI=true a missing folder is a failure.
 pub fn meshes_dir() -> Option<PathBuf> {
-    let p = PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/meshes"
-    ));
-    if p.is_dir() {
-        return Some(p);
-    }
-    if std::env::var("CI").as_deref() == Ok("true") {
-        panic!("{} is missing and CI=true", p.display());
-    }
-    eprintln!("skipped: {} is missing", p.display());
-    None
+    voxlod_testkit::shared_meshes("voxlod-gpu tests")
 }
 
-/// Positions of a PLY's triangles (fan-triangulated polygons). Supports binary_little_endian
-/// and ascii with float vertex properties of which x y z are the first three, and a face
-/// `list uchar int|uint` of vertex indices as the only face property.
-pub fn load_ply(path: &Path) -> Vec<[[f32; 3]; 3]> {
-    let data = std::fs::read(path).unwrap();
-    // the header may end its lines with \r\n (bun_zipper.ply does)
-    let at = data
-        .windows(10)
-        .position(|w| w == b"end_header")
-        .expect("no end_header");
-    let end = at
-        + data[at..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .expect("no newline after end_header")
-        + 1;
-    let header = std::str::from_utf8(&data[..end]).unwrap();
-    let ascii = header.contains("format ascii");
-    let mut nv = 0usize;
-    let mut nf = 0usize;
-    let mut vprops = 0usize;
-    let mut elem = "";
-    for line in header.lines() {
-        let w: Vec<&str> = line.split_whitespace().collect();
-        match w.as_slice() {
-            ["element", name, n] => {
-                elem = if *name == "vertex" {
-                    "vertex"
-                } else if *name == "face" {
-                    "face"
-                } else {
-                    "other"
-                };
-                if elem == "vertex" {
-                    nv = n.parse().unwrap();
-                } else if elem == "face" {
-                    nf = n.parse().unwrap();
-                }
-            }
-            ["property", "float", _] if elem == "vertex" => vprops += 1,
-            _ => {}
-        }
-    }
-    let mut verts = Vec::with_capacity(nv);
-    let mut faces: Vec<Vec<usize>> = Vec::with_capacity(nf);
-    if ascii {
-        let body = std::str::from_utf8(&data[end..]).unwrap();
-        let mut lines = body.lines();
-        for _ in 0..nv {
-            let f: Vec<f32> = lines
-                .next()
-                .unwrap()
-                .split_whitespace()
-                .map(|s| s.parse().unwrap())
-                .collect();
-            verts.push([f[0], f[1], f[2]]);
-        }
-        for _ in 0..nf {
-            let f: Vec<usize> = lines
-                .next()
-                .unwrap()
-                .split_whitespace()
-                .map(|s| s.parse().unwrap())
-                .collect();
-            faces.push(f[1..=f[0]].to_vec());
-        }
-    } else {
-        assert!(header.contains("binary_little_endian"));
-        let mut at = end;
-        let f32_at = |i: usize| f32::from_le_bytes(data[i..i + 4].try_into().unwrap());
-        for _ in 0..nv {
-            verts.push([f32_at(at), f32_at(at + 4), f32_at(at + 8)]);
-            at += 4 * vprops;
-        }
-        for _ in 0..nf {
-            let k = data[at] as usize;
-            at += 1;
-            let f = (0..k)
-                .map(|j| {
-                    u32::from_le_bytes(data[at + 4 * j..at + 4 * j + 4].try_into().unwrap())
-                        as usize
-                })
-                .collect();
-            at += 4 * k;
-            faces.push(f);
-        }
-    }
-    fan(&verts, &faces)
-}
-
-/// Positions of an OBJ's triangles (`v` and `f` lines only; negative indices supported).
-pub fn load_obj(path: &Path) -> Vec<[[f32; 3]; 3]> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut verts = Vec::new();
-    let mut faces = Vec::new();
-    for line in text.lines() {
-        let mut w = line.split_whitespace();
-        match w.next() {
-            Some("v") => {
-                let f: Vec<f32> = w.take(3).map(|s| s.parse().unwrap()).collect();
-                verts.push([f[0], f[1], f[2]]);
-            }
-            Some("f") => {
-                let f: Vec<usize> = w
-                    .map(|s| {
-                        let i: i64 = s.split('/').next().unwrap().parse().unwrap();
-                        if i < 0 {
-                            (verts.len() as i64 + i) as usize
-                        } else {
-                            i as usize - 1
-                        }
-                    })
-                    .collect();
-                faces.push(f);
-            }
-            _ => {}
-        }
-    }
-    fan(&verts, &faces)
-}
-
-fn fan(verts: &[[f32; 3]], faces: &[Vec<usize>]) -> Vec<[[f32; 3]; 3]> {
-    let mut out = Vec::new();
-    for f in faces {
-        for k in 1..f.len().saturating_sub(1) {
-            out.push([verts[f[0]], verts[f[k]], verts[f[k + 1]]]);
-        }
-    }
-    out
+/// Positions of a mesh's triangles (fan-triangulated polygons), read by the test kit's
+/// reader (independent of voxlod-ingest): PLY (ASCII, binary) or OBJ by extension.
+pub fn load_mesh(path: &Path) -> Vec<[[f32; 3]; 3]> {
+    voxlod_testkit::mesh::triangles_f32(&voxlod_testkit::mesh::read_mesh(path))
 }
 
 /// The mesh in grid coordinates of a `res`³ grid fitted to its bounds.
@@ -170,42 +36,30 @@ pub fn to_grid(tris: &[[[f32; 3]; 3]], res: u32) -> Vec<Triangle> {
         .collect()
 }
 
-/// xorshift64*.
-pub struct Rng(pub u64);
-impl Rng {
-    pub fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    /// Uniform in [0, 1).
-    pub fn f(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.f()
-    }
-}
-
-/// Random per-vertex colours and (for every other triangle) random vertex normals.
+/// Random per-vertex colours and (when `normals`) random vertex normals near a common direction.
 pub fn decorate(t: &mut Triangle, rng: &mut Rng, normals: bool) {
     for k in 0..3 {
         t.c[k] = [
-            rng.next() as u8,
-            rng.next() as u8,
-            rng.next() as u8,
-            rng.next() as u8,
+            rng.next_u64() as u8,
+            rng.next_u64() as u8,
+            rng.next_u64() as u8,
+            rng.next_u64() as u8,
         ];
     }
     t.flags |= voxlod_geom::TRI_HAS_COLORS;
     if normals {
+        // vertex normals around one random direction, as on a real surface: independent random
+        // ones can cancel inside the triangle, where the voxel's normal is rounding noise on
+        // either side (the documented exception of the GPU/CPU contract, gpu crate docs)
+        let d = loop {
+            let d = [0, 1, 2].map(|_| rng.range_f32(-1.0, 1.0));
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if (0.1..=1.0).contains(&l) {
+                break d.map(|x| x / l);
+            }
+        };
         for k in 0..3 {
-            t.n[k] = [
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            ];
+            t.n[k] = d.map(|x| x + 0.3 * rng.range_f32(-1.0, 1.0));
         }
         t.flags |= voxlod_geom::TRI_HAS_NORMALS;
     }

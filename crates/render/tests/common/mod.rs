@@ -5,24 +5,10 @@ use std::path::{Path, PathBuf};
 use voxlod_pipeline::BuildSettings;
 use voxlod_voxelize::Mode;
 
-/// The shared test meshes; `None` with a note when missing, a failure under CI=true.
+/// The shared test meshes (`voxlod_testkit::shared_meshes`: skipped with a note without
+/// `../shared`, a failure under CI).
 pub fn meshes() -> Option<PathBuf> {
-    let dir = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../../shared/data/meshes"
-    ))
-    .to_path_buf();
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    if std::env::var("CI").as_deref() == Ok("true") {
-        panic!(
-            "CI=true but the shared test meshes are missing at {}",
-            dir.display()
-        );
-    }
-    eprintln!("skipped: shared test meshes not found at {}", dir.display());
-    None
+    voxlod_testkit::shared_meshes(module_path!())
 }
 
 /// Builds `mesh` (relative to the meshes folder) into `out` with the pipeline.

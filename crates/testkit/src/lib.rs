@@ -1,0 +1,78 @@
+//! Test support shared by every voxlod test suite, so each rule lives in one place:
+//!
+//! * [`shared_meshes`]: where the real test meshes are (`../shared/data/meshes` beside the
+//!   clone), with the project's rule: missing means "skipped, and say so", except under
+//!   `CI=true`, where missing is a failure.
+//! * [`Rng`]: a deterministic SplitMix64 generator (no dependency, same numbers on every
+//!   platform), with the draws the tests need (floats, ranges, integers, points, rotations).
+//! * [`mesh`]: made-up meshes (icosphere, cube, transforms) and a minimal PLY/OBJ reader
+//!   written independently of `voxlod-ingest`, so tests can check the real reader against it.
+//!
+//! It depends on nothing, not even the other voxlod crates, so any crate can take it as a
+//! dev-dependency without a cycle.
+//!
+//! ```
+//! use voxlod_testkit::{mesh, Rng};
+//! let mut rng = Rng(7);
+//! let (v, f) = mesh::icosphere(1);
+//! assert_eq!((v.len(), f.len()), (42, 80));
+//! let x = rng.range(-1.0, 1.0);
+//! assert!((-1.0..1.0).contains(&x));
+//! if let Some(dir) = voxlod_testkit::shared_meshes("doc example") {
+//!     assert!(dir.join("SOURCES.md").is_file());
+//! }
+//! ```
+
+pub mod mesh;
+mod rng;
+
+pub use rng::Rng;
+
+use std::path::{Path, PathBuf};
+
+/// The repository root (the workspace folder holding `Cargo.toml`, `data/`, `tests/`).
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .unwrap_or_else(|_| Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."))
+}
+
+/// True when the tests run under CI (`CI=true`), where nothing may be skipped.
+pub fn under_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true")
+}
+
+/// The shared real test meshes (`../shared/data/meshes` beside the clone), or `None` after
+/// printing "`test`: SKIPPED …" when this clone has none. Under CI (`CI=true`) a missing folder
+/// is a failure (a panic naming the test), never a silent skip.
+pub fn shared_meshes(test: &str) -> Option<PathBuf> {
+    let p = repo_root().join("../shared/data/meshes");
+    if p.is_dir() {
+        return Some(p);
+    }
+    if under_ci() {
+        panic!(
+            "{test}: {} is missing, and CI=true requires the shared test meshes",
+            p.display()
+        );
+    }
+    eprintln!(
+        "{test}: SKIPPED: {} is not beside this clone (the real-mesh part did not run)",
+        p.display()
+    );
+    None
+}
+
+/// One shared mesh by its path under `../shared/data/meshes` (for example
+/// `"stanford-dragon/dragon.ply"`), or `None` as [`shared_meshes`] says. Under CI a missing
+/// file is a failure too.
+pub fn shared_mesh(test: &str, rel: &str) -> Option<PathBuf> {
+    let p = shared_meshes(test)?.join(rel);
+    assert!(
+        p.is_file(),
+        "{test}: {} is missing from the shared meshes",
+        p.display()
+    );
+    Some(p)
+}
