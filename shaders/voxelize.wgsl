@@ -10,10 +10,22 @@
 // Every formula mirrors crates/voxelize (overlap.rs, clip.rs) operation by operation. The overlap
 // decisions are filtered as on the CPU (overlap.rs, `TriSetup::new`): each value is compared with
 // the same forward error bound, computed with `real`'s unit roundoff. A value inside its band is
-// not trusted: the decision counts as inside (so f32 results are a superset of the exact set) and
-// the chunk is flagged in counter[3]; the host re-voxelizes flagged chunks on the CPU (always in
-// f64, in f32 when a normal component's sign was uncertain), so the sets equal the exact ones.
-
+// not trusted: the decision counts as outside (so the triangle marks a subset of its exact set)
+// and the triangle is *listed* (`note_uncertain`): its index goes to a list in `counter`, which
+// the host reads after marking; the host decides the listed triangles exactly on the CPU, sets
+// their voxels' bits before compaction and adds their attributes itself. In the accumulation
+// phase the listed triangles are skipped (the host uploads their bits per batch). A triangle
+// whose normal component has an uncertain sign is listed before it marks anything.
+//
+// Certified triangles (f64 only, `EXACT_TIES`): when every coordinate is a multiple of 2^-q and
+// (max |v| + 2)·2^q < 2^24, every product and sum of the normal and of the edge functions is an
+// integer multiple of 2^-2q (2^-2q-1 in thin mode) below 2^53, so f64 computes them without
+// rounding and their bands are 0; below 2^14 the same holds for the depth predicates (multiples
+// of 2^-3q-1 below 2^53). A face in an axis plane (two normal components exactly 0) also gets a
+// depth band of 0: its depth predicates are fl(n_z a) - fl(n_z c) with a an integer and c an f32
+// value, whose sign is that of a - c (rounding is monotone, and a != c differ by far more than
+// f64's rounding). With band 0 a value of exactly 0 is a tie and counts as inside, as the CPU's
+// exact predicates decide ties (the closed box counts).
 const MODE_CONSERVATIVE: u32 = 0u;
 const MODE_THIN: u32 = 1u;
 const PHASE_MARK: u32 = 0u;
@@ -23,6 +35,14 @@ const TRI_HAS_NORMALS: u32 = 1u;
 // uncertain (then the triangle's whole setup is in doubt)
 const UNCERTAIN_DECISION: u32 = 1u;
 const UNCERTAIN_NORMAL: u32 = 2u;
+// counter[4]: listed triangles (append attempts; more than LIST_CAP = overflow);
+// counter[LIST_FLAGS..]: one bit per triangle of the batch (listed); counter[LIST_AT..]: the
+// listed triangles' indices in the chunk's stream (params.tri_base + batch index).
+// crates/gpu/src/voxelizer.rs has the same constants.
+const LIST_COUNT: u32 = 4u;
+const LIST_FLAGS: u32 = 8u;
+const LIST_AT: u32 = 2056u; // LIST_FLAGS + 65536 / 32
+const LIST_CAP: u32 = 65536u;
 const CHUNK: i32 = 256;
 // accumulator words per voxel slot: 16 fixed-point sums of three u32 words each
 const SLOT_WORDS: u32 = 48u;
@@ -43,7 +63,8 @@ struct Params {
     slot_lo: u32,
     slot_hi: u32,
     groups_x: u32,
-    _pad0: u32,
+    // index of the batch's first triangle in the chunk's stream of (finite) triangles
+    tri_base: u32,
     _pad1: u32,
 };
 
@@ -151,15 +172,41 @@ fn edge_d(nk: vec2<real>, a: vec2<real>, mode: u32) -> real {
     return base + real(0.5) * (nk.x + nk.y) + real(0.5) * max(abs(nk.x), abs(nk.y));
 }
 
-// Notes an uncertain decision (mark phase only: the accumulation phase repeats the same ones).
-fn note_uncertain(bit: u32) {
-    if params.phase == PHASE_MARK && (atomicLoad(&counter[3]) & bit) == 0u {
-        atomicOr(&counter[3], bit);
+// The triangle being voxelized by this invocation (set by `setup`).
+var<private> cur_tri: u32;
+
+// Whether triangle `ti` of the batch is listed (decided by the host).
+fn listed(ti: u32) -> bool {
+    return (atomicLoad(&counter[LIST_FLAGS + (ti >> 5u)]) & (1u << (ti & 31u))) != 0u;
+}
+
+// Lists the current triangle (mark phase only; in the accumulation phase the listed triangles
+// are skipped by `setup`, and the others meet the same, certain, decisions as in marking).
+fn note_uncertain(kind: u32) {
+    if params.phase != PHASE_MARK {
+        return;
+    }
+    if (atomicLoad(&counter[3]) & kind) == 0u {
+        atomicOr(&counter[3], kind);
+    }
+    let ti = cur_tri;
+    let w = LIST_FLAGS + (ti >> 5u);
+    let bit = 1u << (ti & 31u);
+    if (atomicLoad(&counter[w]) & bit) != 0u {
+        return;
+    }
+    let old = atomicOr(&counter[w], bit);
+    if (old & bit) == 0u {
+        let i = atomicAdd(&counter[LIST_COUNT], 1u);
+        if i < LIST_CAP {
+            atomicStore(&counter[LIST_AT + i], params.tri_base + ti);
+        }
     }
 }
 
 // The filtered predicate `exact >= 0` from its computed value f, |f - exact| <= b (overlap.rs
-// `at_least_zero`): certain outside [-b, b); inside, noted and counted as inside.
+// `at_least_zero`): certain outside [-b, b); inside, the triangle is listed and the decision
+// counts as outside. With b = 0 (exact arithmetic) f >= 0 decides, ties inside.
 fn at_least_zero(f: real, b: real) -> bool {
     if f >= b {
         return true;
@@ -168,7 +215,26 @@ fn at_least_zero(f: real, b: real) -> bool {
         return false;
     }
     note_uncertain(UNCERTAIN_DECISION);
-    return true;
+    return false;
+}
+
+// The exponent of the lowest set bit of f32 x (x = m·2^e with m odd), or 1000 for x = 0.
+fn low_bit(x: f32) -> i32 {
+    let b = bitcast<u32>(x);
+    let e = (b >> 23u) & 255u;
+    var m = b & 0x7fffffu;
+    if e != 0u {
+        m |= 0x800000u;
+    }
+    if m == 0u {
+        return 1000;
+    }
+    return i32(max(e, 1u)) - 150 + i32(countTrailingZeros(m));
+}
+
+// 2^k as `real`, exactly (k in [-126, 127]).
+fn pow2(k: i32) -> real {
+    return real(bitcast<f32>(u32(k + 127) << 23u));
 }
 
 fn max_abs(v: vec3<real>) -> real {
@@ -193,6 +259,21 @@ fn clamp_i32(x: real) -> i32 {
 fn setup(ti: u32) -> Setup {
     var s: Setup;
     s.ok = false;
+    cur_tri = ti;
+    if listed(ti) {
+        return s;
+    }
+    // certification (see the top of this file): q = the finest fraction bit of the coordinates
+    var low = 1000;
+    var top = real(0.0);
+    for (var k = 0u; k < 9u; k++) {
+        low = min(low, low_bit(tris[ti].v[k]));
+        top = max(top, abs(real(tris[ti].v[k])));
+    }
+    // (max |v| + 2)·2^q < 2^bits, with q = max(-low, 0)
+    let q = max(-low, 0);
+    let exact_edges = EXACT_TIES && q <= 24 && top + real(2.0) < pow2(24 - q);
+    let exact_depth = EXACT_TIES && q <= 14 && top + real(2.0) < pow2(14 - q);
     let o0 = vertex(ti, 0u);
     let o1 = vertex(ti, 1u);
     let o2 = vertex(ti, 2u);
@@ -206,8 +287,10 @@ fn setup(ti: u32) -> Setup {
         abs(ea.z * eb.x) + abs(ea.x * eb.z),
         abs(ea.x * eb.y) + abs(ea.y * eb.x));
     for (var k = 0u; k < 3u; k++) {
-        if mag[k] != real(0.0) && abs(no[k]) <= real(5.0) * UNIT * mag[k] {
+        if !exact_edges && mag[k] != real(0.0) && abs(no[k]) <= real(5.0) * UNIT * mag[k] {
+            // the orientation is in doubt: the host decides the whole triangle
             note_uncertain(UNCERTAIN_NORMAL);
+            return s;
         }
     }
     if no.x == real(0.0) && no.y == real(0.0) && no.z == real(0.0) {
@@ -251,10 +334,25 @@ fn setup(ti: u32) -> Setup {
     s.dzx = vec3<real>(edge_d(s.zx0, v0.zx, mode), edge_d(s.zx1, v1.zx, mode), edge_d(s.zx2, v2.zx, mode));
     // M: the largest coordinate magnitude the scan can reach (bounding box, plus the corners)
     let big_m = max(max(max_abs(v0), max_abs(v1)), max_abs(v2)) + real(2.0);
-    s.bxy = vec3<real>(edge_bound(s.xy0, big_m), edge_bound(s.xy1, big_m), edge_bound(s.xy2, big_m));
-    s.byz = vec3<real>(edge_bound(s.yz0, big_m), edge_bound(s.yz1, big_m), edge_bound(s.yz2, big_m));
-    s.bzx = vec3<real>(edge_bound(s.zx0, big_m), edge_bound(s.zx1, big_m), edge_bound(s.zx2, big_m));
-    s.bp = real(16.0) * UNIT * (mag.x + mag.y + mag.z) * (real(2.0) * big_m + real(2.0)) + TINY;
+    if exact_edges {
+        s.bxy = vec3<real>(real(0.0));
+        s.byz = vec3<real>(real(0.0));
+        s.bzx = vec3<real>(real(0.0));
+    } else {
+        s.bxy = vec3<real>(edge_bound(s.xy0, big_m), edge_bound(s.xy1, big_m), edge_bound(s.xy2, big_m));
+        s.byz = vec3<real>(edge_bound(s.yz0, big_m), edge_bound(s.yz1, big_m), edge_bound(s.yz2, big_m));
+        s.bzx = vec3<real>(edge_bound(s.zx0, big_m), edge_bound(s.zx1, big_m), edge_bound(s.zx2, big_m));
+    }
+    // a face in an axis plane: the two other normal components are exactly 0 (all their
+    // products are, and no product of f32 differences underflows in f64)
+    let axis_face = EXACT_TIES && ((mag.x == real(0.0) && mag.y == real(0.0))
+        || (mag.y == real(0.0) && mag.z == real(0.0))
+        || (mag.z == real(0.0) && mag.x == real(0.0)));
+    if exact_depth || axis_face {
+        s.bp = real(0.0);
+    } else {
+        s.bp = real(16.0) * UNIT * (mag.x + mag.y + mag.z) * (real(2.0) * big_m + real(2.0)) + TINY;
+    }
     if n.z < real(0.0) {
         n = -n;
     }
@@ -302,7 +400,7 @@ fn column(s: Setup, ti: u32, px: i32, py: i32) {
     let zh = real(s.hi.z);
     // z0 = the first z >= zl whose box (diamond) reaches up to the plane: the division's guess,
     // then settled by the filtered predicate up(z) = n_z (z+1) - lo_rhs >= 0 (monotone in z,
-    // also with uncertain values counted as true)
+    // also with uncertain values counted as false: the computed value is monotone in z)
     let c0 = ceil(lo_rhs * inv_nz) - real(1.0);
     var z0 = zl;
     if c0 >= zl {

@@ -98,6 +98,7 @@
 
 mod device;
 mod encode;
+mod fallback;
 pub mod shaders;
 mod voxelizer;
 
