@@ -21,11 +21,11 @@
 // (max |v| + 2)·2^q < 2^24, every product and sum of the normal and of the edge functions is an
 // integer multiple of 2^-2q (2^-2q-1 in thin mode) below 2^53, so f64 computes them without
 // rounding and their bands are 0; below 2^14 the same holds for the depth predicates (multiples
-// of 2^-3q-1 below 2^53). A face in an axis plane (two normal components exactly 0) also gets a
-// depth band of 0: its depth predicates are fl(n_z a) - fl(n_z c) with a an integer and c an f32
-// value, whose sign is that of a - c (rounding is monotone, and a != c differ by far more than
-// f64's rounding). With band 0 a value of exactly 0 is a tie and counts as inside, as the CPU's
-// exact predicates decide ties (the closed box counts).
+// of 2^-3q-1 below 2^53; a fused multiply-add rounds an exact value, so it changes nothing).
+// A face in an axis plane z = c (two normal components exactly 0) gets its depth range from
+// integer comparisons with c instead of the plane predicates: voxel z meets the plane iff
+// z <= c <= z + 1 (the box and the diamond alike). Ties count as inside, as the CPU's exact
+// predicates decide them (the closed box counts).
 const MODE_CONSERVATIVE: u32 = 0u;
 const MODE_THIN: u32 = 1u;
 const PHASE_MARK: u32 = 0u;
@@ -113,6 +113,9 @@ struct Setup {
     byz: vec3<real>,
     bzx: vec3<real>,
     bp: real,
+    // a face in the axis plane z = plane_z (swizzled): the depth range is exact integer arithmetic
+    axis_face: bool,
+    plane_z: real,
     // swizzled voxel range: closed bounding box clamped to the chunk
     lo: vec3<i32>,
     hi: vec3<i32>,
@@ -348,7 +351,8 @@ fn setup(ti: u32) -> Setup {
     let axis_face = EXACT_TIES && ((mag.x == real(0.0) && mag.y == real(0.0))
         || (mag.y == real(0.0) && mag.z == real(0.0))
         || (mag.z == real(0.0) && mag.x == real(0.0)));
-    if exact_depth || axis_face {
+    s.axis_face = axis_face;
+    if exact_depth {
         s.bp = real(0.0);
     } else {
         s.bp = real(16.0) * UNIT * (mag.x + mag.y + mag.z) * (real(2.0) * big_m + real(2.0)) + TINY;
@@ -357,6 +361,7 @@ fn setup(ti: u32) -> Setup {
         n = -n;
     }
     s.n = n;
+    s.plane_z = v0.z;
     s.area2d = real(0.5) * n.z;
     let dp = n.x * v0.x + n.y * v0.y + n.z * v0.z;
     if mode == MODE_CONSERVATIVE {
@@ -392,12 +397,22 @@ fn column(s: Setup, ti: u32, px: i32, py: i32) {
         return;
     }
     let n = s.n;
+    let zl = real(s.lo.z);
+    let zh = real(s.hi.z);
+    if s.axis_face {
+        // the plane z = c: voxel z meets it iff z <= c <= z + 1
+        let c = s.plane_z;
+        let z0 = max(zl, ceil(c) - real(1.0));
+        let z1 = min(zh, floor(c));
+        if z0 <= z1 {
+            side_tests(s, ti, px, py, i32(z0), i32(z1));
+        }
+        return;
+    }
     let inv_nz = real(1.0) / n.z;
     let a = -(n.x * x + n.y * y);
     let lo_rhs = a + s.d_lo;
     let hi_rhs = a + s.d_hi;
-    let zl = real(s.lo.z);
-    let zh = real(s.hi.z);
     // z0 = the first z >= zl whose box (diamond) reaches up to the plane: the division's guess,
     // then settled by the filtered predicate up(z) = n_z (z+1) - lo_rhs >= 0 (monotone in z,
     // also with uncertain values counted as false: the computed value is monotone in z)
@@ -427,8 +442,13 @@ fn column(s: Setup, ti: u32, px: i32, py: i32) {
     while z1 >= z0 && !at_least_zero(hi_rhs - n.z * z1, s.bp) {
         z1 -= real(1.0);
     }
-    let iz0 = i32(z0);
-    let iz1 = i32(z1);
+    side_tests(s, ti, px, py, i32(z0), i32(z1));
+}
+
+// The YZ and ZX edge tests of the voxels z0..=z1 of column (px, py); emits the overlapped ones.
+fn side_tests(s: Setup, ti: u32, px: i32, py: i32, iz0: i32, iz1: i32) {
+    let x = real(px);
+    let y = real(py);
     let czx = vec3<real>(s.zx0.y * x + s.dzx.x, s.zx1.y * x + s.dzx.y, s.zx2.y * x + s.dzx.z);
     let cyz = vec3<real>(s.yz0.x * y + s.dyz.x, s.yz1.x * y + s.dyz.y, s.yz2.x * y + s.dyz.z);
     for (var pz = iz0; pz <= iz1; pz++) {
