@@ -7,7 +7,8 @@
 //! A triangle is *listed* by the shaders when one of its decisions lies inside its rounding
 //! band, or a normal component's sign is in doubt (voxelize.wgsl `note_uncertain`). Such a
 //! triangle marks on the GPU only voxels it certainly overlaps (uncertain decisions count as
-//! outside), a subset of its exact set, and nothing in the accumulation phase. The host then
+//! outside), a subset of its exact set, and nothing in the accumulation phase (the host
+//! overwrites it with a degenerate triangle in the triangle buffer). The host then
 //! 1. sets the bits of the listed triangles' exact voxels in the occupancy bitset, before
 //!    compaction, so the union is the exact set of the chunk ([`Listed::new`], [`Listed::mark`]);
 //! 2. adds their contributions to the voxels' sums in the 2⁶⁴ fixed point of the GPU's sums
@@ -15,6 +16,40 @@
 
 use voxlod_geom::{Triangle, CHUNK, TRI_HAS_NORMALS};
 use voxlod_voxelize::{clipped_area, voxelize_triangle, Mode};
+
+/// Flags of a triangle sent to f64 shaders (voxelize.wgsl): its edge functions and normal /
+/// also its depth predicates are computed without rounding ([`exact_flags`]).
+pub(crate) const TRI_EXACT_EDGES: u32 = 1 << 8;
+pub(crate) const TRI_EXACT_DEPTH: u32 = 1 << 9;
+
+/// The certification of voxelize.wgsl (docs/VOXELIZE.md, "Certified on the GPU"): with every
+/// coordinate a multiple of 2⁻q (q ≥ 0, the finest fraction bit of the f32 values) and
+/// `B = (max|v| + 2)·2^q`, f64 computes the edge functions and the normal exactly when
+/// `B < 2²⁴`, and the depth predicates too when `B < 2¹⁴`. Computed on the host, once per
+/// triangle and batch, so the shaders pay nothing for it.
+pub(crate) fn exact_flags(t: &Triangle) -> u32 {
+    let mut low = i32::MAX;
+    let mut top = 0.0f64;
+    for &c in t.v.iter().flatten() {
+        let b = c.to_bits();
+        let e = ((b >> 23) & 255) as i32;
+        let m = (b & 0x7f_ffff) | if e != 0 { 0x80_0000 } else { 0 };
+        if m != 0 {
+            // c = ±m·2^(max(e,1) − 150)
+            low = low.min(e.max(1) - 150 + m.trailing_zeros() as i32);
+        }
+        top = top.max((c as f64).abs());
+    }
+    let q = if low == i32::MAX { 0 } else { (-low).max(0) };
+    let b = (top + 2.0) * 2f64.powi(q);
+    if b < (1u32 << 14) as f64 {
+        TRI_EXACT_EDGES | TRI_EXACT_DEPTH
+    } else if b < (1u32 << 24) as f64 {
+        TRI_EXACT_EDGES
+    } else {
+        0
+    }
+}
 
 /// The fixed-point scale of the GPU's sums, 2⁶⁴ (voxelize.wgsl `add_fixed`).
 const SCALE: f64 = 18446744073709551616.0;
@@ -168,6 +203,43 @@ fn contribution(t: &Triangle, p: [i32; 3]) -> (bool, [f64; 8]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn certification_levels() {
+        let t = |v: [[f32; 3]; 3]| exact_flags(&Triangle::new(v));
+        let all = TRI_EXACT_EDGES | TRI_EXACT_DEPTH;
+        // integers and quarters below 2^14 - 2
+        assert_eq!(
+            t([[0.0, 1.0, 2.0], [16381.0, 3.0, 0.0], [5.0, 6.0, 7.0]]),
+            all
+        );
+        assert_eq!(
+            t([[0.25, 1.0, 2.0], [4000.5, 3.0, 0.0], [5.0, 6.0, 7.0]]),
+            all
+        );
+        assert_eq!(
+            t([[0.25, 1.0, 2.0], [4094.0, 3.0, 0.0], [5.0, 6.0, 7.0]]),
+            TRI_EXACT_EDGES
+        );
+        // 16382 + 2 = 2^14: no longer exact in the depth predicates
+        assert_eq!(
+            t([[0.0, 1.0, 2.0], [16382.0, 3.0, 0.0], [5.0, 6.0, 7.0]]),
+            TRI_EXACT_EDGES
+        );
+        // full f32 mantissas in the binade of the largest coordinate: (500 + 2) · 2^15 < 2^24
+        assert_eq!(
+            t([[0.0, 1.0, 2.0], [500.00003, 3.0, 0.0], [5.0, 6.0, 7.0]]),
+            TRI_EXACT_EDGES
+        );
+        // a fine mantissa far below the largest coordinate: 2^22 · 502 ≥ 2^24
+        assert_eq!(t([[3.7, 1.0, 2.0], [500.0, 3.0, 0.0], [5.0, 6.0, 7.0]]), 0);
+        // a tiny coordinate
+        assert_eq!(t([[1e-30, 1.0, 2.0], [5.0, 3.0, 0.0], [5.0, 6.0, 7.0]]), 0);
+        assert_eq!(
+            t([[-8.0, -1.5, 2.0], [5.0, 3.0, 0.0], [5.0, 6.0, 7.0]]),
+            all
+        );
+    }
 
     #[test]
     fn fixed_point_adds_with_carries_and_sign() {

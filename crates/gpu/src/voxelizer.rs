@@ -9,7 +9,7 @@ use voxlod_voxelize::{ChunkVoxelizer, Mode};
 
 use crate::device::{open, Gpu};
 use crate::encode::{decode, SLOT_BYTES};
-use crate::fallback::Listed;
+use crate::fallback::{exact_flags, Listed, TRI_EXACT_DEPTH, TRI_EXACT_EDGES};
 use crate::shaders::{classify_source, raster_source, Precision};
 use crate::{GpuError, GpuMethod};
 
@@ -735,11 +735,18 @@ impl GpuVoxelizer {
             }
             let acc = self.gpu.read(&self.accum, &self.staging, bytes)?;
             self.inflight = [None, None];
-            let mut acc: Vec<u32> = bytemuck::pod_collect_to_vec(&acc);
-            if let Some(h) = &host {
-                h.add_to(&mut acc, lo as u32, hi as u32);
-            }
-            decode(&occ, &base, &acc, lo as u32, hi as u32, &mut voxels);
+            let owned: Vec<u32>;
+            let acc: &[u32] = match &host {
+                // the listed triangles' contributions, added to the GPU's sums
+                Some(h) => {
+                    let mut a: Vec<u32> = bytemuck::pod_collect_to_vec(&acc);
+                    h.add_to(&mut a, lo as u32, hi as u32);
+                    owned = a;
+                    &owned
+                }
+                None => bytemuck::cast_slice(&acc),
+            };
+            decode(&occ, &base, acc, lo as u32, hi as u32, &mut voxels);
             lo = hi;
         }
         voxels.sort_unstable_by_key(|v| v.morton());
@@ -753,14 +760,24 @@ impl GpuVoxelizer {
             let room = self.batch - self.pending.len();
             let (head, rest) = tris.split_at(room.min(tris.len()));
             tris = rest;
-            let r = if self.pending.is_empty()
+            // f64 shaders: every triangle gets its certification flags, so it is copied
+            let certify = self.precision == Precision::F64;
+            let r = if !certify
+                && self.pending.is_empty()
                 && head.len() == self.batch
                 && head.iter().all(Triangle::is_finite)
             {
                 self.submit(st, head)
             } else {
+                let at = self.pending.len();
                 self.pending
                     .extend(head.iter().filter(|t| t.is_finite()).copied());
+                for t in &mut self.pending[at..] {
+                    t.flags &= !(TRI_EXACT_EDGES | TRI_EXACT_DEPTH);
+                    if certify {
+                        t.flags |= exact_flags(t);
+                    }
+                }
                 if self.pending.len() == self.batch {
                     let full = std::mem::take(&mut self.pending);
                     let r = self.submit(st, &full);
@@ -867,7 +884,7 @@ impl GpuVoxelizer {
     /// Records and submits the classification pass and, if `defers`, the second pass of one
     /// batch (`len` triangles in triangle buffer `slot`, the first of them triangle `tri_base`
     /// of the chunk's stream). Marking clears the batch's bits of listed triangles (the shaders
-    /// set them); accumulation uploads them from the chunk's list (those triangles are skipped).
+    /// set them); accumulation overwrites the listed triangles with zeros (skipped).
     #[allow(clippy::too_many_arguments)]
     fn record(
         &mut self,
@@ -908,18 +925,19 @@ impl GpuVoxelizer {
         let (compute, raster, sweep) = self.bind_groups(slot);
         let words = (len as u64).div_ceil(32);
         if phase == PHASE_ACCUMULATE {
-            let mut bits = vec![0u32; words as usize];
+            // the listed triangles' contributions come from the host: replace them by
+            // degenerate (zero-area) triangles, which the shaders skip
             let first = self.listed.partition_point(|&i| i < tri_base);
+            let zero = [0u8; std::mem::size_of::<Triangle>()];
             for &i in &self.listed[first..] {
-                let k = (i - tri_base) as usize;
-                if k >= len {
+                let k = (i - tri_base) as u64;
+                if k >= len as u64 {
                     break;
                 }
-                bits[k >> 5] |= 1 << (k & 31);
+                self.gpu
+                    .queue
+                    .write_buffer(&self.tris[slot], k * zero.len() as u64, &zero);
             }
-            self.gpu
-                .queue
-                .write_buffer(&self.counter, LIST_FLAGS * 4, bytemuck::cast_slice(&bits));
         }
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         if phase == PHASE_MARK {
