@@ -40,9 +40,9 @@
 //! outside its band. Two cases are certified on the GPU itself (f64 shaders): a triangle whose
 //! coordinates lie on a coarse dyadic grid (multiples of 2⁻q with `(max|v| + 2)·2^q < 2²⁴`: the
 //! edge functions and the normal are computed without rounding; below 2¹⁴ the depth predicates
-//! too), whose bands are then 0, and a face in an axis plane, whose depth predicates have an
-//! exact sign; there a value of exactly 0 is a tie and counts as inside, as on the CPU (block
-//! worlds, faces on the grid's boundary planes). Every other decision inside its band, and a
+//! too; the host flags such triangles), where the computed value is exact and `f ≥ 0` decides,
+//! and a face in an axis plane `z = c`, whose depth range is the integer test `z ≤ c ≤ z + 1`;
+//! ties count as inside, as on the CPU (block worlds, faces on the grid's boundary planes). Every other decision inside its band, and a
 //! normal component of doubtful sign, *lists the triangle*: the uncertain decision counts as
 //! outside (so the GPU marks a subset of the triangle's exact set), and the triangle's index
 //! goes to a list (at most 65,536 per chunk). After the marking pass the host decides the

@@ -2,9 +2,10 @@
 //! each entry file gets the shared routines of `voxelize.wgsl` appended and the `real` alias
 //! (f64 or f32) prepended, with the constants of the filter bounds for that type: `UNIT`, the
 //! unit roundoff (2⁻⁵³ or 2⁻²⁴), and `TINY`, an absolute slack covering underflow (in f32 also
-//! denormals flushed to zero: at most 2⁻¹²⁶ per operation), and `EXACT_TIES`, whether triangles
-//! whose arithmetic is provably exact get bands of 0 (f64 only: the certification relies on
-//! f64's 53-bit significand; see the top of `voxelize.wgsl`).
+//! denormals flushed to zero: at most 2⁻¹²⁶ per operation), and `EXACT_TIES`, whether faces in
+//! an axis plane get the exact integer depth test (f64 only: recognizing them relies on
+//! products of f32 differences never underflowing to 0, true in f64; see the top of
+//! `voxelize.wgsl`). The host's certification flags are likewise set for f64 shaders only.
 
 /// Classification and compaction compute entry points (`classify`, `compact`).
 pub const CLASSIFY_WGSL: &str = include_str!("../../../shaders/classify.wgsl");
