@@ -18,8 +18,9 @@
 @group(0) @binding(4) var<storage, read_write> draw_args: array<atomic<u32>, 8>;
 @group(0) @binding(5) var<storage, read_write> base: array<u32>;
 @group(0) @binding(6) var<storage, read_write> accum: array<atomic<u32>>;
-// [0]: number of occupied voxels; [1], [2]: triangles voxelized here / deferred (mark phase)
-@group(0) @binding(7) var<storage, read_write> counter: array<atomic<u32>, 4>;
+// [0]: number of occupied voxels; [1], [2]: triangles voxelized here / deferred (mark phase);
+// [3..]: the uncertainty flags and the list of uncertain triangles of voxelize.wgsl
+@group(0) @binding(7) var<storage, read_write> counter: array<atomic<u32>>;
 
 // Half the pixel diagonal (paper: l = sqrt(2)/2 in voxel space) plus a margin for the
 // rasterizer's sub-pixel snapping and f32 rounding; extra fragments are culled by the tests.

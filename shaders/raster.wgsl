@@ -12,8 +12,9 @@
 @group(0) @binding(3) var<storage, read> deferred: array<Deferred>;
 @group(0) @binding(5) var<storage, read> base: array<u32>;
 @group(0) @binding(6) var<storage, read_write> accum: array<atomic<u32>>;
-// [3]: the uncertainty flags of voxelize.wgsl ([0..3] belong to the classification pass)
-@group(0) @binding(7) var<storage, read_write> counter: array<atomic<u32>, 4>;
+// [3..]: the uncertainty flags and the list of uncertain triangles of voxelize.wgsl ([0..3]
+// belong to the classification pass)
+@group(0) @binding(7) var<storage, read_write> counter: array<atomic<u32>>;
 
 struct VsOut {
     @builtin(position) pos: vec4<f32>,

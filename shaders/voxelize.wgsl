@@ -10,10 +10,24 @@
 // Every formula mirrors crates/voxelize (overlap.rs, clip.rs) operation by operation. The overlap
 // decisions are filtered as on the CPU (overlap.rs, `TriSetup::new`): each value is compared with
 // the same forward error bound, computed with `real`'s unit roundoff. A value inside its band is
-// not trusted: the decision counts as inside (so f32 results are a superset of the exact set) and
-// the chunk is flagged in counter[3]; the host re-voxelizes flagged chunks on the CPU (always in
-// f64, in f32 when a normal component's sign was uncertain), so the sets equal the exact ones.
-
+// not trusted: the decision counts as outside (so the triangle marks a subset of its exact set)
+// and the triangle is *listed* (`note_uncertain`): its index goes to a list in `counter`, which
+// the host reads after marking; the host decides the listed triangles exactly on the CPU, sets
+// their voxels' bits before compaction and adds their attributes itself. In the accumulation
+// phase the host overwrites the listed triangles with degenerate ones (skipped). A triangle
+// whose normal component has an uncertain sign is listed before it marks anything.
+//
+// Certified triangles (f64 only; the host sets TRI_EXACT_* in the triangle's flags,
+// crates/gpu/src/fallback.rs `exact_flags`): when every coordinate is a multiple of 2^-q and
+// (max |v| + 2)·2^q < 2^24,
+// every product and sum of the normal and of the edge functions is an integer multiple of
+// 2^-2q (2^-2q-1 in thin mode) below 2^53, so f64 computes them without rounding and f >= 0
+// decides; below 2^14 the same holds for the depth predicates (multiples
+// of 2^-3q-1 below 2^53; a fused multiply-add rounds an exact value, so it changes nothing).
+// A face in an axis plane z = c (two normal components exactly 0) gets its depth range from
+// integer comparisons with c instead of the plane predicates: voxel z meets the plane iff
+// z <= c <= z + 1 (the box and the diamond alike). Ties count as inside, as the CPU's exact
+// predicates decide them (the closed box counts).
 const MODE_CONSERVATIVE: u32 = 0u;
 const MODE_THIN: u32 = 1u;
 const PHASE_MARK: u32 = 0u;
@@ -23,6 +37,17 @@ const TRI_HAS_NORMALS: u32 = 1u;
 // uncertain (then the triangle's whole setup is in doubt)
 const UNCERTAIN_DECISION: u32 = 1u;
 const UNCERTAIN_NORMAL: u32 = 2u;
+// Triangle flags set by the host (crates/gpu/src/fallback.rs `exact_flags`, f64 only)
+const TRI_EXACT_EDGES: u32 = 256u;
+const TRI_EXACT_DEPTH: u32 = 512u;
+// counter[4]: listed triangles (append attempts; more than LIST_CAP = overflow);
+// counter[LIST_FLAGS..]: one bit per triangle of the batch (listed); counter[LIST_AT..]: the
+// listed triangles' indices in the chunk's stream (params.tri_base + batch index).
+// crates/gpu/src/voxelizer.rs has the same constants.
+const LIST_COUNT: u32 = 4u;
+const LIST_FLAGS: u32 = 8u;
+const LIST_AT: u32 = 2056u; // LIST_FLAGS + 65536 / 32
+const LIST_CAP: u32 = 65536u;
 const CHUNK: i32 = 256;
 // accumulator words per voxel slot: 16 fixed-point sums of three u32 words each
 const SLOT_WORDS: u32 = 48u;
@@ -43,7 +68,8 @@ struct Params {
     slot_lo: u32,
     slot_hi: u32,
     groups_x: u32,
-    _pad0: u32,
+    // index of the batch's first triangle in the chunk's stream of (finite) triangles
+    tri_base: u32,
     _pad1: u32,
 };
 
@@ -92,6 +118,9 @@ struct Setup {
     byz: vec3<real>,
     bzx: vec3<real>,
     bp: real,
+    // a face in the axis plane z = plane_z (swizzled): the depth range is exact integer arithmetic
+    axis_face: bool,
+    plane_z: real,
     // swizzled voxel range: closed bounding box clamped to the chunk
     lo: vec3<i32>,
     hi: vec3<i32>,
@@ -151,24 +180,58 @@ fn edge_d(nk: vec2<real>, a: vec2<real>, mode: u32) -> real {
     return base + real(0.5) * (nk.x + nk.y) + real(0.5) * max(abs(nk.x), abs(nk.y));
 }
 
-// Notes an uncertain decision (mark phase only: the accumulation phase repeats the same ones).
-fn note_uncertain(bit: u32) {
-    if params.phase == PHASE_MARK && (atomicLoad(&counter[3]) & bit) == 0u {
-        atomicOr(&counter[3], bit);
+// The triangle being voxelized by this invocation (set by `setup`).
+var<private> cur_tri: u32;
+
+// Lists the current triangle (mark phase only; in the accumulation phase the host has replaced
+// the listed triangles by degenerate ones, and the others meet the same decisions as in
+// marking).
+fn note_uncertain(kind: u32) {
+    if params.phase != PHASE_MARK {
+        return;
+    }
+    if (atomicLoad(&counter[3]) & kind) == 0u {
+        atomicOr(&counter[3], kind);
+    }
+    let ti = cur_tri;
+    let w = LIST_FLAGS + (ti >> 5u);
+    let bit = 1u << (ti & 31u);
+    if (atomicLoad(&counter[w]) & bit) != 0u {
+        return;
+    }
+    let old = atomicOr(&counter[w], bit);
+    if (old & bit) == 0u {
+        let i = atomicAdd(&counter[LIST_COUNT], 1u);
+        if i < LIST_CAP {
+            atomicStore(&counter[LIST_AT + i], params.tri_base + ti);
+        }
     }
 }
 
+// The current triangle's exactness (TRI_EXACT_* flags set by the host): 2 = edge functions,
+// normal and depth predicates computed without rounding, 1 = edge functions and normal, 0 = none.
+var<private> cur_level: i32;
+// Whether the current column met a value inside its band that the level does not settle.
+var<private> unc: bool;
+
 // The filtered predicate `exact >= 0` from its computed value f, |f - exact| <= b (overlap.rs
-// `at_least_zero`): certain outside [-b, b); inside, noted and counted as inside.
-fn at_least_zero(f: real, b: real) -> bool {
+// `at_least_zero`): certain outside [-b, b). Inside, if the triangle's arithmetic is exact for
+// this kind of decision (`cur_level >= need`: 1 for edge functions, 2 for depth predicates), f
+// is the exact value and f >= 0 decides (ties inside); otherwise the decision counts as outside
+// and `unc` is set (the column then lists the triangle). Kept small: llvmpipe runs the code of
+// a branch no lane takes too.
+fn at_least_zero(f: real, b: real, need: i32) -> bool {
     if f >= b {
         return true;
     }
     if f < -b {
         return false;
     }
-    note_uncertain(UNCERTAIN_DECISION);
-    return true;
+    if cur_level >= need {
+        return f >= real(0.0);
+    }
+    unc = true;
+    return false;
 }
 
 fn max_abs(v: vec3<real>) -> real {
@@ -193,6 +256,9 @@ fn clamp_i32(x: real) -> i32 {
 fn setup(ti: u32) -> Setup {
     var s: Setup;
     s.ok = false;
+    cur_tri = ti;
+    let fl = tris[ti].flags;
+    cur_level = select(select(0, 1, (fl & TRI_EXACT_EDGES) != 0u), 2, (fl & TRI_EXACT_DEPTH) != 0u);
     let o0 = vertex(ti, 0u);
     let o1 = vertex(ti, 1u);
     let o2 = vertex(ti, 2u);
@@ -206,8 +272,10 @@ fn setup(ti: u32) -> Setup {
         abs(ea.z * eb.x) + abs(ea.x * eb.z),
         abs(ea.x * eb.y) + abs(ea.y * eb.x));
     for (var k = 0u; k < 3u; k++) {
-        if mag[k] != real(0.0) && abs(no[k]) <= real(5.0) * UNIT * mag[k] {
+        if mag[k] != real(0.0) && abs(no[k]) <= real(5.0) * UNIT * mag[k] && cur_level < 1 {
+            // the orientation is in doubt: the host decides the whole triangle
             note_uncertain(UNCERTAIN_NORMAL);
+            return s;
         }
     }
     if no.x == real(0.0) && no.y == real(0.0) && no.z == real(0.0) {
@@ -254,11 +322,18 @@ fn setup(ti: u32) -> Setup {
     s.bxy = vec3<real>(edge_bound(s.xy0, big_m), edge_bound(s.xy1, big_m), edge_bound(s.xy2, big_m));
     s.byz = vec3<real>(edge_bound(s.yz0, big_m), edge_bound(s.yz1, big_m), edge_bound(s.yz2, big_m));
     s.bzx = vec3<real>(edge_bound(s.zx0, big_m), edge_bound(s.zx1, big_m), edge_bound(s.zx2, big_m));
+    // a face in an axis plane: the two other normal components are exactly 0 (all their
+    // products are, and no product of f32 differences underflows in f64)
+    let axis_face = EXACT_TIES && ((mag.x == real(0.0) && mag.y == real(0.0))
+        || (mag.y == real(0.0) && mag.z == real(0.0))
+        || (mag.z == real(0.0) && mag.x == real(0.0)));
+    s.axis_face = axis_face;
     s.bp = real(16.0) * UNIT * (mag.x + mag.y + mag.z) * (real(2.0) * big_m + real(2.0)) + TINY;
     if n.z < real(0.0) {
         n = -n;
     }
     s.n = n;
+    s.plane_z = v0.z;
     s.area2d = real(0.5) * n.z;
     let dp = n.x * v0.x + n.y * v0.y + n.z * v0.z;
     if mode == MODE_CONSERVATIVE {
@@ -286,35 +361,64 @@ fn setup(ti: u32) -> Setup {
 // filtered (`at_least_zero`); the depth range is settled as in overlap.rs `depth`. The scanned
 // voxels lie in the triangle's closed bounding box, where the bounds hold.
 fn column(s: Setup, ti: u32, px: i32, py: i32) {
+    unc = false;
+    column_scan(s, ti, px, py);
+    if unc {
+        note_uncertain(UNCERTAIN_DECISION);
+    }
+}
+
+fn column_scan(s: Setup, ti: u32, px: i32, py: i32) {
     let x = real(px);
     let y = real(py);
-    if !(at_least_zero(s.xy0.x * x + s.xy0.y * y + s.dxy.x, s.bxy.x)
-        && at_least_zero(s.xy1.x * x + s.xy1.y * y + s.dxy.y, s.bxy.y)
-        && at_least_zero(s.xy2.x * x + s.xy2.y * y + s.dxy.z, s.bxy.z)) {
+    if !(at_least_zero(s.xy0.x * x + s.xy0.y * y + s.dxy.x, s.bxy.x, 1)
+        && at_least_zero(s.xy1.x * x + s.xy1.y * y + s.dxy.y, s.bxy.y, 1)
+        && at_least_zero(s.xy2.x * x + s.xy2.y * y + s.dxy.z, s.bxy.z, 1)) {
         return;
     }
+    let zl = real(s.lo.z);
+    let zh = real(s.hi.z);
+    var z0 = zl;
+    var z1 = zh;
+    if s.axis_face {
+        // the plane z = c: voxel z meets it iff z <= c <= z + 1
+        z0 = max(zl, ceil(s.plane_z) - real(1.0));
+        z1 = min(zh, floor(s.plane_z));
+    } else {
+        depth_range(s, px, py, &z0, &z1);
+    }
+    side_tests(s, ti, px, py, i32(z0), i32(z1));
+}
+
+// The depth range [z0, z1] of column (px, py) within [z0, z1] (in: the clamped range), settled
+// by the filtered plane predicates; empty (z0 > z1) if the plane misses the column there.
+fn depth_range(s: Setup, px: i32, py: i32, z0p: ptr<function, real>, z1p: ptr<function, real>) {
+    let x = real(px);
+    let y = real(py);
     let n = s.n;
+    let zl = *z0p;
+    let zh = *z1p;
     let inv_nz = real(1.0) / n.z;
     let a = -(n.x * x + n.y * y);
     let lo_rhs = a + s.d_lo;
     let hi_rhs = a + s.d_hi;
-    let zl = real(s.lo.z);
-    let zh = real(s.hi.z);
     // z0 = the first z >= zl whose box (diamond) reaches up to the plane: the division's guess,
     // then settled by the filtered predicate up(z) = n_z (z+1) - lo_rhs >= 0 (monotone in z,
-    // also with uncertain values counted as true)
+    // also with uncertain values counted as false: the computed value is monotone in z)
     let c0 = ceil(lo_rhs * inv_nz) - real(1.0);
     var z0 = zl;
     if c0 >= zl {
         z0 = min(c0, zh + real(1.0));
     }
-    while z0 > zl && at_least_zero(n.z * z0 - lo_rhs, s.bp) {
+    while z0 > zl && at_least_zero(n.z * z0 - lo_rhs, s.bp, 2) {
         z0 -= real(1.0);
     }
-    while z0 <= zh && !at_least_zero(n.z * (z0 + real(1.0)) - lo_rhs, s.bp) {
+    while z0 <= zh && !at_least_zero(n.z * (z0 + real(1.0)) - lo_rhs, s.bp, 2) {
         z0 += real(1.0);
     }
     if z0 > zh {
+        *z0p = real(1.0);
+        *z1p = real(0.0);
         return;
     }
     // z1 = the last z <= zh whose box reaches down to the plane: down(z) = hi_rhs - n_z z >= 0
@@ -323,24 +427,30 @@ fn column(s: Setup, ti: u32, px: i32, py: i32) {
     if c1 <= zh {
         z1 = max(c1, z0 - real(1.0));
     }
-    while z1 < zh && at_least_zero(hi_rhs - n.z * (z1 + real(1.0)), s.bp) {
+    while z1 < zh && at_least_zero(hi_rhs - n.z * (z1 + real(1.0)), s.bp, 2) {
         z1 += real(1.0);
     }
-    while z1 >= z0 && !at_least_zero(hi_rhs - n.z * z1, s.bp) {
+    while z1 >= z0 && !at_least_zero(hi_rhs - n.z * z1, s.bp, 2) {
         z1 -= real(1.0);
     }
-    let iz0 = i32(z0);
-    let iz1 = i32(z1);
+    *z0p = z0;
+    *z1p = z1;
+}
+
+// The YZ and ZX edge tests of the voxels z0..=z1 of column (px, py); emits the overlapped ones.
+fn side_tests(s: Setup, ti: u32, px: i32, py: i32, iz0: i32, iz1: i32) {
+    let x = real(px);
+    let y = real(py);
     let czx = vec3<real>(s.zx0.y * x + s.dzx.x, s.zx1.y * x + s.dzx.y, s.zx2.y * x + s.dzx.z);
     let cyz = vec3<real>(s.yz0.x * y + s.dyz.x, s.yz1.x * y + s.dyz.y, s.yz2.x * y + s.dyz.z);
     for (var pz = iz0; pz <= iz1; pz++) {
         let z = real(pz);
-        if at_least_zero(s.yz0.y * z + cyz.x, s.byz.x)
-            && at_least_zero(s.yz1.y * z + cyz.y, s.byz.y)
-            && at_least_zero(s.yz2.y * z + cyz.z, s.byz.z)
-            && at_least_zero(s.zx0.x * z + czx.x, s.bzx.x)
-            && at_least_zero(s.zx1.x * z + czx.y, s.bzx.y)
-            && at_least_zero(s.zx2.x * z + czx.z, s.bzx.z) {
+        if at_least_zero(s.yz0.y * z + cyz.x, s.byz.x, 1)
+            && at_least_zero(s.yz1.y * z + cyz.y, s.byz.y, 1)
+            && at_least_zero(s.yz2.y * z + cyz.z, s.byz.z, 1)
+            && at_least_zero(s.zx0.x * z + czx.x, s.bzx.x, 1)
+            && at_least_zero(s.zx1.x * z + czx.y, s.bzx.y, 1)
+            && at_least_zero(s.zx2.x * z + czx.z, s.bzx.z, 1) {
             emit(s, ti, vec3<i32>(px, py, pz));
         }
     }

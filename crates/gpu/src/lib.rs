@@ -37,21 +37,25 @@
 //! per-triangle error bound and Shewchuk's exact predicates inside it,
 //! `voxlod_voxelize::overlap`, `TriSetup::new`). The shaders evaluate the same bounds (with the
 //! unit roundoff of their float type: 2⁻⁵³, or 2⁻²⁴ in f32) and trust a decision's sign only
-//! outside its band. A value inside the band counts as inside and flags the chunk (an atomic
-//! flag in a storage buffer); so does a normal component whose sign is in doubt (a nearly
-//! degenerate projection). After the marking pass the host reads the flags:
-//! * **f64**: a flagged chunk is re-voxelized on the CPU (`voxlod_voxelize::ChunkVoxelizer`,
-//!   same mode; the replay callback feeds it), so the voxel sets always equal the exact CPU
-//!   sets, in both modes. How often: the bands are about 10⁻¹³ voxel wide, but exact ties
-//!   (faces on grid planes) and near-degenerate slivers are flagged every time; at 512³ no
-//!   chunk of the Stanford bunny fell back, 3 of 4 of the dragon's, every chunk of Sponza and
-//!   the conference room (docs/BENCHMARKS.md, "GPU exactness").
-//! * **f32** (adapters without `SHADER_F64`): the bands are 2²⁹ times wider, so most chunks
-//!   would be flagged; uncertain decisions count as inside and the chunk is kept, so the set is
-//!   a **conservative superset** of the exact one (may add voxels, never misses one). Only an
-//!   uncertain normal sign (where "inside" is undefined) sends the chunk to the CPU.
+//! outside its band. Two cases are certified on the GPU itself (f64 shaders): a triangle whose
+//! coordinates lie on a coarse dyadic grid (multiples of 2⁻q with `(max|v| + 2)·2^q < 2²⁴`: the
+//! edge functions and the normal are computed without rounding; below 2¹⁴ the depth predicates
+//! too; the host flags such triangles), where the computed value is exact and `f ≥ 0` decides,
+//! and a face in an axis plane `z = c`, whose depth range is the integer test `z ≤ c ≤ z + 1`;
+//! ties count as inside, as on the CPU (block worlds, faces on the grid's boundary planes). Every other decision inside its band, and a
+//! normal component of doubtful sign, *lists the triangle*: the uncertain decision counts as
+//! outside (so the GPU marks a subset of the triangle's exact set), and the triangle's index
+//! goes to a list (at most 65,536 per chunk). After the marking pass the host decides the
+//! listed triangles with the CPU's exact test (`voxlod_voxelize::voxelize_triangle`; the replay
+//! callback feeds them), sets their voxels in the occupancy bitset before compaction, and adds
+//! their attribute contributions to the GPU's fixed-point sums (integer additions: the result
+//! does not depend on the order); the accumulation pass skips them. So the voxel sets equal the
+//! exact CPU sets, with f64 and with f32 shaders (f32 lists many more triangles: its bands are
+//! 2²⁹ times wider). Only a chunk with more listed triangles than the list holds is re-voxelized
+//! as a whole on the CPU (`voxlod_voxelize::ChunkVoxelizer`, same mode).
 //!
-//! [`GpuVoxelizer::last_uncertain`] and [`GpuVoxelizer::last_fell_back`] report both per chunk.
+//! [`GpuVoxelizer::last_uncertain`], [`GpuVoxelizer::last_fallback_triangles`] and
+//! [`GpuVoxelizer::last_fell_back`] report them per chunk.
 //!
 //! **Attributes.** The GPU sums each voxel's area-weighted normal and colour in 96-bit fixed
 //! point (exact, so independent of the order of the atomics); the CPU sums in f32 with a
@@ -98,6 +102,7 @@
 
 mod device;
 mod encode;
+mod fallback;
 pub mod shaders;
 mod voxelizer;
 

@@ -2,7 +2,10 @@
 //! each entry file gets the shared routines of `voxelize.wgsl` appended and the `real` alias
 //! (f64 or f32) prepended, with the constants of the filter bounds for that type: `UNIT`, the
 //! unit roundoff (2⁻⁵³ or 2⁻²⁴), and `TINY`, an absolute slack covering underflow (in f32 also
-//! denormals flushed to zero: at most 2⁻¹²⁶ per operation).
+//! denormals flushed to zero: at most 2⁻¹²⁶ per operation), and `EXACT_TIES`, whether faces in
+//! an axis plane get the exact integer depth test (f64 only: recognizing them relies on
+//! products of f32 differences never underflowing to 0, true in f64; see the top of
+//! `voxelize.wgsl`). The host's certification flags are likewise set for f64 shaders only.
 
 /// Classification and compaction compute entry points (`classify`, `compact`).
 pub const CLASSIFY_WGSL: &str = include_str!("../../../shaders/classify.wgsl");
@@ -16,8 +19,8 @@ pub const VOXELIZE_WGSL: &str = include_str!("../../../shaders/voxelize.wgsl");
 pub enum Precision {
     /// f64 (needs `wgpu::Features::SHADER_F64`): the same arithmetic as the CPU reference.
     F64,
-    /// f32: the same filter with f32's unit roundoff; decisions inside the (wider) bands count
-    /// as inside, so the voxel set is a superset of the exact one.
+    /// f32: the same filter with f32's unit roundoff; triangles with a decision inside the
+    /// (wider) bands are decided on the host, as in f64, only many more of them.
     F32,
 }
 
@@ -34,11 +37,11 @@ pub fn raster_source(p: Precision) -> String {
 fn assemble(entry: &str, p: Precision) -> String {
     // abstract-float literals, converted to `real` exactly (both are powers of two or far
     // above the bounds' own rounding)
-    let (ty, unit, tiny) = match p {
-        Precision::F64 => ("f64", "1.1102230246251565e-16", "1e-300"),
-        Precision::F32 => ("f32", "5.9604644775390625e-8", "1e-30"),
+    let (ty, unit, tiny, ties) = match p {
+        Precision::F64 => ("f64", "1.1102230246251565e-16", "1e-300", true),
+        Precision::F32 => ("f32", "5.9604644775390625e-8", "1e-30", false),
     };
     format!(
-        "alias real = {ty};\nconst UNIT: real = {unit};\nconst TINY: real = {tiny};\n{entry}\n{VOXELIZE_WGSL}"
+        "alias real = {ty};\nconst UNIT: real = {unit};\nconst TINY: real = {tiny};\nconst EXACT_TIES: bool = {ties};\n{entry}\n{VOXELIZE_WGSL}"
     )
 }

@@ -9,6 +9,7 @@ use voxlod_voxelize::{ChunkVoxelizer, Mode};
 
 use crate::device::{open, Gpu};
 use crate::encode::{decode, SLOT_BYTES};
+use crate::fallback::{exact_flags, Listed, TRI_EXACT_DEPTH, TRI_EXACT_EDGES};
 use crate::shaders::{classify_source, raster_source, Precision};
 use crate::{GpuError, GpuMethod};
 
@@ -39,7 +40,8 @@ struct Params {
     slot_lo: u32,
     slot_hi: u32,
     groups_x: u32,
-    pad: [u32; 2],
+    tri_base: u32,
+    pad: u32,
 }
 
 const PHASE_MARK: u32 = 0;
@@ -48,6 +50,14 @@ const PHASE_ACCUMULATE: u32 = 1;
 /// was counted as inside) / some normal component's sign was uncertain.
 const UNCERTAIN_DECISION: u32 = 1;
 const UNCERTAIN_NORMAL: u32 = 2;
+/// Word offsets in `counter` (voxelize.wgsl): the number of listed triangles, the batch's bits of
+/// listed triangles (one per triangle of a batch), the list (indices in the chunk's stream).
+const LIST_COUNT: usize = 4;
+const LIST_FLAGS: u64 = 8;
+const LIST_AT: u64 = LIST_FLAGS + 65536 / 32;
+/// Most triangles listed per chunk; beyond that the whole chunk is voxelized on the CPU.
+const LIST_CAP: u64 = 65536;
+const COUNTER_BYTES: u64 = (LIST_AT + LIST_CAP) * 4;
 
 /// Reusable GPU voxelizer of 256³ chunks; see the crate docs.
 pub struct GpuVoxelizer {
@@ -95,6 +105,10 @@ pub struct GpuVoxelizer {
     /// the last chunk's uncertainty flags, and whether it was re-voxelized on the CPU
     uncertain: u32,
     fell_back: bool,
+    /// the last chunk's listed triangles (indices in its stream, sorted; decided on the host)
+    listed: Vec<u32>,
+    /// how many triangles the last chunk listed (more than `LIST_CAP` on overflow)
+    fallback_tris: u64,
 }
 
 /// (compute, raster, sweep) bind groups.
@@ -281,7 +295,11 @@ impl GpuVoxelizer {
             U::STORAGE | U::COPY_SRC | U::COPY_DST,
         );
         let args_dummy = buf("indirect args (sweep stand-in)", 32, U::STORAGE);
-        let counter = buf("counter", 16, U::STORAGE | U::COPY_SRC | U::COPY_DST);
+        let counter = buf(
+            "counter",
+            COUNTER_BYTES,
+            U::STORAGE | U::COPY_SRC | U::COPY_DST,
+        );
         let staging = buf("staging", 2 * OCC_BYTES, U::MAP_READ | U::COPY_DST);
         gpu.check()?;
         Ok(GpuVoxelizer {
@@ -318,6 +336,8 @@ impl GpuVoxelizer {
             cpu: None,
             uncertain: 0,
             fell_back: false,
+            listed: Vec::new(),
+            fallback_tris: 0,
         })
     }
 
@@ -371,12 +391,18 @@ impl GpuVoxelizer {
         self.uncertain != 0
     }
 
-    /// Whether the last chunk was re-voxelized on the CPU (`voxlod_voxelize::ChunkVoxelizer`,
-    /// same mode) because of such a decision: always when flagged in f64; in f32 only when a
-    /// normal component's sign was uncertain (other uncertain f32 decisions count as inside,
-    /// so the chunk's set is a superset of the exact one).
+    /// Whether the last chunk was re-voxelized as a whole on the CPU
+    /// (`voxlod_voxelize::ChunkVoxelizer`, same mode): only when more than 65,536 of its
+    /// triangles had a decision the shaders could not certify (the list's capacity).
     pub fn last_fell_back(&self) -> bool {
         self.fell_back
+    }
+
+    /// Triangles of the last chunk decided on the host because the shaders could not certify
+    /// one of their decisions (the per-triangle fallback; see the crate docs). When the chunk
+    /// fell back as a whole ([`GpuVoxelizer::last_fell_back`]), more than 65,536.
+    pub fn last_fallback_triangles(&self) -> u64 {
+        self.fallback_tris
     }
 
     /// Triangles per GPU batch (default and maximum 65,535: the sweep pass dispatches one
@@ -537,6 +563,8 @@ impl GpuVoxelizer {
         self.split = (0, 0);
         self.uncertain = 0;
         self.fell_back = false;
+        self.listed.clear();
+        self.fallback_tris = 0;
         self.resident = None;
         self.pending.clear();
         let origin_i = origin.map(|c| c as i32);
@@ -556,28 +584,66 @@ impl GpuVoxelizer {
             return Ok(Vec::new());
         }
         // compaction: a slot per occupied voxel
-        let (count, small, large, flags) = {
-            let (compute, _, _) = self.bind_groups(0);
-            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&Default::default());
-                pass.set_pipeline(&self.compact);
-                pass.set_bind_group(0, &compute, &[]);
-                pass.dispatch_workgroups((OCC_WORDS / WG as u64) as u32, 1, 1);
-            }
-            self.gpu.queue.submit([enc.finish()]);
-            let c = self.gpu.read(&self.counter, &self.staging, 16)?;
-            let c: &[u32] = bytemuck::cast_slice(&c);
-            (c[0] as u64, c[1] as u64, c[2] as u64, c[3])
-        };
+        let c = self.compact_and_count()?;
+        let (mut count, small, large, flags, listed) = (
+            c[0] as u64,
+            c[1] as u64,
+            c[2] as u64,
+            c[3],
+            c[LIST_COUNT] as u64,
+        );
         self.inflight = [None, None];
         self.split = (small, large);
         self.uncertain = flags;
-        let fall_back = match self.precision {
-            Precision::F64 => flags != 0,
-            Precision::F32 => flags & UNCERTAIN_NORMAL != 0,
-        };
+        self.fallback_tris = listed;
         debug_assert!(flags & !(UNCERTAIN_DECISION | UNCERTAIN_NORMAL) == 0);
+        // the listed triangles don't fit the list, or their stream indices don't fit a u32
+        let fall_back = listed > LIST_CAP || marked_tris > u32::MAX as u64;
+        let mut host = None;
+        if listed > 0 && !fall_back {
+            // the per-triangle fallback: the listed triangles' exact voxels, set before
+            // compaction (compaction runs again)
+            let words = self
+                .gpu
+                .read(&self.counter, &self.staging, (LIST_AT + listed) * 4)?;
+            let words: &[u32] = bytemuck::cast_slice(&words);
+            self.listed = words[LIST_AT as usize..].to_vec();
+            self.listed.sort_unstable();
+            debug_assert!(self.listed.windows(2).all(|w| w[0] < w[1]));
+            let mut tris = Vec::with_capacity(self.listed.len());
+            let (mut i, mut next) = (0u64, 0usize);
+            let wanted = &self.listed;
+            replay(&mut |b: &[Triangle]| {
+                for t in b.iter().filter(|t| t.is_finite()) {
+                    if next < wanted.len() && wanted[next] as u64 == i {
+                        tris.push(*t);
+                        next += 1;
+                    }
+                    i += 1;
+                }
+            })?;
+            if i != marked_tris || tris.len() != self.listed.len() {
+                return Err(GpuError::Replay {
+                    first: marked_tris,
+                    again: i,
+                }
+                .into());
+            }
+            let pairs = Listed::new(tris, origin, self.mode);
+            let mut occ: Vec<u32> = bytemuck::pod_collect_to_vec(&self.gpu.read(
+                &self.occ,
+                &self.staging,
+                OCC_BYTES,
+            )?);
+            if pairs.mark(&mut occ) {
+                self.gpu
+                    .queue
+                    .write_buffer(&self.occ, 0, bytemuck::cast_slice(&occ));
+                self.gpu.queue.write_buffer(&self.counter, 0, &[0; 4]);
+                count = self.compact_and_count()?[0] as u64;
+            }
+            host = Some(pairs);
+        }
         if fall_back {
             // the exact CPU decisions for the whole chunk (its attributes too)
             self.fell_back = true;
@@ -626,6 +692,9 @@ impl GpuVoxelizer {
         let (occ, base): (&[u8], &[u8]) = occ_base.split_at(OCC_BYTES as usize);
         let occ: Vec<u32> = bytemuck::pod_collect_to_vec(occ);
         let base: Vec<u32> = bytemuck::pod_collect_to_vec(base);
+        if let Some(h) = &mut host {
+            h.slots(&occ, &base, origin);
+        }
         let mut voxels = Vec::with_capacity(count as usize);
         let mut lo = 0u64;
         while lo < count {
@@ -640,7 +709,16 @@ impl GpuVoxelizer {
             match self.resident {
                 // one batch: its triangles are still on the device
                 Some(r) if marked_batches == 1 => {
-                    self.record(r.slot, r.len, origin_i, PHASE_ACCUMULATE, slots, r.defers)?;
+                    let tri_base = 0;
+                    self.record(
+                        r.slot,
+                        r.len,
+                        tri_base,
+                        origin_i,
+                        PHASE_ACCUMULATE,
+                        slots,
+                        r.defers,
+                    )?;
                 }
                 _ => {
                     let mut st = Stream::new(origin_i, PHASE_ACCUMULATE, slots);
@@ -657,14 +735,18 @@ impl GpuVoxelizer {
             }
             let acc = self.gpu.read(&self.accum, &self.staging, bytes)?;
             self.inflight = [None, None];
-            decode(
-                &occ,
-                &base,
-                bytemuck::cast_slice(&acc),
-                lo as u32,
-                hi as u32,
-                &mut voxels,
-            );
+            let owned: Vec<u32>;
+            let acc: &[u32] = match &host {
+                // the listed triangles' contributions, added to the GPU's sums
+                Some(h) => {
+                    let mut a: Vec<u32> = bytemuck::pod_collect_to_vec(&acc);
+                    h.add_to(&mut a, lo as u32, hi as u32);
+                    owned = a;
+                    &owned
+                }
+                None => bytemuck::cast_slice(&acc),
+            };
+            decode(&occ, &base, acc, lo as u32, hi as u32, &mut voxels);
             lo = hi;
         }
         voxels.sort_unstable_by_key(|v| v.morton());
@@ -678,14 +760,24 @@ impl GpuVoxelizer {
             let room = self.batch - self.pending.len();
             let (head, rest) = tris.split_at(room.min(tris.len()));
             tris = rest;
-            let r = if self.pending.is_empty()
+            // f64 shaders: every triangle gets its certification flags, so it is copied
+            let certify = self.precision == Precision::F64;
+            let r = if !certify
+                && self.pending.is_empty()
                 && head.len() == self.batch
                 && head.iter().all(Triangle::is_finite)
             {
                 self.submit(st, head)
             } else {
+                let at = self.pending.len();
                 self.pending
                     .extend(head.iter().filter(|t| t.is_finite()).copied());
+                for t in &mut self.pending[at..] {
+                    t.flags &= !(TRI_EXACT_EDGES | TRI_EXACT_DEPTH);
+                    if certify {
+                        t.flags |= exact_flags(t);
+                    }
+                }
                 if self.pending.len() == self.batch {
                     let full = std::mem::take(&mut self.pending);
                     let r = self.submit(st, &full);
@@ -734,7 +826,17 @@ impl GpuVoxelizer {
             .queue
             .write_buffer(&self.tris[slot], 0, bytemuck::cast_slice(tris));
         let defers = self.may_defer(tris);
-        let idx = self.record(slot, tris.len(), st.origin, st.phase, st.slots, defers)?;
+        // (a chunk whose stream exceeds u32 indices falls back as a whole)
+        let tri_base = st.tris.min(u32::MAX as u64) as u32;
+        let idx = self.record(
+            slot,
+            tris.len(),
+            tri_base,
+            st.origin,
+            st.phase,
+            st.slots,
+            defers,
+        )?;
         self.inflight[slot] = Some(idx);
         self.resident = Some(Resident {
             slot,
@@ -761,12 +863,34 @@ impl GpuVoxelizer {
         !tris.iter().all(|t| certainly_inline(t, cutoff))
     }
 
+    /// Runs the compaction pass and reads `counter` up to the number of listed triangles.
+    fn compact_and_count(&mut self) -> Result<[u32; LIST_COUNT + 1], GpuError> {
+        let (compute, _, _) = self.bind_groups(0);
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&self.compact);
+            pass.set_bind_group(0, &compute, &[]);
+            pass.dispatch_workgroups((OCC_WORDS / WG as u64) as u32, 1, 1);
+        }
+        self.gpu.queue.submit([enc.finish()]);
+        let c = self
+            .gpu
+            .read(&self.counter, &self.staging, 4 * (LIST_COUNT as u64 + 1))?;
+        let c: Vec<u32> = bytemuck::pod_collect_to_vec(&c);
+        Ok(std::array::from_fn(|k| c[k]))
+    }
+
     /// Records and submits the classification pass and, if `defers`, the second pass of one
-    /// batch (`len` triangles in triangle buffer `slot`).
+    /// batch (`len` triangles in triangle buffer `slot`, the first of them triangle `tri_base`
+    /// of the chunk's stream). Marking clears the batch's bits of listed triangles (the shaders
+    /// set them); accumulation overwrites the listed triangles with zeros (skipped).
+    #[allow(clippy::too_many_arguments)]
     fn record(
         &mut self,
         slot: usize,
         len: usize,
+        tri_base: u32,
         origin: [i32; 3],
         phase: u32,
         slots: (u32, u32),
@@ -792,13 +916,33 @@ impl GpuVoxelizer {
             slot_lo: slots.0,
             slot_hi: slots.1,
             groups_x,
-            pad: [0; 2],
+            tri_base,
+            pad: 0,
         };
         self.gpu
             .queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         let (compute, raster, sweep) = self.bind_groups(slot);
+        let words = (len as u64).div_ceil(32);
+        if phase == PHASE_ACCUMULATE {
+            // the listed triangles' contributions come from the host: replace them by
+            // degenerate (zero-area) triangles, which the shaders skip
+            let first = self.listed.partition_point(|&i| i < tri_base);
+            let zero = [0u8; std::mem::size_of::<Triangle>()];
+            for &i in &self.listed[first..] {
+                let k = (i - tri_base) as u64;
+                if k >= len as u64 {
+                    break;
+                }
+                self.gpu
+                    .queue
+                    .write_buffer(&self.tris[slot], k * zero.len() as u64, &zero);
+            }
+        }
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        if phase == PHASE_MARK {
+            enc.clear_buffer(&self.counter, LIST_FLAGS * 4, Some(words * 4));
+        }
         enc.clear_buffer(&self.args, 0, None);
         {
             let mut pass = enc.begin_compute_pass(&Default::default());

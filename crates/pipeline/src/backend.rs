@@ -313,10 +313,12 @@ pub(crate) struct GpuRun {
     /// triangles voxelized in the classification pass / deferred to the second pass, summed
     /// over the chunks voxelized so far
     split: (u64, u64),
-    /// chunks re-voxelized on the CPU (a decision the shaders could not certify), and chunks
-    /// with such a decision at all (in f32 mostly counted as inside: a conservative superset)
+    /// chunks re-voxelized as a whole on the CPU (more triangles with a decision the shaders
+    /// could not certify than their list holds), chunks with such a decision at all, and the
+    /// triangles decided on the host for it (per chunk)
     fallback: u64,
     uncertain: u64,
+    fallback_tris: u64,
 }
 
 /// The GPU backend: one device, the chunks one after another.
@@ -337,6 +339,7 @@ impl Voxelize for GpuVoxelizers {
         gpu.split.1 += large;
         gpu.fallback += gpu.vz.last_fell_back() as u64;
         gpu.uncertain += gpu.vz.last_uncertain() as u64;
+        gpu.fallback_tris += gpu.vz.last_fallback_triangles();
         Ok(ChunkVoxels { voxels, skipped: 0 })
     }
 
@@ -344,8 +347,9 @@ impl Voxelize for GpuVoxelizers {
     /// deferred to the second pass (the fragment pass; the sweep pass of `--gpu-method
     /// triangle`), summed over the chunks voxelized (the cutoff search not included). A
     /// triangle spanning several chunks counts once per chunk; zero-area triangles and parts
-    /// outside a chunk count in neither. With them, the chunks re-voxelized on the CPU and
-    /// those with an uncertain decision.
+    /// outside a chunk count in neither. With them, the chunks re-voxelized on the CPU as a
+    /// whole, the triangles decided on the host (per-triangle fallback) and the chunks with an
+    /// uncertain decision.
     fn gpu_stats(&self) -> Result<Option<GpuStats>, StageError> {
         let g = self.0.lock().map_err(|_| {
             StageError::Other(anyhow::anyhow!(
@@ -355,6 +359,7 @@ impl Voxelize for GpuVoxelizers {
         Ok(Some(GpuStats {
             split: [g.split.0, g.split.1],
             cpu_fallback_chunks: g.fallback,
+            cpu_fallback_triangles: g.fallback_tris,
             uncertain_chunks: g.uncertain,
         }))
     }
@@ -365,8 +370,10 @@ impl Voxelize for GpuVoxelizers {
 pub(crate) struct GpuStats {
     /// triangles voxelized in the classification pass / deferred to the second pass
     pub split: [u64; 2],
-    /// chunks re-voxelized on the CPU
+    /// chunks re-voxelized on the CPU as a whole
     pub cpu_fallback_chunks: u64,
+    /// triangles (per chunk) decided on the host, one of their decisions being uncertain
+    pub cpu_fallback_triangles: u64,
     /// chunks with a decision inside its rounding band
     pub uncertain_chunks: u64,
 }
@@ -481,14 +488,15 @@ fn select_gpu(
     }
     // the contract of the voxel sets (crates/gpu docs, "Exactness")
     desc += match gpu.precision() {
-        voxlod_gpu::shaders::Precision::F64 => ", f64: exact sets, uncertain chunks on the CPU)",
-        voxlod_gpu::shaders::Precision::F32 => ", f32: conservative superset)",
+        voxlod_gpu::shaders::Precision::F64 => ", f64: exact sets, uncertain triangles on the CPU)",
+        voxlod_gpu::shaders::Precision::F32 => ", f32: exact sets, uncertain triangles on the CPU)",
     };
     let run = GpuRun {
         vz: gpu,
         split: (0, 0),
         fallback: 0,
         uncertain: 0,
+        fallback_tris: 0,
     };
     Ok((Box::new(GpuVoxelizers(Mutex::new(run))), desc))
 }

@@ -190,11 +190,13 @@ pub struct BuildSummary {
     /// cutoff) and triangles deferred to the second pass, summed over the chunks this run
     /// voxelized (a triangle counts once per chunk it was binned to). `None` on the CPU.
     pub gpu_split: Option<[u64; 2]>,
-    /// GPU backend: chunks re-voxelized on the CPU because a decision was inside its rounding
-    /// band (f64; in f32 only an uncertain normal sign), so that the sets are exact.
+    /// GPU backend: chunks re-voxelized on the CPU as a whole, because more than 65,536 of
+    /// their triangles had a decision inside its rounding band (the list's capacity).
     pub gpu_cpu_fallback_chunks: Option<u64>,
-    /// GPU backend: chunks with a decision inside its rounding band (in f32 counted as inside
-    /// unless the chunk fell back: the set is then a conservative superset).
+    /// GPU backend: triangles decided on the host with the CPU's exact test because one of
+    /// their decisions was inside its rounding band (a triangle counts once per chunk).
+    pub gpu_cpu_fallback_triangles: Option<u64>,
+    /// GPU backend: chunks with a decision inside its rounding band.
     pub gpu_uncertain_chunks: Option<u64>,
     /// Non-empty leaf chunk bins (chunks some triangle's range touches).
     pub chunk_bins: usize,
@@ -405,6 +407,7 @@ fn summarize(ctx: BuildContext, built: Built, resumed: bool, t0: Instant) -> Bui
         backend: voxelized.backend,
         gpu_split: gpu.map(|g| g.split),
         gpu_cpu_fallback_chunks: gpu.map(|g| g.cpu_fallback_chunks),
+        gpu_cpu_fallback_triangles: gpu.map(|g| g.cpu_fallback_triangles),
         gpu_uncertain_chunks: gpu.map(|g| g.uncertain_chunks),
         chunk_bins: voxelized.marker.records as usize,
         binned_triangles: voxelized.marker.binned_triangles,

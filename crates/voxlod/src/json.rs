@@ -135,7 +135,7 @@ mod tests {
 
         let s = summary(
             "gpu llvmpipe (LLVM 19.1.1, 256 bits) (hybrid, cutoff 12.5 voxels² found by search, \
-             f64: exact sets, uncertain chunks on the CPU)",
+             f64: exact sets, uncertain triangles on the CPU)",
             true,
         );
         let o = backend_object(&s);

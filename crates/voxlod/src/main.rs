@@ -396,9 +396,13 @@ fn print_summary(s: &BuildSummary, input: &str) {
             "  gpu split    {small} triangle/chunk pairs voxelized in the classification pass, {large} deferred to the second pass"
         );
     }
-    if let (Some(f), Some(u)) = (s.gpu_cpu_fallback_chunks, s.gpu_uncertain_chunks) {
+    if let (Some(f), Some(t), Some(u)) = (
+        s.gpu_cpu_fallback_chunks,
+        s.gpu_cpu_fallback_triangles,
+        s.gpu_uncertain_chunks,
+    ) {
         println!(
-            "  gpu exact    {f} chunks re-voxelized on the CPU, {u} with a decision inside its rounding band"
+            "  gpu exact    {t} triangles decided on the CPU, in {u} chunks; {f} chunks re-voxelized on the CPU"
         );
     }
     println!(
