@@ -143,8 +143,8 @@ fn gpu_backend_writes_the_same_file_as_cpu() {
         let tris = summary["gpu_cpu_fallback_triangles"].as_u64().unwrap();
         assert_eq!(fallback, 0, "no list overflow on the bunny");
         assert!(
-            (uncertain == 0) == (tris == 0),
-            "a chunk is uncertain exactly when some of its triangles went to the host: {uncertain} chunks, {tris} triangles"
+            uncertain == 0 || tris > 0,
+            "an uncertain chunk sends its uncertain triangles to the host: {uncertain} chunks, {tris} triangles"
         );
         check_octree(&gpu);
         let r = gpu_contract(&cpu, &gpu);
