@@ -136,9 +136,10 @@ fn block_world_ties_are_certified_on_the_gpu() {
         let mut tris = Vec::new();
         let o = origin.map(|c| c as f32);
         for i in 0..60 {
-            let lo: [f32; 3] =
-                std::array::from_fn(|k| o[k] + (rng.next() % (240.0 / unit) as u64) as f32 * unit);
-            let size: [f32; 3] = std::array::from_fn(|_| (1 + rng.next() % 12) as f32 * unit);
+            let lo: [f32; 3] = std::array::from_fn(|k| {
+                o[k] + (rng.next_u64() % (240.0 / unit) as u64) as f32 * unit
+            });
+            let size: [f32; 3] = std::array::from_fn(|_| (1 + rng.next_u64() % 12) as f32 * unit);
             let hi: [f32; 3] = std::array::from_fn(|k| lo[k] + size[k]);
             tris.extend(block(lo, hi));
             if i % 3 == 0 {
@@ -170,11 +171,11 @@ fn block_world_ties_are_certified_on_the_gpu() {
 /// A sliver: `a`, `b`, and a point on segment ab (parameter `t`) moved one or two ulps in one
 /// coordinate.
 fn sliver(rng: &mut Rng, a: [f32; 3], b: [f32; 3]) -> Triangle {
-    let t = rng.f();
+    let t = rng.f32();
     let mut c: [f32; 3] = std::array::from_fn(|k| a[k] + t * (b[k] - a[k]));
-    let k = (rng.next() % 3) as usize;
-    let ulps = 1 + (rng.next() % 2) as u32;
-    c[k] = if rng.next() % 2 == 0 {
+    let k = (rng.next_u64() % 3) as usize;
+    let ulps = 1 + (rng.next_u64() % 2) as u32;
+    c[k] = if rng.next_u64() % 2 == 0 {
         f32::from_bits(c[k].to_bits() + ulps)
     } else {
         f32::from_bits(c[k].to_bits() - ulps)
@@ -190,9 +191,10 @@ fn slivers_fall_back_per_triangle() {
     let o = origin.map(|c| c as f32);
     let mut tris = Vec::new();
     for i in 0..3000 {
-        let c: [f32; 3] = std::array::from_fn(|k| o[k] + rng.range(4.0, 252.0));
+        let c: [f32; 3] = std::array::from_fn(|k| o[k] + rng.range_f32(4.0, 252.0));
         let s = if i % 5 == 0 { 4.0 } else { 1.5 };
-        let p = |rng: &mut Rng| -> [f32; 3] { std::array::from_fn(|k| c[k] + rng.range(-s, s)) };
+        let p =
+            |rng: &mut Rng| -> [f32; 3] { std::array::from_fn(|k| c[k] + rng.range_f32(-s, s)) };
         let mut t = if i % 10 == 0 {
             // slivers, some through voxel corners (integer end points)
             let (a, b) = (p(&mut rng), p(&mut rng));
