@@ -161,22 +161,40 @@ impl Voxelizers {
         gpu_method: &str,
         cutoff: Cutoff,
         bins: &Bins,
+        textures: Option<std::sync::Arc<voxlod_texture::TextureSet>>,
     ) -> Result<(Voxelizers, String)> {
+        let textured = textures.as_ref().map(|t| t.bytes());
         let cpu = || {
             let v = Voxelizers::Cpu(
                 (0..cpu_workers)
                     .map(|_| {
                         let mut cv = ChunkVoxelizer::new(mode);
                         cv.set_method(method);
+                        cv.set_textures(textures.clone());
                         Mutex::new(cv)
                     })
                     .collect(),
             );
-            (
-                v,
-                format!("cpu ({cpu_workers} chunk voxelizers on {threads} threads, {method})"),
-            )
+            let mut d =
+                format!("cpu ({cpu_workers} chunk voxelizers on {threads} threads, {method})");
+            if let Some(bytes) = textured {
+                d += &format!(
+                    "; colours from textures ({:.1} MiB decoded), averaged in linear light",
+                    bytes as f64 / (1u64 << 20) as f64
+                );
+            }
+            (v, d)
         };
+        // the GPU shaders do not sample textures: a textured mesh is voxelized on the CPU
+        if textured.is_some() && backend != Backend::Cpu {
+            let (v, d) = cpu();
+            let why = if backend == Backend::Gpu {
+                "--backend gpu: the GPU shaders do not sample textures, so this textured mesh ran on the CPU"
+            } else {
+                "textured mesh: on the CPU (the GPU shaders do not sample textures)"
+            };
+            return Ok((v, format!("{d}; {why}")));
+        }
         // the GPU computes the overlap tests' set; the approximate method runs on the CPU only
         match (backend, method.is_exact()) {
             (Backend::Gpu, false) => {

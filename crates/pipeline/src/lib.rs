@@ -21,6 +21,7 @@ mod passes;
 mod progress;
 mod size;
 mod system;
+mod textures;
 mod window;
 mod work;
 
@@ -446,7 +447,9 @@ fn run(
     let layout = RecordLayout {
         normals: info.has_normals,
         colors: info.has_colors,
+        texcoords: info.has_texcoords,
     };
+    let textures = textures::load(&info, input, &mut warnings);
     let spooled = !source.rereadable();
     let rec = layout.bytes() as u64;
 
@@ -639,6 +642,7 @@ fn run(
             &mut stages,
             &mut backend_used,
             &mut gpu_stats,
+            textures,
         )?,
     };
     if leaves_marker.skipped > 0 {
@@ -817,6 +821,7 @@ fn tile_and_voxelize(
     stages: &mut Vec<StageTime>,
     backend_used: &mut String,
     gpu_stats: &mut Option<backend::GpuStats>,
+    textures: Option<std::sync::Arc<voxlod_texture::TextureSet>>,
 ) -> Result<LeavesMarker> {
     let stage_done =
         |stages: &mut Vec<StageTime>, stage: &'static str, t: Instant, resumed: bool| {
@@ -961,6 +966,7 @@ fn tile_and_voxelize(
                 &s.gpu_method,
                 s.cutoff,
                 &bins,
+                textures.clone(),
             )?;
             *backend_used = description;
             let bar = Stage::items(s.progress, "voxelize", chunks.len() as u64);
