@@ -38,6 +38,8 @@ struct Scan {
     faces: u64,
     corners_without_normal: u64,
     corners_without_texcoord: u64,
+    /// materials (by `usemtl` name) with a face corner without a texture coordinate index
+    without_texcoord: HashSet<String>,
     mtllibs: Vec<String>,
     used_materials: HashSet<String>,
 }
@@ -58,11 +60,13 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
         faces: 0,
         corners_without_normal: 0,
         corners_without_texcoord: 0,
+        without_texcoord: HashSet::new(),
         mtllibs: Vec::new(),
         used_materials: HashSet::new(),
     };
     let mut buf = Vec::new();
     let mut line_no = 0u64;
+    let mut current_material = String::new();
     loop {
         buf.clear();
         if r.read_until(b'\n', &mut buf)
@@ -231,6 +235,9 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                     }
                     if parts.get(1).is_none_or(|t| t.is_empty()) {
                         s.corners_without_texcoord += 1;
+                        if !s.without_texcoord.contains(&current_material) {
+                            s.without_texcoord.insert(current_material.clone());
+                        }
                     }
                 }
                 s.faces += 1;
@@ -242,8 +249,11 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                 }
             }
             Some("usemtl") => {
-                if let Some(name) = t.next() {
+                // the name as tobj takes it: the rest of the line
+                let name = line.trim().strip_prefix("usemtl").unwrap_or("").trim();
+                if !name.is_empty() {
                     s.used_materials.insert(name.to_string());
+                    current_material = name.to_string();
                 }
             }
             _ => {}
@@ -270,6 +280,13 @@ impl ObjSource {
                     for m in &mats {
                         let Some(map) = &m.diffuse_texture else { continue };
                         if !s.used_materials.contains(&m.name) || textured.contains_key(&m.name) {
+                            continue;
+                        }
+                        if s.texcoords > 0 && s.without_texcoord.contains(&m.name) {
+                            warnings.push(format!(
+                                "material {:?} has a texture (map_Kd) but some of its faces have no texture coordinate index; its Kd is used",
+                                m.name
+                            ));
                             continue;
                         }
                         let found = crate::texpath::split_mtl_map(map).and_then(|(file, clamp)| {
@@ -312,11 +329,6 @@ impl ObjSource {
                 "materials have textures (map_Kd) but the file has no texture coordinates (vt); their Kd is used"
                     .into(),
             );
-        } else if materials.len() > 1 && s.corners_without_texcoord > 0 {
-            warnings.push(format!(
-                "{} face corners have no texture coordinate index; faces of textured materials without them get Kd",
-                s.corners_without_texcoord
-            ));
         }
         let has_texcoords = materials.len() > 1 && s.texcoords > 0;
         if !has_texcoords {
