@@ -221,7 +221,7 @@ pub struct BuildSummary {
     /// bounds of the vertex list before it, see [`MeshSource::vertex_bounds`]), so the tile
     /// stage had no count pass.
     pub counted_during_ingest: bool,
-    /// Bytes of one triangle record in the spool and bins (40–88: only the attributes the
+    /// Bytes of one triangle record in the spool and bins (40–112: only the attributes the
     /// mesh has).
     pub record_bytes: usize,
     /// True if the build continued an interrupted one.
@@ -449,7 +449,7 @@ fn run(
         colors: info.has_colors,
         texcoords: info.has_texcoords,
     };
-    let textures = textures::load(&info, input, &mut warnings);
+    let textures = textures::load(&info, input, s.memory, &mut warnings);
     let spooled = !source.rereadable();
     let rec = layout.bytes() as u64;
 

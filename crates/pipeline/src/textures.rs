@@ -8,10 +8,12 @@ use voxlod_ingest::MeshInfo;
 use voxlod_texture::TextureSet;
 
 /// The textures of `info`'s materials, `None` if the mesh has no texture coordinates or no
-/// usable texture; what could not be used goes to `warnings`.
+/// usable texture; what could not be used goes to `warnings`, and so does a set of decoded
+/// textures larger than a quarter of the memory `budget` (they are not yet inside the plan).
 pub(crate) fn load(
     info: &MeshInfo,
     input: &Path,
+    budget: u64,
     warnings: &mut Vec<String>,
 ) -> Option<Arc<TextureSet>> {
     if !info.has_texcoords {
@@ -23,5 +25,13 @@ pub(crate) fn load(
             .iter()
             .map(|w| format!("{}: {w}", input.display())),
     );
+    let bytes = set.bytes() as u64;
+    if bytes > budget / 4 {
+        warnings.push(format!(
+            "the decoded textures take {:.0} MiB, held in memory outside the --memory plan ({:.0} MiB): peak memory can exceed the budget",
+            bytes as f64 / (1u64 << 20) as f64,
+            budget as f64 / (1u64 << 20) as f64
+        ));
+    }
     (!set.is_empty()).then(|| Arc::new(set))
 }
