@@ -28,11 +28,20 @@ pub const TRI_HAS_NORMALS: u32 = 1;
 /// `flags` bit: the colours come from the mesh (vertex or material colour), not the default.
 pub const TRI_HAS_COLORS: u32 = 2;
 
+/// `flags` bit: the triangle carries texture coordinates in `uv` (its material may have a
+/// base colour texture, see [`Triangle::material`]).
+pub const TRI_HAS_UV: u32 = 4;
+/// The material index is stored in the `flags` bits from this one up (16 bits: up to 65,535
+/// materials; index 0 also means "no material" for meshes without a material table).
+pub const TRI_MATERIAL_SHIFT: u32 = 16;
+/// The largest material index a triangle can carry.
+pub const MAX_MATERIAL: u32 = u16::MAX as u32;
+
 /// Colour given to triangles whose mesh has neither vertex nor material colours: opaque white.
 pub const DEFAULT_COLOR: [u8; 4] = [255, 255, 255, 255];
 
 /// One triangle with its per-vertex attributes, as ingest yields it and as tile bins store it
-/// (88 bytes, plain old data, little-endian on disk).
+/// (112 bytes, plain old data, little-endian on disk).
 ///
 /// Positions are in world units when ingest yields them and in grid units (voxels, see
 /// [`Grid::to_grid`]) once the tile stage has binned them.
@@ -45,8 +54,12 @@ pub struct Triangle {
     pub n: [[f32; 3]; 3],
     /// Vertex colours, RGBA8.
     pub c: [[u8; 4]; 3],
-    /// `TRI_HAS_NORMALS | TRI_HAS_COLORS`.
+    /// `TRI_HAS_NORMALS | TRI_HAS_COLORS | TRI_HAS_UV`, and the material index shifted by
+    /// [`TRI_MATERIAL_SHIFT`].
     pub flags: u32,
+    /// Per-vertex texture coordinates `(u, v)` (OBJ/glTF convention: `v` up from the image's
+    /// bottom row, i.e. texel row `(1 − v)·height`); all zero unless `flags & TRI_HAS_UV`.
+    pub uv: [[f32; 2]; 3],
 }
 
 impl Triangle {
@@ -57,7 +70,22 @@ impl Triangle {
             n: [[0.0; 3]; 3],
             c: [DEFAULT_COLOR; 3],
             flags: 0,
+            uv: [[0.0; 2]; 3],
         }
+    }
+
+    /// The triangle's material index (an index into the mesh's material table; 0 for a mesh
+    /// without one).
+    #[inline]
+    pub fn material(&self) -> u32 {
+        self.flags >> TRI_MATERIAL_SHIFT
+    }
+
+    /// Sets the material index (`m <= MAX_MATERIAL`).
+    #[inline]
+    pub fn set_material(&mut self, m: u32) {
+        assert!(m <= MAX_MATERIAL, "material index {m} > {MAX_MATERIAL}");
+        self.flags = (self.flags & ((1 << TRI_MATERIAL_SHIFT) - 1)) | (m << TRI_MATERIAL_SHIFT);
     }
 
     /// Twice the area vector `(v1 - v0) × (v2 - v0)` in f64.
@@ -82,6 +110,33 @@ impl Triangle {
         let c = self.cross();
         c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0
     }
+}
+
+/// How texture coordinates outside `[0, 1]` are mapped into the texture (glTF sampler wrap
+/// modes; OBJ textures repeat).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Wrap {
+    /// The texture tiles the plane (OBJ, glTF `REPEAT`).
+    #[default]
+    Repeat,
+    /// Coordinates are clamped to the edge texels (glTF `CLAMP_TO_EDGE`).
+    Clamp,
+    /// The texture tiles the plane, every other copy mirrored (glTF `MIRRORED_REPEAT`).
+    Mirror,
+}
+
+/// One entry of a mesh's material table, indexed by [`Triangle::material`]. The diffuse /
+/// base colour factor is already multiplied into the triangles' vertex colours by ingest; the
+/// table says where a triangle's colour additionally comes from a texture.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Material {
+    /// The material's name (OBJ `newmtl`, glTF material name or index).
+    pub name: String,
+    /// The base colour texture, resolved to an existing file (`None`: untextured).
+    pub texture: Option<std::path::PathBuf>,
+    /// How the texture wraps in `u` and `v`.
+    pub wrap: [Wrap; 2],
 }
 
 fn sub64(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {

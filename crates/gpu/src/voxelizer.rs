@@ -16,6 +16,16 @@ use crate::{GpuError, GpuMethod};
 /// Occupancy bitset of a chunk: 256³ bits.
 const OCC_WORDS: u64 = (CHUNK as u64).pow(3) / 32;
 const OCC_BYTES: u64 = OCC_WORDS * 4;
+/// A triangle as the shaders read it: [`Triangle`] without its texture coordinates.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct ShaderTriangle {
+    v: [[f32; 3]; 3],
+    n: [[f32; 3]; 3],
+    c: [[u8; 4]; 3],
+    flags: u32,
+}
+
 /// Triangles per batch (88 bytes each: under 6 MiB). The sweep pass dispatches one workgroup
 /// per deferred triangle, and a dispatch dimension is at most 65535.
 const BATCH: usize = 65535;
@@ -819,12 +829,24 @@ impl GpuVoxelizer {
         if let Some(idx) = self.inflight[slot].take() {
             self.gpu.wait_for(idx)?;
         }
-        let bytes = std::mem::size_of_val(tris) as u64;
+        // the shaders read the 88-byte layout v, n, c, flags (texture coordinates, which
+        // `Triangle` carries after them, are not used on the GPU: textured meshes are
+        // voxelized on the CPU)
+        let packed: Vec<ShaderTriangle> = tris
+            .iter()
+            .map(|t| ShaderTriangle {
+                v: t.v,
+                n: t.n,
+                c: t.c,
+                flags: t.flags,
+            })
+            .collect();
+        let bytes = std::mem::size_of_val(packed.as_slice()) as u64;
         self.ensure_tris(slot, bytes);
         self.ensure(Which::Deferred, tris.len() as u64 * DEFERRED_BYTES);
         self.gpu
             .queue
-            .write_buffer(&self.tris[slot], 0, bytemuck::cast_slice(tris));
+            .write_buffer(&self.tris[slot], 0, bytemuck::cast_slice(&packed));
         let defers = self.may_defer(tris);
         // (a chunk whose stream exceeds u32 indices falls back as a whole)
         let tri_base = st.tris.min(u32::MAX as u64) as u32;

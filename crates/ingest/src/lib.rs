@@ -8,8 +8,11 @@
 //!   (polygons, fan-triangulated) and `tristrips` (restart at -1). Vertex normals `nx ny nz`;
 //!   vertex colours `red green blue [alpha]` (or `diffuse_*`, `r g b a`), uchar 0–255 or
 //!   float 0–1.
-//! * **OBJ** (`.obj`) through `tobj`: polygons fan-triangulated, MTL `Kd` as the colour of
-//!   the triangle, `vn` normals when every face corner has one. Textures are ignored.
+//! * **OBJ** (`.obj`) through `tobj`: polygons fan-triangulated, MTL `Kd` (times `d` as alpha)
+//!   as the colour of the triangle, `vn` normals when every face corner has one; `vt`
+//!   texture coordinates and the material's `map_Kd` texture (resolved relative to the MTL
+//!   file, case-insensitively if the exact path does not exist) into [`MeshInfo::materials`]
+//!   (docs/TEXTURES.md).
 //! * **STL** (`.stl`): binary and ASCII; the facet normal is ignored.
 //!
 //! Memory: binary PLY and binary STL are memory-mapped and vertices are read in place —
@@ -58,6 +61,7 @@ mod ply_header;
 mod ply_records;
 mod ply_vertices;
 mod stl;
+mod texpath;
 
 pub use batch::BATCH;
 pub use error::{IngestError, Location};
@@ -65,7 +69,7 @@ pub use map_guard::TRUNCATED_EXIT;
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
-use voxlod_geom::{Bounds, Triangle};
+use voxlod_geom::{Bounds, Material, Triangle};
 
 /// What [`MeshSource::open`] learnt about a mesh before reading its body.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -85,6 +89,11 @@ pub struct MeshInfo {
     pub has_normals: bool,
     /// Triangles carry vertex or material colours (`TRI_HAS_COLORS`), for at least some.
     pub has_colors: bool,
+    /// Triangles carry texture coordinates (`TRI_HAS_UV`), for at least some.
+    pub has_texcoords: bool,
+    /// The material table [`voxlod_geom::Triangle::material`] indexes (empty for a mesh
+    /// without textured materials: then every material index is 0 and means nothing).
+    pub materials: Vec<Material>,
     /// Things that did not stop reading but the user should know (missing MTL file,
     /// ignored partial normals, trailing bytes, no faces).
     pub warnings: Vec<String>,

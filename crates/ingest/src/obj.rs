@@ -1,6 +1,9 @@
 //! Wavefront OBJ reading through `tobj` (triangulated as fans, like PLY polygons), with the
-//! MTL diffuse colour `Kd` as the colour of all three corners and `vn` normals when every
-//! face corner names one. `tobj` loads the whole file into memory: OBJ input costs
+//! MTL diffuse colour `Kd` (alpha: the dissolve `d`) as the colour of all three corners and
+//! `vn` normals when every face corner names one. A material with a `map_Kd` texture gets an
+//! entry in the material table ([`MeshInfo::materials`]; entry 0 is "no texture") and its
+//! triangles carry their `vt` coordinates (`TRI_HAS_UV`) and that entry's index; `Kd` stays
+//! their colour, the factor the texture is multiplied by (the MTL definition). `tobj` loads the whole file into memory: OBJ input costs
 //! O(file) memory.
 //!
 //! Because `tobj` reports errors without a line number, [`scan`] first walks the file once
@@ -9,17 +12,22 @@
 
 use crate::batch::Emitter;
 use crate::{IngestError, Location, MeshInfo};
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use voxlod_geom::{Triangle, DEFAULT_COLOR, TRI_HAS_COLORS, TRI_HAS_NORMALS};
+use voxlod_geom::{
+    Material, Triangle, Wrap, DEFAULT_COLOR, MAX_MATERIAL, TRI_HAS_COLORS, TRI_HAS_NORMALS,
+    TRI_HAS_UV,
+};
 
 pub(crate) struct ObjSource {
     path: PathBuf,
     polygons: u64,
     /// Every face corner names a normal: use the `vn` normals.
     use_normals: bool,
+    /// Material name → index in the material table, for the materials with a usable texture.
+    textured: HashMap<String, u32>,
 }
 
 struct Scan {
@@ -29,6 +37,9 @@ struct Scan {
     colored_vertices: u64,
     faces: u64,
     corners_without_normal: u64,
+    corners_without_texcoord: u64,
+    /// materials (by `usemtl` name) with a face corner without a texture coordinate index
+    without_texcoord: HashSet<String>,
     mtllibs: Vec<String>,
     used_materials: HashSet<String>,
 }
@@ -48,11 +59,14 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
         colored_vertices: 0,
         faces: 0,
         corners_without_normal: 0,
+        corners_without_texcoord: 0,
+        without_texcoord: HashSet::new(),
         mtllibs: Vec::new(),
         used_materials: HashSet::new(),
     };
     let mut buf = Vec::new();
     let mut line_no = 0u64;
+    let mut current_material = String::new();
     loop {
         buf.clear();
         if r.read_until(b'\n', &mut buf)
@@ -219,6 +233,12 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                     if !has_normal {
                         s.corners_without_normal += 1;
                     }
+                    if parts.get(1).is_none_or(|t| t.is_empty()) {
+                        s.corners_without_texcoord += 1;
+                        if !s.without_texcoord.contains(&current_material) {
+                            s.without_texcoord.insert(current_material.clone());
+                        }
+                    }
                 }
                 s.faces += 1;
             }
@@ -229,8 +249,11 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                 }
             }
             Some("usemtl") => {
-                if let Some(name) = t.next() {
+                // the name as tobj takes it: the rest of the line
+                let name = line.trim().strip_prefix("usemtl").unwrap_or("").trim();
+                if !name.is_empty() {
                     s.used_materials.insert(name.to_string());
+                    current_material = name.to_string();
                 }
             }
             _ => {}
@@ -245,11 +268,52 @@ impl ObjSource {
         let mut warnings = Vec::new();
         let mut has_colors = s.colored_vertices > 0 && s.colored_vertices == s.vertices;
         let dir = path.parent().unwrap_or(Path::new("."));
+        // entry 0: no texture (untextured materials and faces without a material)
+        let mut materials = vec![Material::default()];
+        let mut textured = HashMap::new();
         for lib in &s.mtllibs {
             let p = dir.join(lib);
             match tobj::load_mtl(&p) {
                 Ok((mats, _)) => {
                     has_colors |= mats.iter().any(|m| m.diffuse.is_some() && s.used_materials.contains(&m.name));
+                    let mtl_dir = p.parent().unwrap_or(Path::new("."));
+                    for m in &mats {
+                        let Some(map) = &m.diffuse_texture else { continue };
+                        if !s.used_materials.contains(&m.name) || textured.contains_key(&m.name) {
+                            continue;
+                        }
+                        if s.texcoords > 0 && s.without_texcoord.contains(&m.name) {
+                            warnings.push(format!(
+                                "material {:?} has a texture (map_Kd) but some of its faces have no texture coordinate index; its Kd is used",
+                                m.name
+                            ));
+                            continue;
+                        }
+                        let found = crate::texpath::split_mtl_map(map).and_then(|(file, clamp)| {
+                            crate::texpath::resolve(mtl_dir, &file).map(|f| (f, clamp))
+                        });
+                        match found {
+                            Ok((file, clamp)) if materials.len() <= MAX_MATERIAL as usize => {
+                                let wrap = if clamp { Wrap::Clamp } else { Wrap::Repeat };
+                                textured.insert(m.name.clone(), materials.len() as u32);
+                                materials.push(Material {
+                                    name: m.name.clone(),
+                                    texture: Some(file),
+                                    wrap: [wrap; 2],
+                                });
+                            }
+                            Ok(_) => warnings.push(format!(
+                                "material {:?}: more than {MAX_MATERIAL} textured materials; its texture is ignored and Kd used",
+                                m.name
+                            )),
+                            Err(e) => warnings.push(format!(
+                                "material {:?} in {}: texture map_Kd {:?} cannot be used ({e}); its Kd is used",
+                                m.name,
+                                p.display(),
+                                map
+                            )),
+                        }
+                    }
                 }
                 Err(e) => warnings.push(format!(
                     "material library {} cannot be read ({e}); its materials get the default colour",
@@ -259,6 +323,17 @@ impl ObjSource {
         }
         if !s.used_materials.is_empty() && s.mtllibs.is_empty() {
             warnings.push("usemtl without mtllib: materials get the default colour".into());
+        }
+        if materials.len() > 1 && s.texcoords == 0 {
+            warnings.push(
+                "materials have textures (map_Kd) but the file has no texture coordinates (vt); their Kd is used"
+                    .into(),
+            );
+        }
+        let has_texcoords = materials.len() > 1 && s.texcoords > 0;
+        if !has_texcoords {
+            materials.clear();
+            textured.clear();
         }
         let use_normals = s.normals > 0 && s.corners_without_normal == 0;
         if s.normals > 0 && !use_normals {
@@ -274,6 +349,8 @@ impl ObjSource {
             faces: s.faces,
             has_normals: use_normals,
             has_colors,
+            has_texcoords,
+            materials,
             warnings,
         };
         Ok((
@@ -281,6 +358,7 @@ impl ObjSource {
                 path: path.to_path_buf(),
                 polygons: s.faces,
                 use_normals,
+                textured,
             },
             info,
         ))
@@ -322,10 +400,16 @@ impl ObjSource {
         em.report(em.bytes_total / 2);
         for m in &models {
             let mesh = &m.mesh;
-            let mat = mesh
-                .material_id
-                .and_then(|i| materials.get(i))
-                .and_then(|m| m.diffuse);
+            let material = mesh.material_id.and_then(|i| materials.get(i));
+            let mat = material.and_then(|m| m.diffuse);
+            let alpha = material.and_then(|m| m.dissolve).unwrap_or(1.0);
+            // the material's entry in the table if it has a usable texture and every corner of
+            // this model has a texture coordinate
+            let tex = material
+                .and_then(|m| self.textured.get(&m.name).copied())
+                .filter(|_| {
+                    mesh.texcoord_indices.len() == mesh.indices.len() && !mesh.texcoords.is_empty()
+                });
             let vcol =
                 mesh.vertex_color.len() == mesh.positions.len() && !mesh.vertex_color.is_empty();
             let normals = self.use_normals
@@ -335,9 +419,15 @@ impl ObjSource {
             if vcol || mat.is_some() {
                 flags |= TRI_HAS_COLORS;
             }
-            let mat_color = mat
+            if tex.is_some() {
+                flags |= TRI_HAS_UV;
+            }
+            let mut mat_color = mat
                 .map(|d| rgba8([d[0], d[1], d[2]]))
                 .unwrap_or(DEFAULT_COLOR);
+            if mat.is_some() {
+                mat_color[3] = (alpha * 255.0).round().clamp(0.0, 255.0) as u8;
+            }
             let get3 = |a: &[f32], i: usize| -> Option<[f32; 3]> {
                 a.get(3 * i..3 * i + 3).map(|s| [s[0], s[1], s[2]])
             };
@@ -353,11 +443,19 @@ impl ObjSource {
                 };
                 let mut out = Triangle::new([[0.0; 3]; 3]);
                 out.flags = flags;
+                if let Some(m) = tex {
+                    out.set_material(m);
+                }
                 for (k, &vi) in tri.iter().enumerate() {
                     out.v[k] = get3(&mesh.positions, vi).ok_or_else(bad)?;
                     if normals {
                         out.n[k] = get3(&mesh.normals, mesh.normal_indices[3 * t + k] as usize)
                             .ok_or_else(bad)?;
+                    }
+                    if tex.is_some() {
+                        let ti = mesh.texcoord_indices[3 * t + k] as usize;
+                        let uv = mesh.texcoords.get(2 * ti..2 * ti + 2).ok_or_else(bad)?;
+                        out.uv[k] = [uv[0], uv[1]];
                     }
                     out.c[k] = if vcol {
                         rgba8(get3(&mesh.vertex_color, vi).ok_or_else(bad)?)

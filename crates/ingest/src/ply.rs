@@ -89,6 +89,8 @@ impl PlySource {
                 .sum(),
             has_normals: layout.has_normals,
             has_colors: layout.has_colors,
+            has_texcoords: false,
+            materials: Vec::new(),
             warnings,
         };
         Ok((

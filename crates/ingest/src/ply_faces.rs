@@ -409,6 +409,7 @@ fn gather<V: VertexSource>(
         n: [[0.0; 3]; 3],
         c: [DEFAULT_COLOR; 3],
         flags,
+        uv: [[0.0; 2]; 3],
     };
     for (k, &vi) in tri.iter().enumerate() {
         let c = verts.corner(vi);

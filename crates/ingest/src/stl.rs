@@ -64,6 +64,8 @@ impl StlSource {
             faces: 0,
             has_normals: false,
             has_colors: false,
+            has_texcoords: false,
+            materials: Vec::new(),
             warnings: Vec::new(),
         };
         if is_ascii_stl(head, len) {

@@ -96,6 +96,7 @@ fn expected(
             },
             flags: if normals { TRI_HAS_NORMALS } else { 0 }
                 | if colors { TRI_HAS_COLORS } else { 0 },
+            uv: [[0.0; 2]; 3],
         });
     }
     (out, repeated, degenerate)

@@ -3,12 +3,13 @@
 //! cutoff search.
 
 use std::ops::ControlFlow;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use voxlod_format::Voxel;
 use voxlod_geom::Triangle;
+use voxlod_texture::TextureSet;
 use voxlod_tile::{Bins, TileError};
 use voxlod_voxelize::ChunkVoxelizer;
 
@@ -271,12 +272,17 @@ pub(crate) struct CpuVoxelizers {
 }
 
 impl CpuVoxelizers {
-    pub(crate) fn new(s: &BuildSettings, workers: usize) -> CpuVoxelizers {
+    pub(crate) fn new(
+        s: &BuildSettings,
+        workers: usize,
+        textures: Option<Arc<TextureSet>>,
+    ) -> CpuVoxelizers {
         assert!(workers > 0, "at least one chunk voxelizer");
         let slots = (0..workers)
             .map(|_| {
                 let mut cv = ChunkVoxelizer::new(s.mode);
                 cv.set_method(s.voxelizer);
+                cv.set_textures(textures.clone());
                 Mutex::new(cv)
             })
             .collect();
@@ -384,21 +390,41 @@ const READ_BATCH: usize = 64 * 1024;
 
 /// The voxelizer of one build for `s.backend`, with a description for the summary.
 /// `cpu_workers` CPU voxelizers run on `threads` threads; `bins` is for the cutoff search.
+/// A textured mesh (`textures`) runs on the CPU whatever the backend: the GPU shaders do not
+/// sample textures.
 pub(crate) fn select(
     s: &BuildSettings,
     cpu_workers: usize,
     threads: usize,
     bins: &Bins,
+    textures: Option<Arc<TextureSet>>,
 ) -> Result<(Box<dyn Voxelize>, String)> {
+    let textured = textures.as_ref().map(|t| t.bytes());
     let cpu = || -> (Box<dyn Voxelize>, String) {
+        let mut d = format!(
+            "cpu ({cpu_workers} chunk voxelizers on {threads} threads, {})",
+            s.voxelizer
+        );
+        if let Some(bytes) = textured {
+            d += &format!(
+                "; colours from textures ({:.1} MiB decoded), averaged in linear light",
+                bytes as f64 / (1u64 << 20) as f64
+            );
+        }
         (
-            Box::new(CpuVoxelizers::new(s, cpu_workers)),
-            format!(
-                "cpu ({cpu_workers} chunk voxelizers on {threads} threads, {})",
-                s.voxelizer
-            ),
+            Box::new(CpuVoxelizers::new(s, cpu_workers, textures.clone())),
+            d,
         )
     };
+    if textured.is_some() && s.backend != Backend::Cpu {
+        let (v, d) = cpu();
+        let why = if s.backend == Backend::Gpu {
+            "--backend gpu: the GPU shaders do not sample textures, so this textured mesh ran on the CPU"
+        } else {
+            "textured mesh: on the CPU (the GPU shaders do not sample textures)"
+        };
+        return Ok((v, format!("{d}; {why}")));
+    }
     // the GPU computes the overlap tests' set; the approximate method runs on the CPU only
     match (s.backend, s.voxelizer.is_exact()) {
         (Backend::Gpu, false) => anyhow::bail!(

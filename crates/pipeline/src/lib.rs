@@ -24,6 +24,7 @@ mod progress;
 mod size;
 mod stages;
 mod system;
+mod textures;
 mod window;
 mod work;
 
@@ -223,7 +224,7 @@ pub struct BuildSummary {
     /// bounds of the vertex list before it, see [`MeshSource::vertex_bounds`]), so the tile
     /// stage had no count pass.
     pub counted_during_ingest: bool,
-    /// Bytes of one triangle record in the spool and bins (40–88: only the attributes the
+    /// Bytes of one triangle record in the spool and bins (40–112: only the attributes the
     /// mesh has).
     pub record_bytes: usize,
     /// True if the build continued an interrupted one.

@@ -548,6 +548,7 @@ mod tests {
         let spool_layout = RecordLayout {
             normals: false,
             colors: true,
+            texcoords: false,
         };
         let mut sp = Spooler::create(&dir.path().join("spool"), spool_layout).unwrap();
         for b in tris.chunks(700) {
@@ -648,6 +649,7 @@ mod tests {
         let layout = RecordLayout {
             normals: false,
             colors: true,
+            texcoords: false,
         };
         let e = crate::Spool::open(&p, layout).unwrap_err();
         assert!(

@@ -28,7 +28,7 @@
 //! use voxlod_geom::{Grid, Triangle};
 //! use voxlod_tile::{count, scatter, RecordLayout, Spooler};
 //! let dir = tempfile::tempdir().unwrap();
-//! let layout = RecordLayout { normals: false, colors: false };
+//! let layout = RecordLayout { normals: false, colors: false, texcoords: false };
 //! let mut spooler = Spooler::create(&dir.path().join("spool"), layout).unwrap();
 //! spooler.push(&[Triangle::new([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 1.0]])]).unwrap();
 //! let spool = spooler.finish().unwrap();

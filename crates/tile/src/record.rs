@@ -1,7 +1,7 @@
 //! Compact on-disk triangle records for the spool and the bins: only the attributes the mesh
 //! has are stored.
 //!
-//! A [`Triangle`] is 88 bytes in memory; most scans have no vertex normals and many no colours,
+//! A [`Triangle`] is 112 bytes in memory; most scans have no vertex normals and many no colours,
 //! and writing those zeros (and reading them back twice) was most of the tiling stages' time
 //! on a 100M-triangle input (the disk, not the CPU, is the limit there). A record is, in this
 //! order, little-endian:
@@ -12,9 +12,11 @@
 //! | `flags`: u32 | 4 | always |
 //! | `n`: 9 × f32 vertex normals | 36 | if the layout has normals |
 //! | `c`: 3 × RGBA8 colours | 12 | if the layout has colours |
+//! | `uv`: 3 × 2 × f32 texture coordinates | 24 | if the layout has texture coordinates |
 //!
-//! so 40, 52, 76 or 88 bytes. Decoding fills absent normals with zeros and absent colours with
-//! [`DEFAULT_COLOR`], exactly what ingest gives a triangle without them, so a decoded record
+//! so 40 to 112 bytes (the material index of a textured mesh travels in `flags`, which is
+//! always stored). Decoding fills absent normals and texture coordinates with zeros and absent
+//! colours with [`DEFAULT_COLOR`], exactly what ingest gives a triangle without them, so a decoded record
 //! equals the triangle that was encoded; [`RecordLayout::encode`] refuses a triangle whose
 //! absent fields are not those defaults (the layout would lose them).
 
@@ -29,18 +31,23 @@ pub struct RecordLayout {
     pub normals: bool,
     /// Vertex colours are stored (the mesh has non-default colours).
     pub colors: bool,
+    /// Texture coordinates are stored (the mesh has `TRI_HAS_UV` triangles).
+    pub texcoords: bool,
 }
 
 impl RecordLayout {
-    /// Every attribute: records are the 88-byte [`Triangle`] in another field order.
+    /// Every attribute: records are the 112-byte [`Triangle`] in another field order.
     pub const FULL: RecordLayout = RecordLayout {
         normals: true,
         colors: true,
+        texcoords: true,
     };
 
     /// Bytes of one record.
     pub const fn bytes(self) -> usize {
-        40 + if self.normals { 36 } else { 0 } + if self.colors { 12 } else { 0 }
+        40 + if self.normals { 36 } else { 0 }
+            + if self.colors { 12 } else { 0 }
+            + if self.texcoords { 24 } else { 0 }
     }
 
     /// Appends the record of `t` to `out`. Fails if `t` has normals or colours the layout does
@@ -57,10 +64,17 @@ impl RecordLayout {
     pub fn encode_into(self, t: &Triangle, out: &mut [u8]) -> Result<(), TileError> {
         debug_assert_eq!(out.len(), self.bytes());
         let lost_normals = !self.normals && t.n != [[0.0; 3]; 3];
-        if lost_normals || !self.colors && t.c != [DEFAULT_COLOR; 3] {
+        let lost_uv = !self.texcoords && t.uv != [[0.0; 2]; 3];
+        if lost_normals || lost_uv || !self.colors && t.c != [DEFAULT_COLOR; 3] {
             return Err(TileError::Callback(format!(
                 "a triangle has {} but the temporary records were laid out without them (ingest reported the mesh's attributes wrongly)",
-                if lost_normals { "vertex normals" } else { "colours" }
+                if lost_normals {
+                    "vertex normals"
+                } else if lost_uv {
+                    "texture coordinates"
+                } else {
+                    "colours"
+                }
             )));
         }
         out[..36].copy_from_slice(bytemuck::bytes_of(&t.v));
@@ -72,6 +86,10 @@ impl RecordLayout {
         }
         if self.colors {
             out[at..at + 12].copy_from_slice(bytemuck::bytes_of(&t.c));
+            at += 12;
+        }
+        if self.texcoords {
+            out[at..at + 24].copy_from_slice(bytemuck::bytes_of(&t.uv));
         }
         Ok(())
     }
@@ -90,6 +108,10 @@ impl RecordLayout {
         }
         if self.colors {
             bytemuck::bytes_of_mut(&mut t.c).copy_from_slice(&rec[at..at + 12]);
+            at += 12;
+        }
+        if self.texcoords {
+            bytemuck::bytes_of_mut(&mut t.uv).copy_from_slice(&rec[at..at + 24]);
         }
         t
     }
@@ -105,21 +127,28 @@ impl RecordLayout {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use voxlod_geom::{TRI_HAS_COLORS, TRI_HAS_NORMALS};
+    use voxlod_geom::{TRI_HAS_COLORS, TRI_HAS_NORMALS, TRI_HAS_UV};
 
     fn full() -> Triangle {
         let mut t = Triangle::new([[1.0, 2.0, 3.0], [4.0, 5.5, 6.0], [-7.0, 8.0, 9.25]]);
         t.n = [[0.0, 0.0, 1.0], [0.5, 0.5, 0.0], [1.0, -1.0, 0.0]];
         t.c = [[1, 2, 3, 4], [250, 251, 252, 253], [0, 128, 255, 7]];
-        t.flags = TRI_HAS_NORMALS | TRI_HAS_COLORS;
+        t.uv = [[0.25, -1.5], [3.0, 0.5], [1.0, 1e-3]];
+        t.flags = TRI_HAS_NORMALS | TRI_HAS_COLORS | TRI_HAS_UV;
+        t.set_material(77);
         t
     }
 
     #[test]
     fn every_layout_round_trips_what_it_stores() {
-        for normals in [false, true] {
-            for colors in [false, true] {
-                let l = RecordLayout { normals, colors };
+        for bits in 0..8 {
+            let (normals, colors, texcoords) = (bits & 1 != 0, bits & 2 != 0, bits & 4 != 0);
+            {
+                let l = RecordLayout {
+                    normals,
+                    colors,
+                    texcoords,
+                };
                 let mut t = full();
                 if !normals {
                     t.n = [[0.0; 3]; 3];
@@ -127,6 +156,10 @@ mod tests {
                 }
                 if !colors {
                     t.c = [DEFAULT_COLOR; 3];
+                }
+                if !texcoords {
+                    t.uv = [[0.0; 2]; 3];
+                    t.flags &= !TRI_HAS_UV;
                 }
                 let mut buf = Vec::new();
                 l.encode(&t, &mut buf).unwrap();
@@ -146,14 +179,23 @@ mod tests {
         let l = RecordLayout {
             normals: false,
             colors: true,
+            texcoords: true,
         };
         let e = l.encode(&full(), &mut buf).unwrap_err();
         assert!(e.to_string().contains("vertex normals"), "{e}");
         let l = RecordLayout {
             normals: true,
             colors: false,
+            texcoords: true,
         };
         let e = l.encode(&full(), &mut buf).unwrap_err();
         assert!(e.to_string().contains("colours"), "{e}");
+        let l = RecordLayout {
+            normals: true,
+            colors: true,
+            texcoords: false,
+        };
+        let e = l.encode(&full(), &mut buf).unwrap_err();
+        assert!(e.to_string().contains("texture coordinates"), "{e}");
     }
 }

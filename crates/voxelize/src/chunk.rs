@@ -7,11 +7,14 @@
 //! touch order so that one triangle's voxels stay in cache) and one accumulator per occupied
 //! voxel. Global Morton code = brick Morton code · 512 + Morton code inside the brick.
 
+use std::sync::Arc;
 use voxlod_format::voxel::{border_caps, face_mask, morton8, pack_color, pack_normal_f64, Voxel};
 use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
+use voxlod_texture::{linear_to_srgb, TextureSet};
 
 use crate::column::Columns;
 use crate::overlap::{cross_f64, interior_voxel, to_f64, TriSetup};
+use crate::texcolor::{linear_color, TexAt};
 use crate::{scanline, Method, Mode};
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
@@ -96,7 +99,7 @@ impl Acc {
 /// `a(q) = a₀ + g_x·(q_x − v0_x) + g_y·(q_y − v0_y)` with per-triangle gradients. This equals
 /// `Σ λ_k a_k` with the crate docs' barycentrics up to rounding (relative 1e-15 for a
 /// non-degenerate triangle: `|n_z| ≥ |n|/√3` on the dominant axis).
-struct Interp {
+struct Interp<'a> {
     o: [f64; 2],
     /// colours (r, g, b, a) at v0 and their gradients
     c0: [f64; 4],
@@ -108,10 +111,14 @@ struct Interp {
     face: [f64; 3],
     /// the swizzled `(x, y)` of the triangle's centroid (the point of an empty part)
     centroid: [f64; 2],
+    /// a build with textures: colours in linear light ([`crate::texcolor`]), and this
+    /// triangle's texture if it has one
+    linear: bool,
+    tex: Option<TexAt<'a>>,
 }
 
-impl Interp {
-    fn new(t: &Triangle, s: &TriSetup) -> Interp {
+impl<'a> Interp<'a> {
+    fn new(t: &Triangle, s: &TriSetup, textures: Option<&'a TextureSet>) -> Interp<'a> {
         let [p0, p1, p2] = s.v;
         let e1 = [p1[0] - p0[0], p1[1] - p0[1]];
         let e2 = [p2[0] - p0[0], p2[1] - p0[1]];
@@ -146,6 +153,7 @@ impl Interp {
         let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
         let face = n.map(|c| c / len);
         let centroid = [0, 1].map(|k| (p0[k] + p1[k] + p2[k]) / 3.0);
+        let tex = textures.and_then(|set| TexAt::new(t, set, grad, len));
         Interp {
             o: [p0[0], p0[1]],
             c0,
@@ -154,12 +162,15 @@ impl Interp {
             vn,
             face,
             centroid,
+            linear: textures.is_some(),
+            tex,
         }
     }
 
-    /// The accumulated values `[n_x, n_y, n_z, 1, r, g, b, a]` at the swizzled point `(x, y)`.
+    /// The accumulated values `[n_x, n_y, n_z, 1, r, g, b, a]` at the swizzled point `(x, y)`
+    /// of a part of `w` voxel².
     #[inline]
-    fn at(&self, x: f64, y: f64) -> [f32; 8] {
+    fn at(&self, x: f64, y: f64, w: f64) -> [f32; 8] {
         let (dx, dy) = (x - self.o[0], y - self.o[1]);
         let normal = match &self.vn {
             Some([a, gx, gy]) => {
@@ -168,7 +179,10 @@ impl Interp {
             }
             None => self.face,
         };
-        let c = [0, 1, 2, 3].map(|k| self.c0[k] + self.cx[k] * dx + self.cy[k] * dy);
+        let mut c = [0, 1, 2, 3].map(|k| self.c0[k] + self.cx[k] * dx + self.cy[k] * dy);
+        if self.linear {
+            c = linear_color(c, self.tex.as_ref().map(|t| t.sample(dx, dy, w)));
+        }
         values(normal, c)
     }
 }
@@ -232,6 +246,8 @@ pub struct ChunkVoxelizer {
     cols: Columns,
     /// how each triangle's voxels are found
     method: Method,
+    /// the build's textures: colours from them, averaged in linear light
+    textures: Option<Arc<TextureSet>>,
 }
 
 impl ChunkVoxelizer {
@@ -247,7 +263,16 @@ impl ChunkVoxelizer {
             skipped: 0,
             cols: Columns::idle(true),
             method: Method::default(),
+            textures: None,
         }
+    }
+
+    /// The textures of the mesh's materials ([`voxlod_texture::TextureSet`], indexed by
+    /// [`Triangle::material`]). With `Some`, colours are accumulated in linear light and
+    /// stored sRGB-encoded, textured triangles modulating their colour by their texture
+    /// ([`crate::texcolor`]); with `None` (the default) colours are averaged as stored.
+    pub fn set_textures(&mut self, textures: Option<Arc<TextureSet>>) {
+        self.textures = textures;
     }
 
     /// How each triangle's voxels are found ([`Method::default`] unless set). The exact methods
@@ -326,7 +351,7 @@ impl ChunkVoxelizer {
             if (0..3).any(|k| s.bmax[k] < lo_s[k] || s.bmin[k] > hi_s[k]) {
                 continue;
             }
-            let ip = Interp::new(t, &s);
+            let ip = Interp::new(t, &s, self.textures.as_deref());
             let cols = &mut self.cols;
             cols.set(&s);
             let mut sink = Sink {
@@ -344,7 +369,7 @@ impl ChunkVoxelizer {
                     Some(c) => [c[0], c[1]],
                     None => ip.centroid,
                 };
-                let x = ip.at(q[0], q[1]);
+                let x = ip.at(q[0], q[1], w);
                 let g = s.unswizzle(p);
                 let local = [0, 1, 2].map(|k| (g[k] as i64 - o[k]) as u32);
                 debug_assert!(local.iter().all(|&c| c < CHUNK));
@@ -380,8 +405,11 @@ impl ChunkVoxelizer {
         } else {
             face
         };
-        let c = [0, 1, 2, 3]
+        let mut c = [0, 1, 2, 3]
             .map(|k| (t.c[0][k] as u32 + t.c[1][k] as u32 + t.c[2][k] as u32) as f64 / 3.0);
+        if let Some(set) = self.textures.as_deref() {
+            c = linear_color(c, TexAt::centroid(t, set, len));
+        }
         let local = [0, 1, 2].map(|k| (p[k] as i64 - self.origin[k] as i64) as u32);
         debug_assert!(local.iter().all(|&c| c < CHUNK));
         Sink {
@@ -403,7 +431,8 @@ impl ChunkVoxelizer {
     /// in its brick.
     pub fn finish(&mut self) -> Vec<Voxel> {
         let mut out = vec![Voxel::default(); self.acc.len()];
-        self.ranked(|r, pos, a| out[r] = encode(pos, a));
+        let linear = self.textures.is_some();
+        self.ranked(|r, pos, a| out[r] = encode(pos, a, linear));
         out
     }
 
@@ -496,15 +525,24 @@ impl Sink<'_> {
     }
 }
 
-/// The voxel record of an accumulator: area-weighted means, or unweighted means if `Σ w = 0`.
+/// The voxel record of an accumulator: area-weighted means, or unweighted means if `Σ w = 0`;
+/// `linear`: the colour sums are in linear light and the mean is sRGB-encoded.
 /// The normal is packed from the sum itself (packing normalizes, and `N / W` has the direction
 /// of `N`), in f64 so that tiny sums neither underflow nor lose digits.
 #[inline]
-fn encode(pos: [u8; 3], a: &Acc) -> Voxel {
+fn encode(pos: [u8; 3], a: &Acc, linear: bool) -> Voxel {
     let s = &a.s;
     let normal = pack_normal_f64([s[0] as f64, s[1] as f64, s[2] as f64]);
     let mask = face_mask(normal) | border_caps(pos);
     let inv = 1.0 / if s[3] > 0.0 { s[3] } else { a.k as f32 };
-    let c = |k: usize| (s[k] * inv).round().clamp(0.0, 255.0) as u8;
+    let c = |k: usize| {
+        let m = s[k] * inv;
+        let m = if linear && k < 7 {
+            linear_to_srgb(m / 255.0) * 255.0
+        } else {
+            m
+        };
+        m.round().clamp(0.0, 255.0) as u8
+    };
     Voxel::new(pos, mask, normal, pack_color([c(4), c(5), c(6), c(7)]))
 }

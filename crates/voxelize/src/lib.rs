@@ -24,6 +24,8 @@
 //! * [`chunk`]: [`ChunkVoxelizer`], which accumulates attributes per voxel of a chunk and emits
 //!   the 12-byte [`voxlod_format::Voxel`] records sorted by Morton code.
 //! * [`grid`]: [`voxelize_grid`], a whole in-memory grid, chunks in parallel.
+//! * [`texcolor`]: colour from a base colour texture (linear light, mip level of the part's
+//!   footprint; docs/TEXTURES.md).
 //!
 //! Grid coordinates: voxel `p` is the closed box `[p, p+1]³`; triangles are given in grid
 //! coordinates (`Grid::to_grid`).
@@ -43,7 +45,9 @@
 //! * normal = `normalize(Σ λ_k n_k)` of the vertex normals if `flags & TRI_HAS_NORMALS` (the unit
 //!   face normal `n/|n|` if that sum is zero or not finite), else the unit face normal `n/|n|`
 //!   (its sign follows the winding `v0, v1, v2`);
-//! * colour = `Σ λ_k c_k` of the RGBA8 vertex colours as reals in 0..255.
+//! * colour = `Σ λ_k c_k` of the RGBA8 vertex colours as reals in 0..255; in a build with
+//!   textures ([`ChunkVoxelizer::set_textures`], [`texcolor`]) that colour in linear light times
+//!   the triangle's texture sampled at `q`, and the mean below is sRGB-encoded.
 //!
 //! Per voxel, in triangle order: `W = Σ w`, `N = Σ w·normal`, `C = Σ w·colour`, plus the count
 //! `K` and the unweighted sums `N′`, `C′`. If `W > 0` the voxel's normal is `N / W` and its
@@ -72,7 +76,8 @@
 //! * encoding: the normal is packed from `N` itself (`pack_normal_f64`: normalized in f64, one
 //!   square root, one division), the colour as `C · (1/W)` in f32.
 //!
-//! The GPU voxelizer (crates/gpu) computes the definition in f64 (or f32) with 96-bit
+//! The GPU voxelizer (crates/gpu) computes the definition (without textures: the pipeline
+//! voxelizes textured meshes on the CPU) in f64 (or f32) with 96-bit
 //! fixed-point sums; its tests accept one quantization step against this one.
 //!
 //! # How the chunk voxelizer computes this quickly
@@ -131,6 +136,7 @@ pub mod grid;
 pub mod overlap;
 pub mod predicates;
 pub mod scanline;
+pub mod texcolor;
 
 pub use chunk::{ChunkVoxelizer, VoxelSums};
 pub use clip::clipped_area;

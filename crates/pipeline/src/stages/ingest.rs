@@ -81,6 +81,7 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
     let layout = RecordLayout {
         normals: info.has_normals,
         colors: info.has_colors,
+        texcoords: info.has_texcoords,
     };
     let spooled = !ctx.source.rereadable();
     let temp_disk = check_temp_disk(ctx, layout, spooled)?;

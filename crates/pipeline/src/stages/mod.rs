@@ -318,7 +318,7 @@ mod tests {
             .starts_with(&format!("voxelizing leaf chunk 1 {coord:?} panicked")));
         assert!(ctx.work.marker::<voxelize::LeavesMarker>().is_none());
         // the log holds chunk 0 only; the real voxelizer continues from there
-        let cpu = Box::new(CpuVoxelizers::new(&fx.settings, 2));
+        let cpu = Box::new(CpuVoxelizers::new(&fx.settings, 2, None));
         let (m, gpu) = voxelize::run_with(&mut ctx, &tiled, cpu).unwrap();
         assert_eq!((m.records, gpu), (n as u64, None));
         assert_eq!(

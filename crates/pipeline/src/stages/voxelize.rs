@@ -64,8 +64,19 @@ impl Voxelized {
 /// Runs the voxelize stage with the voxelizer the settings choose.
 pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, StageError> {
     let threads = ctx.pool.current_num_threads();
-    let (vz, backend) =
-        crate::backend::select(ctx.settings, ctx.plan.voxelizers, threads, &tiled.bins)?;
+    let textures = crate::textures::load(
+        ctx.source.info(),
+        ctx.input,
+        ctx.settings.memory,
+        &mut ctx.warnings,
+    );
+    let (vz, backend) = crate::backend::select(
+        ctx.settings,
+        ctx.plan.voxelizers,
+        threads,
+        &tiled.bins,
+        textures,
+    )?;
     let (marker, gpu_stats) = run_with(ctx, &tiled, vz)?;
     tiled.bins.remove()?;
     Ok(Voxelized {
