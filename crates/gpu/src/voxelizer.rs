@@ -950,7 +950,7 @@ impl GpuVoxelizer {
             // the listed triangles' contributions come from the host: replace them by
             // degenerate (zero-area) triangles, which the shaders skip
             let first = self.listed.partition_point(|&i| i < tri_base);
-            let zero = [0u8; std::mem::size_of::<Triangle>()];
+            let zero = [0u8; std::mem::size_of::<ShaderTriangle>()];
             for &i in &self.listed[first..] {
                 let k = (i - tri_base) as u64;
                 if k >= len as u64 {
