@@ -18,24 +18,9 @@
 mod common;
 
 use common::*;
-use voxlod_format::Voxel;
 use voxlod_geom::Triangle;
 use voxlod_gpu::{GpuMethod, GpuVoxelizer, Precision, DEFAULT_CUTOFF};
-use voxlod_voxelize::{ChunkVoxelizer, Mode};
-
-const METHODS: [GpuMethod; 3] = [GpuMethod::Hybrid, GpuMethod::Triangle, GpuMethod::Fragment];
-
-fn gpu() -> GpuVoxelizer {
-    GpuVoxelizer::new(Mode::Conservative, GpuMethod::Hybrid, DEFAULT_CUTOFF)
-        .unwrap_or_else(|e| panic!("this test needs a GPU adapter (lavapipe is enough): {e}"))
-}
-
-fn cpu(mode: Mode, origin: [u32; 3], tris: &[Triangle]) -> Vec<Voxel> {
-    let mut c = ChunkVoxelizer::new(mode);
-    c.begin(origin);
-    c.add(tris);
-    c.finish()
-}
+use voxlod_voxelize::Mode;
 
 /// The 12 triangles of the box `[lo, hi]` (outward winding).
 fn block(lo: [f32; 3], hi: [f32; 3]) -> Vec<Triangle> {

@@ -13,11 +13,6 @@ use voxlod_geom::Triangle;
 use voxlod_gpu::{Feed, GpuError, GpuMethod, GpuVoxelizer, DEFAULT_CUTOFF};
 use voxlod_voxelize::Mode;
 
-fn gpu() -> GpuVoxelizer {
-    GpuVoxelizer::new(Mode::Conservative, GpuMethod::Hybrid, DEFAULT_CUTOFF)
-        .unwrap_or_else(|e| panic!("this test needs a GPU adapter (lavapipe is enough): {e}"))
-}
-
 /// `tris` through the streamed entry point in caller batches of `piece` triangles; returns the
 /// voxels, the split and how many times the chunk was replayed.
 fn streamed(

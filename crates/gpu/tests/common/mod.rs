@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use voxlod_format::voxel::unpack_normal;
 use voxlod_format::Voxel;
 use voxlod_geom::{Bounds, Grid, Triangle};
+use voxlod_gpu::{GpuMethod, GpuVoxelizer, DEFAULT_CUTOFF};
+use voxlod_voxelize::{ChunkVoxelizer, Mode};
 
 pub use voxlod_testkit::Rng;
 
@@ -126,4 +128,21 @@ pub fn compare(cpu: &[Voxel], gpu: &[Voxel]) -> Diff {
         }
     }
     d
+}
+
+/// Every GPU voxelization method (the same voxels, different passes).
+pub const METHODS: [GpuMethod; 3] = [GpuMethod::Hybrid, GpuMethod::Triangle, GpuMethod::Fragment];
+
+/// A conservative hybrid GPU voxelizer; no adapter is a test FAILURE (lavapipe is enough).
+pub fn gpu() -> GpuVoxelizer {
+    GpuVoxelizer::new(Mode::Conservative, GpuMethod::Hybrid, DEFAULT_CUTOFF)
+        .unwrap_or_else(|e| panic!("this test needs a GPU adapter (lavapipe is enough): {e}"))
+}
+
+/// The CPU chunk voxelizer's voxels of `tris` in the chunk at `origin` (the exact reference).
+pub fn cpu(mode: Mode, origin: [u32; 3], tris: &[Triangle]) -> Vec<Voxel> {
+    let mut c = ChunkVoxelizer::new(mode);
+    c.begin(origin);
+    c.add(tris);
+    c.finish()
 }
