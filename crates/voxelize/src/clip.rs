@@ -116,6 +116,54 @@ impl Poly {
         true
     }
 
+    /// Both sides of the plane `x[K] = b` in one pass: `lo` = the part with `x[K] ≤ b`, `hi` =
+    /// the part with `x[K] ≥ b`, each bit for bit what [`Poly::clip_into`] gives
+    /// (`clip_into::<K, true>(b, lo)` and `clip_into::<K, false>(b, hi)`: the same vertex order,
+    /// each intersection point computed from that side's inside end), except that a side with
+    /// every vertex inside receives a copy of `self`.
+    #[inline(always)]
+    pub(crate) fn split_into<const K: usize>(&self, b: f64, lo: &mut Poly, hi: &mut Poly) {
+        // du: distance inside the lower side (b − x), dl = −du: inside the upper side (x − b);
+        // IEEE subtraction is sign-symmetric, so dl is what clip_into computes
+        let mut du = [0.0f64; MAX_POLY];
+        let mut dl = [0.0f64; MAX_POLY];
+        for i in 0..self.len {
+            du[i] = b - self.p[i][K];
+            dl[i] = self.p[i][K] - b;
+        }
+        lo.len = 0;
+        hi.len = 0;
+        for i in 0..self.len {
+            let j = if i + 1 == self.len { 0 } else { i + 1 };
+            if du[i] >= 0.0 {
+                lo.push(self.p[i]);
+            }
+            if dl[i] >= 0.0 {
+                hi.push(self.p[i]);
+            }
+            let (da, dc) = (du[i], du[j]);
+            if (da > 0.0 && dc < 0.0) || (da < 0.0 && dc > 0.0) {
+                // lo's point from the end below b, hi's from the end above
+                let (pl, ph, dul, dlh) = if da > 0.0 {
+                    (self.p[i], self.p[j], da, dl[j])
+                } else {
+                    (self.p[j], self.p[i], dc, dl[i])
+                };
+                let tl = dul / (dul - (b - ph[K]));
+                let th = dlh / (dlh - (pl[K] - b));
+                let at = |pin: [f64; 3], pout: [f64; 3], t: f64, j: usize| {
+                    if j == K {
+                        b
+                    } else {
+                        pin[j] + t * (pout[j] - pin[j])
+                    }
+                };
+                lo.push([at(pl, ph, tl, 0), at(pl, ph, tl, 1), at(pl, ph, tl, 2)]);
+                hi.push([at(ph, pl, th, 0), at(ph, pl, th, 1), at(ph, pl, th, 2)]);
+            }
+        }
+    }
+
     /// Area and centroid ([`Poly::area_centroid`]) of the part in the slab `z ∈ [z, z+1]`
     /// ([`Poly::clip_depth`]), with `t1`, `t2` as scratch space.
     #[inline]
@@ -265,5 +313,52 @@ pub fn clipped_area(v: &[[f32; 3]; 3], voxel: [i32; 3]) -> (f64, [f64; 3]) {
     match c {
         Some(c) => (area, unswizzle(swz, c)),
         None => (0.0, tri_centroid),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use voxlod_testkit::Rng;
+
+    /// [`Poly::split_into`] gives, bit for bit, the two [`Poly::clip_into`] results (or the
+    /// polygon itself where a side is uncut), on random triangles and their clipped polygons cut
+    /// at random levels, at vertex levels (points on the plane) and at integers.
+    #[test]
+    fn split_is_two_clips() {
+        let mut rng = Rng(7);
+        let mut cases = 0;
+        for _ in 0..20_000 {
+            let v = [0, 1, 2].map(|_| rng.point(-3.0, 3.0));
+            let mut poly = Poly::triangle(&v);
+            if rng.below(2) == 0 {
+                poly = poly.clip_column(-1.0, -1.0);
+            }
+            if poly.len == 0 {
+                continue;
+            }
+            let b = match rng.below(3) {
+                0 => rng.range(-3.0, 3.0),
+                1 => poly.p[rng.index(poly.len)][2],
+                _ => rng.int(-2, 2) as f64,
+            };
+            let (mut lo, mut hi) = (Poly::EMPTY, Poly::EMPTY);
+            poly.split_into::<2>(b, &mut lo, &mut hi);
+            let (mut l2, mut h2) = (Poly::EMPTY, Poly::EMPTY);
+            if !poly.clip_into::<2, true>(b, &mut l2) {
+                l2 = poly;
+            }
+            if !poly.clip_into::<2, false>(b, &mut h2) {
+                h2 = poly;
+            }
+            for (a, r) in [(&lo, &l2), (&hi, &h2)] {
+                assert_eq!(a.len, r.len);
+                for (p, q) in a.vertices().iter().zip(r.vertices()) {
+                    assert_eq!(p.map(f64::to_bits), q.map(f64::to_bits));
+                }
+            }
+            cases += 1;
+        }
+        assert!(cases > 15_000);
     }
 }

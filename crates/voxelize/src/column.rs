@@ -77,6 +77,78 @@ pub(crate) struct Columns {
     corner_z: [f64; 4],
     /// Area and centroid of the whole column polygon, once computed.
     whole: Option<(f64, Option<[f64; 3]>)>,
+    /// The depth sweep of a column spanning several voxel layers (fast paths only).
+    sweep: Sweep,
+}
+
+/// The depth sweep of one column polygon `P` spanning several voxel layers: the voxel `z`'s part
+/// is `clip(clip(P, z ≥ z), z ≤ z+1)` as in [`Poly::depth_area_centroid`], bit for bit, but a
+/// clip that the polygon's depth bounds show to cut nothing is skipped, and the cut at `z+1`
+/// makes both sides in one pass ([`Poly::split_into`]): the side below is this voxel's part,
+/// the side above (`clip(P, z ≥ z+1)`) is kept for the next voxel of the column, which the scan
+/// visits next.
+#[derive(Clone, Copy)]
+struct Sweep {
+    lower: Poly,
+    upper: Poly,
+    /// the level of `upper` (NaN: none for the current column)
+    upper_z: f64,
+    tmp: Poly,
+}
+
+impl Sweep {
+    const IDLE: Sweep = Sweep {
+        lower: Poly::EMPTY,
+        upper: Poly::EMPTY,
+        upper_z: f64::NAN,
+        tmp: Poly::EMPTY,
+    };
+
+    /// Area and centroid of the part of `src` (depth bounds `[zlo, zhi]`) in the slab
+    /// `[z, z+1]`; equal bit for bit to `src.depth_area_centroid(z, scale, ..)`. `upper` must
+    /// have been reset (`upper_z = NaN`) when `src` changed.
+    #[inline]
+    fn layer(
+        &mut self,
+        src: &Poly,
+        zlo: f64,
+        zhi: f64,
+        z: f64,
+        scale: f64,
+    ) -> (f64, Option<[f64; 3]>) {
+        let Sweep {
+            lower,
+            upper,
+            upper_z,
+            tmp,
+        } = self;
+        // a = clip(src, z ≥ z): src itself iff no vertex lies below z
+        let whole = zlo >= z;
+        let a: &Poly = if whole {
+            src
+        } else if *upper_z == z {
+            upper
+        } else if src.clip_into::<2, false>(z, tmp) {
+            tmp
+        } else {
+            src
+        };
+        // clip(a, z ≤ z+1) cuts nothing iff no vertex of src lies above z+1 (a's other
+        // vertices lie on z)
+        if zhi <= z + 1.0 {
+            return a.area_centroid(scale);
+        }
+        if whole {
+            src.split_into::<2>(z + 1.0, lower, upper);
+            *upper_z = z + 1.0;
+            return lower.area_centroid(scale);
+        }
+        if a.clip_into::<2, true>(z + 1.0, lower) {
+            lower.area_centroid(scale)
+        } else {
+            a.area_centroid(scale)
+        }
+    }
 }
 
 /// Clips `src` to the slab `lo ≤ x[K] ≤ hi` ([`Poly::clip`] by `(K, lo, false)`, then
@@ -147,6 +219,7 @@ impl Columns {
             zhi: 0.0,
             corner_z: [0.0; 4],
             whole: None,
+            sweep: Sweep::IDLE,
         }
     }
 
@@ -185,6 +258,7 @@ impl Columns {
         self.x = x;
         self.y = y;
         self.whole = None;
+        self.sweep.upper_z = f64::NAN;
         let (tmin, tmax) = (self.tmin, self.tmax);
         if tmin[0] >= x && tmax[0] <= x + 1.0 && tmin[1] >= y && tmax[1] <= y + 1.0 {
             self.kind = Kind::Triangle;
@@ -237,6 +311,20 @@ impl Columns {
         (self.zlo, self.zhi) = self.bufs[self.col].bounds_z();
     }
 
+    /// The Square column's polygon: the square lifted to the plane.
+    #[inline]
+    fn square(&self) -> Poly {
+        let (x, y) = (self.x, self.y);
+        let c = self.corner_z;
+        let mut sq = Poly::EMPTY;
+        sq.len = 4;
+        sq.p[0] = [x, y, c[0]];
+        sq.p[1] = [x + 1.0, y, c[1]];
+        sq.p[2] = [x + 1.0, y + 1.0, c[2]];
+        sq.p[3] = [x, y + 1.0, c[3]];
+        sq
+    }
+
     #[inline]
     fn z(&self, x: f64, y: f64) -> f64 {
         self.v0[2] + self.gx * (x - self.v0[0]) + self.gy * (y - self.v0[1])
@@ -261,6 +349,17 @@ impl Columns {
             };
             self.whole = Some(w);
             return w;
+        }
+        if self.fast {
+            let (lo, hi, scale) = (self.zlo, self.zhi, self.scale);
+            return match self.kind {
+                Kind::Triangle => self.sweep.layer(&self.tri, lo, hi, z, scale),
+                Kind::General => self.sweep.layer(&self.bufs[self.col], lo, hi, z, scale),
+                Kind::Square => {
+                    let sq = self.square();
+                    self.sweep.layer(&sq, lo, hi, z, scale)
+                }
+            };
         }
         match self.kind {
             Kind::Triangle => {
@@ -313,4 +412,42 @@ pub fn voxel_areas(
         let c = c.map_or(tri_centroid, |c| s.unswizzle(c));
         emit(s.unswizzle(p), w, c);
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use voxlod_testkit::Rng;
+
+    /// [`Sweep::layer`] over the voxels of a column, bottom to top as the scan visits them
+    /// (also starting one layer below the polygon, a tie), equals
+    /// [`Poly::depth_area_centroid`] bit for bit, on steep random triangles clipped to a column.
+    #[test]
+    fn sweep_is_depth_clipping() {
+        let mut rng = Rng(11);
+        let mut layered = 0;
+        for _ in 0..5_000 {
+            let v = [0, 1, 2].map(|_| rng.point(-2.0, 2.0));
+            let src = Poly::triangle(&v).clip_column(rng.int(-2, 1) as f64, rng.int(-2, 1) as f64);
+            if src.len == 0 {
+                continue;
+            }
+            let (zlo, zhi) = src.bounds_z();
+            let (mut t1, mut t2) = (Poly::EMPTY, Poly::EMPTY);
+            let mut sweep = Sweep::IDLE;
+            let first = zlo.floor() as i32 - rng.int(0, 1) as i32;
+            for z in first..=zhi.floor() as i32 {
+                let z = z as f64;
+                let got = sweep.layer(&src, zlo, zhi, z, 1.25);
+                let want = src.depth_area_centroid(z, 1.25, &mut t1, &mut t2);
+                assert_eq!(got.0.to_bits(), want.0.to_bits());
+                assert_eq!(
+                    got.1.map(|c| c.map(f64::to_bits)),
+                    want.1.map(|c| c.map(f64::to_bits))
+                );
+            }
+            layered += (zhi.floor() - zlo.floor() >= 2.0) as u32;
+        }
+        assert!(layered > 100, "{layered} columns of three or more layers");
+    }
 }
