@@ -19,6 +19,15 @@
 //! usual case for thin voxelization and shallow triangles), its area and centroid are computed
 //! once per column and reused. Otherwise the depth slab is clipped per voxel.
 //!
+//! All three cuts (the triangle into x-slabs, a slab into columns, a column polygon into depth
+//! layers) are **sweeps** ([`Sweep`]): the scan visits slabs, columns and layers in increasing
+//! order, so the cut at `c+1` is made once, into both sides ([`Poly::split_into`]), the side
+//! above kept for the next slab, column or layer; and a clip that the polygon's bounds show to
+//! cut nothing is skipped. Every part is still computed from the polygon it is cut from, with
+//! the same planes in the same order as `clipped_area`, so the results are bit for bit those of
+//! clipping each voxel separately (unit tests `sweeps_equal_clipped_area_bit_for_bit`,
+//! `sweep_is_depth_clipping`).
+//!
 //! The results equal [`crate::clipped_area`] up to rounding (below 1e-12 relative on the random
 //! triangles of `tests/column.rs`, which checks 1e-9). A Square with a voxel boundary within
 //! `TIE` (1e-7) of one of its corners could produce a zero-area piece whose centroid (the mean of its

@@ -74,7 +74,8 @@
 //!   than one step wherever `|N|/W ≥ 1.06e-4·(K+2)`; `tests/attributes.rs` checks the bound
 //!   against the f64 reference on random triangles and the npm bunny;
 //! * encoding: the normal is packed from `N` itself (`pack_normal_f64`: normalized in f64, one
-//!   square root, one division), the colour as `C · (1/W)` in f32.
+//!   square root, one division), the colour as `C · (1/W)` in f32; without textures a chunk's
+//!   records are encoded in branch-free batches of 64 (SIMD lanes, the same bits).
 //!
 //! The GPU voxelizer (crates/gpu) computes the definition (without textures: the pipeline
 //! voxelizes textured meshes on the CPU) in f64 (or f32) with 96-bit
