@@ -170,6 +170,45 @@ pub fn decode_material_block(block: &[u8], t: u32, n: u32) -> Result<Vec<u32>, S
     Ok(out)
 }
 
+/// Bytes of the first zstd frame of `bytes` (to split a payload from what follows it in a
+/// build's intermediate files).
+pub fn first_frame_len(bytes: &[u8]) -> Result<usize, String> {
+    zstd::zstd_safe::find_frame_compressed_size(bytes).map_err(|code| {
+        format!(
+            "not a zstd frame: {}",
+            zstd::zstd_safe::get_error_name(code)
+        )
+    })
+}
+
+/// Decodes a material payload of a node of `n` voxels when its table length is not at hand
+/// (a build's intermediate files): `T` from the frame's content size `4T + 2n`, then the checks
+/// of [`decode_material_block`]. Returns the per-voxel ids and the payload as written.
+pub fn decode_materials(payload: Vec<u8>, n: u32) -> Result<(Vec<u32>, EncodedChannel), String> {
+    let size = match zstd::zstd_safe::get_frame_content_size(&payload) {
+        Ok(Some(size)) => size,
+        _ => return Err("the material payload's frame has no content size".into()),
+    };
+    let t = size
+        .checked_sub(2 * n as u64)
+        .filter(|r| r % 4 == 0 && *r / 4 >= 1 && *r / 4 <= MAX_MATERIAL_TABLE as u64)
+        .ok_or_else(|| format!("a material block of {size} bytes does not fit {n} voxels"))?
+        / 4;
+    crate::rules::check_frame_of(&payload, size, &format!("4·{t} + 2·{n}"))?;
+    let block = zstd::bulk::decompress(&payload, size as usize)
+        .map_err(|e| format!("zstd decompression failed: {e}"))?;
+    let mats = decode_material_block(&block, t as u32, n)?;
+    Ok((
+        mats,
+        EncodedChannel {
+            payload_crc32: crc32fast::hash(&payload),
+            payload,
+            count: t as u32,
+            voxel_count: n,
+        },
+    ))
+}
+
 /// The directory of a file's channels, parsed and checked against the node count.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ChannelDirectory {
@@ -317,6 +356,17 @@ mod tests {
             .contains("increasing"));
         assert!(decode_material_block(&block, 3, 4).is_err());
         assert!(encode_materials(&[], 3).is_err());
+    }
+
+    #[test]
+    fn decode_without_the_table_length() {
+        let mats = [4u32, 4, 1, 9];
+        let enc = encode_materials(&mats, 1).unwrap();
+        let both = [enc.payload.clone(), vec![1, 2, 3]].concat();
+        assert_eq!(first_frame_len(&both).unwrap(), enc.payload.len());
+        let (got, again) = decode_materials(enc.payload.clone(), 4).unwrap();
+        assert_eq!((got.as_slice(), &again), (&mats[..], &enc));
+        assert!(decode_materials(enc.payload, 5).is_err());
     }
 
     #[test]
