@@ -138,6 +138,49 @@ fn block_world_materials() {
         "{sole} of {checked} voxels near one block"
     );
 
+    // export carries the materials: 4 vertices per active face, each with its voxel's id
+    let ply = dir.path().join("w.ply");
+    let o = Command::new(BIN)
+        .args(["export"])
+        .arg(&out)
+        .args(["--level", "1", "-o"])
+        .arg(&ply)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let bytes = std::fs::read(&ply).unwrap();
+    let end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .unwrap()
+        + 11;
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    assert!(header.contains("property uchar alpha\nproperty uint material\nelement face"));
+    let mut want = Vec::new();
+    for i in r.level_nodes(1).collect::<Vec<_>>() {
+        let mats = r.read_materials(i).unwrap().unwrap();
+        for (v, m) in r.read_node(i).unwrap().iter().zip(mats) {
+            want.extend(std::iter::repeat_n(m, 4 * v.mask().count_ones() as usize));
+        }
+    }
+    let got: Vec<u32> = bytes[end..end + 32 * want.len()]
+        .chunks_exact(32)
+        .map(|rec| u32::from_le_bytes(rec[28..32].try_into().unwrap()))
+        .collect();
+    assert_eq!(got, want);
+
+    // render --color material on a file without the channel: a clear error, nothing written
+    let png = dir.path().join("one.png");
+    let o = Command::new(BIN)
+        .arg("render")
+        .arg(&one)
+        .args(["--color", "material", "-o"])
+        .arg(&png)
+        .output()
+        .unwrap();
+    assert!(!o.status.success() && !png.exists());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no material channel"));
+
     // the same bytes on one thread
     let single = dir.path().join("w1.voxlod");
     build(&input, &single, "1");
