@@ -17,13 +17,17 @@ Usage:
     voxlod_read.py FILE --node L X Y Z       # decode one node, print its first voxels
     voxlod_read.py FILE --node L X Y Z --raw OUT
         # write the node's voxels as plain 12-byte records (pos_mask, normal, color; u32 LE)
-    voxlod_read.py FILE --check              # decode every node (all checks of 5.2)
+    voxlod_read.py FILE --check              # decode every node (all checks of 5.2;
+                                             # and every material payload, 14.3)
+    voxlod_read.py FILE --node L X Y Z --materials OUT
+        # write the node's per-voxel material ids (u32 LE, voxel order; section 14.3)
 
 As a library:
     f = VoxlodFile("bunny.voxlod")
     f.header["resolution"], len(f.nodes)
     v = f.decode(f.nodes[-1])                # the root: dict of numpy arrays
     v["pos"], v["mask"], v["normal"], v["color"]
+    f.materials(f.nodes[-1])                 # per-voxel material ids, or None (section 14)
 """
 
 import argparse
@@ -44,6 +48,10 @@ MAX_VOXELS = 256**3
 MAX_MANIFEST_DEPTH = 64  # FORMAT.md 11.2
 ZSTD_MAGIC = 0xFD2FB528
 SKIPPABLE_MAGIC = 0x184D2A50  # ..0x184D2A5F
+# Section 14: optional channels (version 2).
+CHANNEL_MATERIAL = 1
+MAX_CHANNELS = 16
+MAX_MATERIAL_TABLE = 65536
 
 # Section 3: the header, little-endian.
 HEADER_STRUCT = struct.Struct("<8sIIIIII3ddQQQQQQIIII")
@@ -71,7 +79,7 @@ assert ENTRY_DTYPE.itemsize == ENTRY_SIZE
 
 
 class FormatError(Exception):
-    """The file is not a valid voxlod v1 file; the message says where."""
+    """The file is not a valid voxlod file (version 1 or 2); the message says where."""
 
 
 def crc32(data):
@@ -166,10 +174,12 @@ def check_manifest(raw):
     return value
 
 
-def check_frame(payload, n):
+def check_frame(payload, n, want=None, formula=None):
     """FORMAT.md 11.2, the payload rules in order: the zstd magic (not a skippable frame), a
-    content size in the frame header, equal to 12·n; the rest (one frame, no trailing bytes)
-    is checked while decompressing."""
+    content size in the frame header, equal to 12·n (or `want` bytes, for a channel payload,
+    14.2); the rest (one frame, no trailing bytes) is checked while decompressing."""
+    if want is None:
+        want, formula = 12 * n, f"12·{n}"
     if len(payload) < 4:
         raise FormatError(f"the payload is {len(payload)} bytes, too short for a zstd frame")
     magic = struct.unpack_from("<I", payload)[0]
@@ -182,10 +192,10 @@ def check_frame(payload, n):
     except zstandard.ZstdError:
         raise FormatError("the zstd frame header is corrupt or cut short") from None
     if size == getattr(zstandard, "CONTENTSIZE_UNKNOWN", 2**64 - 1):
-        raise FormatError(f"the zstd frame header has no content size (it must say 12·{n})")
-    if size != 12 * n:
+        raise FormatError(f"the zstd frame header has no content size (it must say {formula})")
+    if size != want:
         raise FormatError(f"the zstd frame header's content size is {size} bytes, "
-                          f"expected 12·{n} = {12 * n}")
+                          f"expected {formula} = {want}")
 
 
 class VoxlodFile:
@@ -205,6 +215,7 @@ class VoxlodFile:
             self.size = st.st_size
             self.header = self._read_header()
             self.nodes = self._read_index()
+            self.channels = self._read_channels()
             self.manifest = self._read_manifest()
             self._check_nodes()
         except FormatError as e:
@@ -237,7 +248,7 @@ class VoxlodFile:
          index_crc, manifest_crc, reserved, header_crc) = f
         if magic != MAGIC:
             raise FormatError(f"bad magic {magic!r} (an unfinished file has a zero header)")
-        if version != 1:
+        if version not in (1, 2):
             raise FormatError(f"unsupported version {version}")
         if header_size != HEADER_SIZE:
             raise FormatError(f"header_size {header_size} != 128")
@@ -249,7 +260,8 @@ class VoxlodFile:
             raise FormatError(f"levels {levels} != log2({resolution}) - 7")
         if mode not in (0, 1):
             raise FormatError(f"unknown mode {mode}")
-        if flags != 0 or reserved != 0:
+        # version 2: the word at 120 is the channel directory's CRC (section 14.1)
+        if flags != 0 or (version == 1 and reserved != 0):
             raise FormatError("reserved header fields are not zero")
         origin = (ox, oy, oz)
         if not all(np.isfinite(origin)):
@@ -260,8 +272,11 @@ class VoxlodFile:
             raise FormatError(f"index_offset {index_offset} is < 128 or not a multiple of 8")
         if index_size != node_count * ENTRY_SIZE:
             raise FormatError(f"index_size {index_size} != node_count {node_count} * 64")
-        if manifest_offset != index_offset + index_size:
+        index_end = index_offset + index_size
+        if version == 1 and manifest_offset != index_end:
             raise FormatError("manifest does not directly follow the index")
+        if version == 2 and not index_end + 8 <= manifest_offset <= self.size:
+            raise FormatError("no room for the channel directory between index and manifest")
         if manifest_offset + manifest_size != self.size:
             raise FormatError(
                 f"file is {self.size} bytes but the manifest ends at "
@@ -283,6 +298,7 @@ class VoxlodFile:
             "total_voxels": total_voxels,
             "index_crc32": index_crc,
             "manifest_crc32": manifest_crc,
+            "channels_crc32": reserved,
         }
 
     # -- section 4 -------------------------------------------------------------------------
@@ -292,6 +308,43 @@ class VoxlodFile:
         if crc32(raw) != h["index_crc32"]:
             raise FormatError("index CRC mismatch")
         return np.frombuffer(raw, dtype=ENTRY_DTYPE, count=h["node_count"])
+
+    # -- section 14 ------------------------------------------------------------------------
+    def _read_channels(self):
+        """The channel directory of a version 2 file: {id: array of (offset, size, crc, count)
+        per node}, in directory order; {} for version 1."""
+        h = self.header
+        if h["version"] == 1:
+            return {}
+        start = h["index_offset"] + h["index_size"]
+        raw = self._read(start, h["manifest_offset"] - start, "channel directory")
+        if crc32(raw) != h["channels_crc32"]:
+            raise FormatError("channel directory CRC mismatch")
+        count, res = struct.unpack_from("<II", raw, 0)
+        if not 1 <= count <= MAX_CHANNELS or res:
+            raise FormatError(f"channel directory head invalid ({count} channels)")
+        if len(raw) < 8 + 16 * count:
+            raise FormatError("channel directory too short for its descriptors")
+        nodes = h["node_count"]
+        descs = [struct.unpack_from("<IIII", raw, 8 + 16 * k) for k in range(count)]
+        want = 8 + 16 * count + sum(nodes * d[1] for d in descs)
+        out = {}
+        prev = None
+        at = 8 + 16 * count
+        for cid, entry_size, fl, rs in descs:
+            if prev is not None and cid <= prev:
+                raise FormatError("channel ids not strictly increasing")
+            if entry_size < 24 or entry_size % 8 or fl or rs:
+                raise FormatError(f"channel {cid}: bad descriptor")
+            prev = cid
+            if want != len(raw):
+                raise FormatError("channel directory size does not match its tables")
+            table = [struct.unpack_from("<QQII", raw, at + i * entry_size) for i in range(nodes)]
+            at += nodes * entry_size
+            out[cid] = table
+        if want != len(raw):
+            raise FormatError("channel directory size does not match its tables")
+        return out
 
     def _read_manifest(self):
         h = self.header
@@ -325,6 +378,20 @@ class VoxlodFile:
             if off != expected_offset or sz < 1 or off + sz > h["index_offset"]:
                 raise FormatError(f"{name}: payload [{off}, +{sz}) not contiguous/inside")
             expected_offset = off + sz
+            # section 14.2: the node's channel payloads follow, in directory order
+            for cid, table in self.channels.items():
+                coff, csz, ccrc, ccount = table[i]
+                if csz == 0:
+                    if coff or ccrc or ccount:
+                        raise FormatError(f"{name}: channel {cid}: empty entry with non-zero fields")
+                    if cid == CHANNEL_MATERIAL:
+                        raise FormatError(f"{name}: no material payload")
+                    continue
+                if coff != expected_offset or coff + csz > h["index_offset"]:
+                    raise FormatError(f"{name}: channel {cid} payload not contiguous/inside")
+                if cid == CHANNEL_MATERIAL and not 1 <= ccount <= min(n, MAX_MATERIAL_TABLE):
+                    raise FormatError(f"{name}: material table of {ccount} entries")
+                expected_offset = coff + csz
             bmin, bmax = e["bounds_min"], e["bounds_max"]
             if bmin[3] or bmax[3] or any(bmin[a] > bmax[a] for a in range(3)):
                 raise FormatError(f"{name}: bad bounds")
@@ -433,6 +500,43 @@ class VoxlodFile:
         records = np.stack([pos_mask, nw, words[2]], axis=1)
         return {"pos": pos, "mask": mask, "normal": normal, "color": color, "records": records}
 
+    def materials(self, entry):
+        """Section 14.3: the per-voxel material ids of a node (n,) u32 in voxel order, or
+        None if the file has no material channel."""
+        if CHANNEL_MATERIAL not in self.channels:
+            return None
+        i = self.find(int(entry["level"]), int(entry["x"]), int(entry["y"]), int(entry["z"]))
+        off, sz, crc, t = self.channels[CHANNEL_MATERIAL][i]
+        n = int(entry["voxel_count"])
+        name = f"{self.path}: node (level {int(entry['level'])}, {int(entry['x'])},{int(entry['y'])},{int(entry['z'])}): material payload"
+        try:
+            payload = self._read(off, sz, "material payload")
+            if crc32(payload) != crc:
+                raise FormatError("payload CRC mismatch")
+            want = 4 * t + 2 * n
+            check_frame(payload, n, want, f"4·{t} + 2·{n}")
+            try:
+                dobj = self._dctx.decompressobj()
+                block = dobj.decompress(payload)
+                if not dobj.eof or dobj.unused_data:
+                    raise FormatError("the zstd frame is cut short or followed by more bytes")
+            except zstandard.ZstdError as e:
+                raise FormatError(f"zstd: {e}") from None
+            if len(block) != want:
+                raise FormatError(f"block is {len(block)} bytes, expected {want}")
+        except FormatError as e:
+            raise FormatError(f"{name}: {e}") from None
+        table = np.frombuffer(block, dtype="<u4", count=t)
+        if t > 1 and (np.diff(table.astype(np.int64)) <= 0).any():
+            raise FormatError(f"{name}: table not strictly increasing")
+        planes = np.frombuffer(block, dtype=np.uint8, offset=4 * t).reshape(2, n)
+        idx = planes[0].astype(np.uint32) | (planes[1].astype(np.uint32) << 8)
+        if (idx >= t).any():
+            raise FormatError(f"{name}: an index is past the table")
+        if len(np.unique(idx)) != t:
+            raise FormatError(f"{name}: a table entry is used by no voxel")
+        return table[idx].astype(np.uint32)
+
     def world_min_corner(self, entry, pos):
         """Section 7: world coordinates of the voxels' minimum corners (n,3) f64."""
         lvl = int(entry["level"])
@@ -462,6 +566,8 @@ def main(argv=None):
     ap.add_argument("--json", action="store_true", help="print JSON")
     ap.add_argument("--node", nargs=4, type=int, metavar=("L", "X", "Y", "Z"))
     ap.add_argument("--raw", metavar="OUT", help="with --node: write the 12-byte records here")
+    ap.add_argument("--materials", metavar="OUT",
+                    help="with --node: write the per-voxel material ids (u32 LE) here")
     ap.add_argument("--check", action="store_true", help="decode every node")
     args = ap.parse_args(argv)
     try:
@@ -475,6 +581,13 @@ def main(argv=None):
             if args.raw:
                 with open(args.raw, "wb") as out:
                     out.write(v["records"].astype("<u4").tobytes())
+            if args.materials:
+                mats = f.materials(f.nodes[i])
+                if mats is None:
+                    print("the file has no material channel", file=sys.stderr)
+                    return 1
+                with open(args.materials, "wb") as out:
+                    out.write(mats.astype("<u4").tobytes())
             if args.json:
                 print(json.dumps({
                     "node": node_dict(f.nodes[i]),
@@ -483,7 +596,7 @@ def main(argv=None):
                     "normal": v["normal"].tolist(),
                     "color": v["color"].tolist(),
                 }))
-            elif not args.raw:
+            elif not args.raw and not args.materials:
                 print(f"node {tuple(args.node)}: {len(v['pos'])} voxels")
                 for j in range(min(10, len(v["pos"]))):
                     print(f"  pos {tuple(v['pos'][j].tolist())} mask {int(v['mask'][j]):#04x} "
@@ -493,10 +606,12 @@ def main(argv=None):
         if args.check:
             for e in f.nodes:
                 f.decode(e)
+                f.materials(e)
         h = f.header
         if args.json:
             out = {k: h[k] for k in ("version", "resolution", "levels", "mode", "mode_name",
                                      "origin", "voxel_size", "node_count", "total_voxels")}
+            out["channels"] = list(f.channels)
             out["nodes"] = [node_dict(e) for e in f.nodes]
             out["manifest"] = f.manifest
             print(json.dumps(out))

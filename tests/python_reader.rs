@@ -205,3 +205,89 @@ fn python_reader_matches_rust() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("CRC"));
 }
+
+/// A version-2 file with the material channel (FORMAT.md 14), written by the Rust writer: the
+/// Python reader lists the channel, gives the same per-voxel material ids as the Rust reader
+/// and as written, checks every payload, and refuses a flipped material byte.
+#[test]
+fn python_reader_reads_the_material_channel() {
+    if !python_ready() {
+        return;
+    }
+    use voxlod_format::voxel::{pack_color, pack_normal, Voxel};
+    use voxlod_format::{encode_materials, encode_node, FileSpec, Writer, CHANNEL_MATERIAL};
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.voxlod");
+    // one 256³ root: voxels at every 7th Morton code, materials in runs, a wide table
+    let pos = |m: u32| -> [u8; 3] {
+        std::array::from_fn(|a| (0..8).map(|b| ((m >> (3 * b + a)) & 1) << b).sum::<u32>() as u8)
+    };
+    let voxels: Vec<Voxel> = (0..40_000u32)
+        .map(|i| {
+            let n = pack_normal([0.0, 0.0, 1.0]);
+            Voxel::new(pos(7 * i), 0x10, n, pack_color([1, 2, 3, 255]))
+        })
+        .collect();
+    let mats: Vec<u32> = (0..40_000u32).map(|i| (i / 37) % 700 + 5).collect();
+    let mut w = Writer::create_with_channels(
+        &path,
+        FileSpec::new(256, 0, [0.0; 3], 1.0),
+        &[CHANNEL_MATERIAL],
+    )
+    .unwrap();
+    let mat = encode_materials(&mats, 3).unwrap();
+    w.write_node_with(
+        0,
+        [0; 3],
+        0,
+        &encode_node(&voxels, 3).unwrap(),
+        &[Some(&mat)],
+    )
+    .unwrap();
+    w.finish(&serde_json::json!({ "materials": ["", "x"] }))
+        .unwrap();
+
+    let py = json(&run(Command::new("python3")
+        .arg(script())
+        .arg(&path)
+        .arg("--json")));
+    assert_eq!(py["version"], 2);
+    assert_eq!(py["channels"], serde_json::json!([1]));
+    let out = dir.path().join("mats.bin");
+    run(Command::new("python3")
+        .arg(script())
+        .arg(&path)
+        .args(["--node", "0", "0", "0", "0", "--materials"])
+        .arg(&out));
+    let got: Vec<u32> = std::fs::read(&out)
+        .unwrap()
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    assert_eq!(got, mats);
+    let r = Reader::open(&path).unwrap();
+    assert_eq!(r.read_materials(0).unwrap().unwrap(), got);
+    run(Command::new("python3")
+        .arg(script())
+        .arg(&path)
+        .arg("--check"));
+
+    // a flipped byte in the material payload (it follows the voxel payload)
+    let mut bytes = std::fs::read(&path).unwrap();
+    let at = 128 + r.nodes()[0].payload_size as usize + 6;
+    bytes[at] ^= 0x20;
+    let bad = dir.path().join("bad.voxlod");
+    std::fs::write(&bad, bytes).unwrap();
+    let o = Command::new("python3")
+        .arg(script())
+        .arg(&bad)
+        .arg("--check")
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("material payload") && err.contains("CRC"),
+        "{err}"
+    );
+}

@@ -1,7 +1,9 @@
 //! `verify`: every checksum and invariant of a voxlod file (docs/FORMAT.md sections 4–8),
 //! with the LOD rule recomputed independently of the writer: each parent must equal the
 //! sort-and-compact merge of its stored children (Chajdas, Reitinger & Westermann 2014,
-//! section 4), computed here by `voxlod_lod::MergeScratch`.
+//! section 4), computed here by `voxlod_lod::MergeScratch`; in a file with the material
+//! channel (FORMAT.md 14.3) every node's materials are decoded with their checks and each
+//! parent's compared with `voxlod_lod::merge_materials` of its children's.
 //!
 //! Nodes are visited in index order, which is a post-order, so a parent comes after all its
 //! children; decoded children wait in a map until their parent is checked, which bounds
@@ -13,7 +15,7 @@ use std::path::Path;
 use serde::Serialize;
 use voxlod_format::voxel::{border_caps, face_mask};
 use voxlod_format::{FormatError, Reader, Voxel};
-use voxlod_lod::MergeScratch;
+use voxlod_lod::{merge_materials, MergeScratch};
 
 /// One failed check. `level`/`pos`/`index` name the node when the failure is in one.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -55,6 +57,9 @@ pub struct VerifyReport {
     pub parents_checked: usize,
     /// Level-0 voxels whose face mask was checked.
     pub leaf_voxels_checked: u64,
+    /// Parents whose materials were compared with the material LOD rule (0 without the
+    /// material channel).
+    pub materials_checked: usize,
     /// Every failed check.
     pub problems: Vec<Problem>,
 }
@@ -86,6 +91,9 @@ pub fn verify(path: &Path) -> VerifyReport {
     let mut pending: HashMap<usize, Option<Vec<Voxel>>> = HashMap::new();
     let mut merge = MergeScratch::new();
     let mut merged = Vec::new();
+    // the material channel: decoded materials of nodes waiting for their parent
+    let materials = reader.has_materials();
+    let mut pending_mats: HashMap<usize, Vec<u32>> = HashMap::new();
     for (i, e) in reader.nodes().iter().enumerate() {
         let node_problem = |what: String| Problem {
             index: Some(i),
@@ -109,9 +117,53 @@ pub fn verify(path: &Path) -> VerifyReport {
             .iter()
             .filter_map(|&(o, c)| c.map(|c| (o, c, pending.remove(&c).flatten())))
             .collect();
+        let mats = if materials {
+            match reader.read_materials(i) {
+                Ok(m) => m,
+                Err(err) => {
+                    report.problems.push(node_problem(what_of(&err)));
+                    None
+                }
+            }
+        } else {
+            None
+        };
+        let kid_mats: Vec<Option<Vec<u32>>> = kids
+            .iter()
+            .map(|&(_, c, _)| pending_mats.remove(&c))
+            .collect();
         let Some(voxels) = voxels else {
             continue;
         };
+        if let Some(m) = &mats {
+            if e.level > 0
+                && kids.iter().all(|k| k.2.is_some())
+                && kid_mats.iter().all(Option::is_some)
+            {
+                let mut slices: [&[Voxel]; 8] = [&[]; 8];
+                let mut mslices: [&[u32]; 8] = [&[]; 8];
+                for ((o, _, v), km) in kids.iter().zip(&kid_mats) {
+                    slices[*o] = v.as_deref().unwrap_or(&[]);
+                    mslices[*o] = km.as_deref().unwrap_or(&[]);
+                }
+                report.materials_checked += 1;
+                let want = merge_materials(&slices, &mslices);
+                if let Some(j) = (0..m.len().max(want.len())).find(|&j| m.get(j) != want.get(j)) {
+                    report.problems.push(node_problem(format!(
+                        "materials are not the LOD rule's (the most frequent among the children, ties to the smallest id): first difference at voxel {j}: stored {:?}, rule {:?}",
+                        m.get(j),
+                        want.get(j)
+                    )));
+                }
+            } else if e.level > 0 {
+                report.problems.push(node_problem(
+                    "materials not compared with the LOD rule: a child's voxels or materials failed to decode".into(),
+                ));
+            }
+            if e.level + 1 < spec.levels {
+                pending_mats.insert(i, m.clone());
+            }
+        }
         if voxels.len() != e.voxel_count as usize {
             report.problems.push(node_problem(format!(
                 "decoded {} voxels, the index says {}",

@@ -7,8 +7,13 @@ use bytemuck::{Pod, Zeroable};
 
 /// The 8 magic bytes that start every voxlod file (the last byte is the major layout number).
 pub const MAGIC: [u8; 8] = *b"VOXLOD\0\x01";
-/// The format version this crate writes and reads.
+/// The format version of files without optional channels (written byte for byte as before
+/// channels existed, so readers of version 1 keep reading them).
 pub const VERSION: u32 = 1;
+/// The format version of files with optional channels (a channel directory after the node
+/// index; docs/FORMAT.md section 14). This crate reads both and writes this one only for a
+/// file with at least one channel.
+pub const VERSION_CHANNELS: u32 = 2;
 /// Size of [`Header`] in bytes.
 pub const HEADER_SIZE: u32 = 128;
 /// Size of [`NodeEntry`] in bytes.
@@ -43,7 +48,8 @@ pub struct Header {
     pub index_offset: u64,
     /// Byte size of the node index, `node_count · 64`.
     pub index_size: u64,
-    /// Byte offset of the manifest, `index_offset + index_size`.
+    /// Byte offset of the manifest, `index_offset + index_size` (version 2: plus the size of the
+    /// channel directory, which lies between them).
     pub manifest_offset: u64,
     /// Byte size of the manifest; the file ends at `manifest_offset + manifest_size`.
     pub manifest_size: u64,
@@ -53,8 +59,8 @@ pub struct Header {
     pub index_crc32: u32,
     /// CRC-32 of the manifest bytes.
     pub manifest_crc32: u32,
-    /// Reserved, 0.
-    pub reserved: u32,
+    /// Version 2: CRC-32 of the channel directory; version 1: reserved, 0.
+    pub channels_crc32: u32,
     /// CRC-32 of the first 124 bytes of the header.
     pub header_crc32: u32,
 }

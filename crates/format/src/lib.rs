@@ -47,6 +47,7 @@
 //! ```
 
 mod block;
+pub mod channel;
 mod error;
 mod layout;
 mod reader;
@@ -57,9 +58,11 @@ pub mod voxel;
 mod writer;
 
 pub use block::{encode_node, EncodedNode};
+pub use channel::{encode_materials, EncodedChannel, CHANNEL_MATERIAL};
 pub use error::FormatError;
 pub use layout::{
     child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, NODE_ENTRY_SIZE, VERSION,
+    VERSION_CHANNELS,
 };
 pub use reader::Reader;
 pub use select::{Aabb, Camera, DepthFirst};

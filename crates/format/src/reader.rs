@@ -15,10 +15,15 @@ use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use crate::block::unshuffle;
+use crate::channel::{
+    decode_material_block, material_block_size, ChannelDirectory, CHANNEL_MATERIAL,
+    MAX_MATERIAL_TABLE,
+};
 use crate::layout::{
     child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, NODE_ENTRY_SIZE, VERSION,
+    VERSION_CHANNELS,
 };
-use crate::rules::{check_frame, check_manifest};
+use crate::rules::{check_frame, check_frame_of, check_manifest};
 use crate::voxel::Voxel;
 use crate::{FileSpec, FormatError, MAX_NODE_VOXELS};
 
@@ -31,6 +36,8 @@ pub struct Reader {
     header: Header,
     nodes: Vec<NodeEntry>,
     manifest: Vec<u8>,
+    /// the optional channels (version 2; empty for version 1)
+    channels: ChannelDirectory,
 }
 
 impl std::fmt::Debug for Reader {
@@ -132,6 +139,20 @@ impl Reader {
             .chunks_exact(NODE_ENTRY_SIZE as usize)
             .map(bytemuck::pod_read_unaligned)
             .collect();
+        // version 2: the channel directory between the index and the manifest (FORMAT.md 14.1)
+        let mut channels = ChannelDirectory::default();
+        if h.version == VERSION_CHANNELS {
+            let start = h.index_offset + h.index_size;
+            let bytes = read(start, h.manifest_offset - start, "channel directory")?;
+            let crc = crc32fast::hash(&bytes);
+            if crc != h.channels_crc32 {
+                return Err(index_err(format!(
+                    "channel directory checksum mismatch (header says {:08x}, directory has {crc:08x})",
+                    h.channels_crc32
+                )));
+            }
+            channels = ChannelDirectory::parse(&bytes, h.node_count).map_err(index_err)?;
+        }
         let reader = Reader {
             path: path.to_owned(),
             file,
@@ -139,6 +160,7 @@ impl Reader {
             header: h,
             nodes,
             manifest,
+            channels,
         };
         reader.check_entries()?;
         Ok(reader)
@@ -197,6 +219,42 @@ impl Reader {
                         "payload at {} of {} bytes is not inside the payload region [{HEADER_SIZE}, {}) right after the previous payload (at {prev_end})",
                         e.payload_offset, e.payload_size, h.index_offset
                     ))
+                }
+            }
+            // then the node's channel payloads, in directory order (FORMAT.md 14.2)
+            for (d, table) in self.channels.descriptors.iter().zip(&self.channels.entries) {
+                let c = table[i];
+                if c.payload_size == 0 {
+                    if c.payload_offset != 0 || c.payload_crc32 != 0 || c.count != 0 {
+                        return bad(format!(
+                            "channel {}: an entry without payload has non-zero fields",
+                            d.id
+                        ));
+                    }
+                    if d.id == CHANNEL_MATERIAL {
+                        return bad(
+                            "no material payload (the material channel has one for every node)"
+                                .into(),
+                        );
+                    }
+                    continue;
+                }
+                match c.payload_offset.checked_add(c.payload_size) {
+                    Some(end) if c.payload_offset == prev_end && end <= h.index_offset => prev_end = end,
+                    _ => {
+                        return bad(format!(
+                            "channel {} payload at {} of {} bytes is not inside the payload region right after the previous payload (at {prev_end})",
+                            d.id, c.payload_offset, c.payload_size
+                        ))
+                    }
+                }
+                if d.id == CHANNEL_MATERIAL
+                    && (c.count == 0 || c.count > MAX_MATERIAL_TABLE || c.count > e.voxel_count)
+                {
+                    return bad(format!(
+                        "material table of {} entries for {} voxels (1..=min(n, {MAX_MATERIAL_TABLE}))",
+                        c.count, e.voxel_count
+                    ));
                 }
             }
             let (lo, hi) = (e.bounds_min, e.bounds_max);
@@ -314,6 +372,85 @@ impl Reader {
             }
             self.find(e.level - 1, child_pos(e.pos(), o as u32))
         })
+    }
+
+    /// The ids of the file's optional channels (empty for a version 1 file), ascending;
+    /// ids this crate does not know are listed too (their payloads are only checked for
+    /// placement and checksum).
+    pub fn channel_ids(&self) -> Vec<u32> {
+        self.channels.descriptors.iter().map(|d| d.id).collect()
+    }
+
+    /// True if the file has the per-voxel material channel.
+    pub fn has_materials(&self) -> bool {
+        self.channels.position(CHANNEL_MATERIAL).is_some()
+    }
+
+    /// The compressed payload of node `index` in channel `id`, its checksum checked; `None` if
+    /// the file has no such channel or the node has no payload in it.
+    pub fn read_channel_payload(
+        &self,
+        index: usize,
+        id: u32,
+    ) -> Result<Option<Vec<u8>>, FormatError> {
+        if index >= self.nodes.len() {
+            return Err(FormatError::NoSuchNode {
+                path: self.path.clone(),
+                index,
+                count: self.nodes.len(),
+            });
+        }
+        let Some(k) = self.channels.position(id) else {
+            return Ok(None);
+        };
+        let c = self.channels.entries[k][index];
+        if c.payload_size == 0 {
+            return Ok(None);
+        }
+        let mut out = vec![0u8; c.payload_size as usize];
+        read_at(&self.file, &mut out, c.payload_offset).map_err(|err| match err {
+            ReadAtError::Short => self.node_error(
+                index,
+                format!("the file ends before its channel {id} payload: it was truncated after it was opened"),
+            ),
+            ReadAtError::Io(source) => FormatError::Io {
+                path: self.path.clone(),
+                op: "reading a channel payload",
+                source,
+            },
+        })?;
+        let crc = crc32fast::hash(&out);
+        if crc != c.payload_crc32 {
+            return Err(self.node_error(
+                index,
+                format!(
+                    "channel {id} payload checksum mismatch (directory says {:08x}, payload has {crc:08x})",
+                    c.payload_crc32
+                ),
+            ));
+        }
+        Ok(Some(out))
+    }
+
+    /// The material id of each voxel of node `index`, in the node's voxel order (ids index the
+    /// manifest's `"materials"` list), checked as FORMAT.md 14.3 says; `None` for a file
+    /// without the material channel.
+    pub fn read_materials(&self, index: usize) -> Result<Option<Vec<u32>>, FormatError> {
+        let Some(payload) = self.read_channel_payload(index, CHANNEL_MATERIAL)? else {
+            return Ok(None);
+        };
+        let k = self
+            .channels
+            .position(CHANNEL_MATERIAL)
+            .expect("has the channel");
+        let t = self.channels.entries[k][index].count;
+        let n = self.nodes[index].voxel_count;
+        let want = material_block_size(t, n);
+        let bad = |what: String| self.node_error(index, format!("material payload: {what}"));
+        check_frame_of(&payload, want, &format!("4·{t} + 2·{n}")).map_err(bad)?;
+        let block = zstd::bulk::decompress(&payload, want as usize)
+            .map_err(|e| bad(format!("zstd decompression failed: {e}")))?;
+        decode_material_block(&block, t, n).map(Some).map_err(bad)
     }
 
     /// The raw manifest bytes (UTF-8 JSON).
@@ -524,9 +661,9 @@ fn check_header(h: &Header, len: u64) -> Result<(), String> {
             hex(&MAGIC)
         ));
     }
-    if h.version != VERSION {
+    if h.version != VERSION && h.version != VERSION_CHANNELS {
         return Err(format!(
-            "format version {} is not supported (this reader reads version {VERSION})",
+            "format version {} is not supported (this reader reads versions {VERSION} and {VERSION_CHANNELS})",
             h.version
         ));
     }
@@ -551,10 +688,10 @@ fn check_header(h: &Header, len: u64) -> Result<(), String> {
         voxel_size: h.voxel_size,
     };
     spec.validate()?;
-    if h.flags != 0 || h.reserved != 0 {
+    if h.flags != 0 || (h.version == VERSION && h.channels_crc32 != 0) {
         return Err(format!(
             "reserved fields are not zero (flags {:#x}, reserved {:#x})",
-            h.flags, h.reserved
+            h.flags, h.channels_crc32
         ));
     }
     if h.index_offset < HEADER_SIZE as u64 || h.index_offset % 8 != 0 {
@@ -579,9 +716,18 @@ fn check_header(h: &Header, len: u64) -> Result<(), String> {
             h.index_offset, h.index_size
         ));
     };
-    if h.manifest_offset != index_end {
+    // version 2: the channel directory (at least its 8-byte head) lies between them
+    if h.version == VERSION && h.manifest_offset != index_end {
         return Err(format!(
             "manifest offset {} does not follow the index (ends at {index_end})",
+            h.manifest_offset
+        ));
+    }
+    if h.version == VERSION_CHANNELS
+        && !(h.manifest_offset >= index_end + 8 && h.manifest_offset <= len)
+    {
+        return Err(format!(
+            "manifest offset {} does not leave room for a channel directory after the index (ends at {index_end}) in the {len}-byte file",
             h.manifest_offset
         ));
     }

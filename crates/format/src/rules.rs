@@ -77,6 +77,14 @@ pub fn json_depth(bytes: &[u8]) -> usize {
 /// the whole payload (no second frame, no trailing bytes). Decompression and the checksums
 /// come after these.
 pub fn check_frame(payload: &[u8], n: usize) -> Result<(), String> {
+    check_frame_of(payload, 12 * n as u64, &format!("12·{n}"))
+}
+
+/// The payload rules of [`check_frame`] for a frame that must decompress to exactly `want`
+/// bytes (`formula` names it in messages, e.g. `12·5`): also used for channel payloads
+/// (docs/FORMAT.md 14.2).
+pub fn check_frame_of(payload: &[u8], want: u64, formula: &str) -> Result<(), String> {
+    let n = formula;
     let Some(magic) = payload.get(..4) else {
         return Err(format!(
             "the payload is {} bytes, too short for a zstd frame",
@@ -85,7 +93,10 @@ pub fn check_frame(payload: &[u8], n: usize) -> Result<(), String> {
     };
     let magic = u32::from_le_bytes(magic.try_into().expect("4 bytes"));
     if magic & 0xFFFF_FFF0 == SKIPPABLE_MAGIC {
-        return Err("the payload starts with a skippable zstd frame (it must be exactly one zstd frame of voxels)".into());
+        return Err(
+            "the payload starts with a skippable zstd frame (it must be exactly one zstd frame)"
+                .into(),
+        );
     }
     if magic != ZSTD_MAGIC {
         return Err(format!(
@@ -93,17 +104,16 @@ pub fn check_frame(payload: &[u8], n: usize) -> Result<(), String> {
             payload[0], payload[1], payload[2], payload[3]
         ));
     }
-    let want = 12 * n as u64;
     match zstd::zstd_safe::get_frame_content_size(payload) {
         Err(_) => return Err("the zstd frame header is corrupt or cut short".into()),
         Ok(None) => {
             return Err(format!(
-                "the zstd frame header has no content size (it must say 12·{n} = {want})"
+                "the zstd frame header has no content size (it must say {n} = {want})"
             ))
         }
         Ok(Some(size)) if size != want => {
             return Err(format!(
-                "the zstd frame header's content size is {size} bytes, expected 12·{n} = {want}"
+                "the zstd frame header's content size is {size} bytes, expected {n} = {want}"
             ))
         }
         Ok(Some(_)) => {}

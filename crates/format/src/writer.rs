@@ -10,7 +10,13 @@ use std::path::{Path, PathBuf};
 
 use bytemuck::Zeroable;
 
-use crate::layout::{child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, VERSION};
+use crate::channel::{
+    ChannelDescriptor, ChannelDirectory, ChannelEntry, EncodedChannel, CHANNEL_ENTRY_SIZE,
+    CHANNEL_MATERIAL, MAX_CHANNELS,
+};
+use crate::layout::{
+    child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, VERSION, VERSION_CHANNELS,
+};
 use crate::{EncodedNode, FileSpec, FormatError};
 
 /// Writes one voxlod file. See the crate documentation for an example.
@@ -29,6 +35,9 @@ pub struct Writer {
     offset: u64,
     total_voxels: u64,
     failed: bool,
+    /// the optional channels' ids (empty: a version 1 file) and per channel the entries so far
+    channels: Vec<u32>,
+    channel_entries: Vec<Vec<ChannelEntry>>,
 }
 
 impl std::fmt::Debug for Writer {
@@ -52,6 +61,26 @@ pub fn temp_path(path: &Path) -> PathBuf {
 impl Writer {
     /// Creates (or truncates) [`temp_path`]`(path)` and writes the placeholder (all-zero) header.
     pub fn create(path: &Path, spec: FileSpec) -> Result<Writer, FormatError> {
+        Writer::create_with_channels(path, spec, &[])
+    }
+
+    /// [`create`](Self::create) for a file with the optional channels `channels` (ids strictly
+    /// increasing, at most 16; docs/FORMAT.md section 14): every node is then written with
+    /// [`write_node_with`](Self::write_node_with), and the file is version 2. With no channels
+    /// the file is version 1, the same bytes as [`create`](Self::create) gives.
+    pub fn create_with_channels(
+        path: &Path,
+        spec: FileSpec,
+        channels: &[u32],
+    ) -> Result<Writer, FormatError> {
+        if channels.len() > MAX_CHANNELS as usize || channels.windows(2).any(|w| w[0] >= w[1]) {
+            return Err(FormatError::Spec {
+                path: path.to_owned(),
+                what: format!(
+                    "channel ids {channels:?} are not strictly increasing or more than {MAX_CHANNELS}"
+                ),
+            });
+        }
         spec.validate().map_err(|what| FormatError::Spec {
             path: path.to_owned(),
             what,
@@ -72,6 +101,8 @@ impl Writer {
             offset: 0,
             total_voxels: 0,
             failed: false,
+            channels: channels.to_vec(),
+            channel_entries: vec![Vec::new(); channels.len()],
         };
         w.write(
             &[0u8; HEADER_SIZE as usize],
@@ -102,6 +133,22 @@ impl Writer {
         child_mask: u8,
         node: &EncodedNode,
     ) -> Result<(), FormatError> {
+        self.write_node_with(level, pos, child_mask, node, &[])
+    }
+
+    /// [`write_node`](Self::write_node) with the node's payloads in the file's channels:
+    /// `channels[k]` for the `k`-th id given to
+    /// [`create_with_channels`](Self::create_with_channels) (`None` or missing: the node has
+    /// no payload there). The material channel needs a payload for every node, encoded for
+    /// the node's voxel count.
+    pub fn write_node_with(
+        &mut self,
+        level: u32,
+        pos: [u32; 3],
+        child_mask: u8,
+        node: &EncodedNode,
+        channels: &[Option<&EncodedChannel>],
+    ) -> Result<(), FormatError> {
         self.check_usable()?;
         let bad = |what: String| FormatError::Tree {
             path: self.path.clone(),
@@ -109,6 +156,30 @@ impl Writer {
             pos,
             what,
         };
+        if channels.len() > self.channels.len() {
+            return Err(bad(format!(
+                "{} channel payloads for a file of {} channels",
+                channels.len(),
+                self.channels.len()
+            )));
+        }
+        for (k, &id) in self.channels.iter().enumerate() {
+            let c = channels.get(k).copied().flatten();
+            match c {
+                Some(c) if id == CHANNEL_MATERIAL && c.voxel_count != node.voxel_count => {
+                    return Err(bad(format!(
+                        "channel {id}'s payload was encoded for {} voxels, the node has {}",
+                        c.voxel_count, node.voxel_count
+                    )))
+                }
+                None if id == CHANNEL_MATERIAL => {
+                    return Err(bad(
+                        "no material payload (the material channel has one for every node)".into(),
+                    ))
+                }
+                _ => {}
+            }
+        }
         if !self.spec.contains_node(level, pos) {
             return Err(bad(format!(
                 "outside the grid ({} levels; level {level} has {} chunks per axis)",
@@ -170,6 +241,22 @@ impl Writer {
             reserved: [0; 2],
         };
         self.write(&node.payload, "writing a node payload")?;
+        for k in 0..self.channels.len() {
+            let e = match channels.get(k).copied().flatten() {
+                Some(c) => {
+                    let e = ChannelEntry {
+                        payload_offset: self.offset,
+                        payload_size: c.payload.len() as u64,
+                        payload_crc32: c.payload_crc32,
+                        count: c.count,
+                    };
+                    self.write(&c.payload, "writing a channel payload")?;
+                    e
+                }
+                None => ChannelEntry::default(),
+            };
+            self.channel_entries[k].push(e);
+        }
         self.entries.push(entry);
         self.keys.push(key);
         self.total_voxels += node.voxel_count as u64;
@@ -218,12 +305,36 @@ impl Writer {
         let entries = std::mem::take(&mut self.entries);
         let index: &[u8] = bytemuck::cast_slice(&entries);
         self.write(index, "writing the node index")?;
+        // version 2: the channel directory between the index and the manifest
+        let mut channels_crc32 = 0;
+        if !self.channels.is_empty() {
+            let dir = ChannelDirectory {
+                descriptors: self
+                    .channels
+                    .iter()
+                    .map(|&id| ChannelDescriptor {
+                        id,
+                        entry_size: CHANNEL_ENTRY_SIZE,
+                        ..Default::default()
+                    })
+                    .collect(),
+                entries: std::mem::take(&mut self.channel_entries),
+            };
+            let bytes = dir.to_bytes();
+            channels_crc32 = crc32fast::hash(&bytes);
+            self.write(&bytes, "writing the channel directory")?;
+        }
         let manifest_offset = self.offset;
         self.write(&manifest_bytes, "writing the manifest")?;
 
         let mut h = Header::zeroed();
         h.magic = MAGIC;
-        h.version = VERSION;
+        h.version = if self.channels.is_empty() {
+            VERSION
+        } else {
+            VERSION_CHANNELS
+        };
+        h.channels_crc32 = channels_crc32;
         h.header_size = HEADER_SIZE;
         h.resolution = self.spec.resolution;
         h.levels = self.spec.levels;

@@ -281,9 +281,9 @@ fn header_faults_have_clear_messages() {
         "not a voxlod file",
     );
     check(
-        &|f| put(f, 8, &2u32.to_le_bytes()),
+        &|f| put(f, 8, &3u32.to_le_bytes()),
         false,
-        "version 2 is not supported",
+        "version 3 is not supported",
     );
     check(&|f| put(f, 12, &64u32.to_le_bytes()), false, "header size");
     check(

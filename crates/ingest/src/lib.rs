@@ -91,8 +91,10 @@ pub struct MeshInfo {
     pub has_colors: bool,
     /// Triangles carry texture coordinates (`TRI_HAS_UV`), for at least some.
     pub has_texcoords: bool,
-    /// The material table [`voxlod_geom::Triangle::material`] indexes (empty for a mesh
-    /// without textured materials: then every material index is 0 and means nothing).
+    /// The material table [`voxlod_geom::Triangle::material`] indexes: entry 0 is "no
+    /// material", then every material faces use (OBJ `usemtl`), with its texture if it has a
+    /// usable one. Empty for a mesh with at most one material and no texture: then every
+    /// material index is 0. Its names become the manifest's `"materials"` (FORMAT.md 14.3).
     pub materials: Vec<Material>,
     /// Things that did not stop reading but the user should know (missing MTL file,
     /// ignored partial normals, trailing bytes, no faces).

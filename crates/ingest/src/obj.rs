@@ -28,6 +28,9 @@ pub(crate) struct ObjSource {
     use_normals: bool,
     /// Material name → index in the material table, for the materials with a usable texture.
     textured: HashMap<String, u32>,
+    /// Material name → index in the material table, for every material faces use (empty for a
+    /// mesh with at most one material and no texture).
+    ids: HashMap<String, u32>,
 }
 
 struct Scan {
@@ -268,9 +271,13 @@ impl ObjSource {
         let mut warnings = Vec::new();
         let mut has_colors = s.colored_vertices > 0 && s.colored_vertices == s.vertices;
         let dir = path.parent().unwrap_or(Path::new("."));
-        // entry 0: no texture (untextured materials and faces without a material)
+        // entry 0: faces without a material; then every material that faces use, in MTL
+        // order (its texture, if it has a usable one, is set below). The table gives both the
+        // textures and the per-voxel material channel's ids (docs/FORMAT.md 14.3).
         let mut materials = vec![Material::default()];
+        let mut ids: HashMap<String, u32> = HashMap::new();
         let mut textured = HashMap::new();
+        let mut too_many = false;
         for lib in &s.mtllibs {
             let p = dir.join(lib);
             match tobj::load_mtl(&p) {
@@ -278,10 +285,20 @@ impl ObjSource {
                     has_colors |= mats.iter().any(|m| m.diffuse.is_some() && s.used_materials.contains(&m.name));
                     let mtl_dir = p.parent().unwrap_or(Path::new("."));
                     for m in &mats {
-                        let Some(map) = &m.diffuse_texture else { continue };
-                        if !s.used_materials.contains(&m.name) || textured.contains_key(&m.name) {
+                        if !s.used_materials.contains(&m.name) || ids.contains_key(&m.name) {
                             continue;
                         }
+                        if materials.len() > MAX_MATERIAL as usize {
+                            too_many = true;
+                            continue;
+                        }
+                        let id = materials.len() as u32;
+                        ids.insert(m.name.clone(), id);
+                        materials.push(Material {
+                            name: m.name.clone(),
+                            ..Material::default()
+                        });
+                        let Some(map) = &m.diffuse_texture else { continue };
                         if s.texcoords > 0 && s.without_texcoord.contains(&m.name) {
                             warnings.push(format!(
                                 "material {:?} has a texture (map_Kd) but some of its faces have no texture coordinate index; its Kd is used",
@@ -293,19 +310,13 @@ impl ObjSource {
                             crate::texpath::resolve(mtl_dir, &file).map(|f| (f, clamp))
                         });
                         match found {
-                            Ok((file, clamp)) if materials.len() <= MAX_MATERIAL as usize => {
+                            Ok((file, clamp)) => {
                                 let wrap = if clamp { Wrap::Clamp } else { Wrap::Repeat };
-                                textured.insert(m.name.clone(), materials.len() as u32);
-                                materials.push(Material {
-                                    name: m.name.clone(),
-                                    texture: Some(file),
-                                    wrap: [wrap; 2],
-                                });
+                                textured.insert(m.name.clone(), id);
+                                let e = &mut materials[id as usize];
+                                e.texture = Some(file);
+                                e.wrap = [wrap; 2];
                             }
-                            Ok(_) => warnings.push(format!(
-                                "material {:?}: more than {MAX_MATERIAL} textured materials; its texture is ignored and Kd used",
-                                m.name
-                            )),
                             Err(e) => warnings.push(format!(
                                 "material {:?} in {}: texture map_Kd {:?} cannot be used ({e}); its Kd is used",
                                 m.name,
@@ -321,19 +332,31 @@ impl ObjSource {
                 )),
             }
         }
+        if too_many {
+            warnings.push(format!(
+                "more than {MAX_MATERIAL} materials: the others count as no material (id 0) and their textures are ignored"
+            ));
+        }
         if !s.used_materials.is_empty() && s.mtllibs.is_empty() {
             warnings.push("usemtl without mtllib: materials get the default colour".into());
         }
-        if materials.len() > 1 && s.texcoords == 0 {
+        if !textured.is_empty() && s.texcoords == 0 {
             warnings.push(
                 "materials have textures (map_Kd) but the file has no texture coordinates (vt); their Kd is used"
                     .into(),
             );
         }
-        let has_texcoords = materials.len() > 1 && s.texcoords > 0;
+        let has_texcoords = !textured.is_empty() && s.texcoords > 0;
         if !has_texcoords {
-            materials.clear();
             textured.clear();
+            for m in &mut materials {
+                m.texture = None;
+            }
+        }
+        // a mesh with at most one material and no texture: no table, as before materials
+        if !has_texcoords && materials.len() <= 2 {
+            materials.clear();
+            ids.clear();
         }
         let use_normals = s.normals > 0 && s.corners_without_normal == 0;
         if s.normals > 0 && !use_normals {
@@ -359,6 +382,7 @@ impl ObjSource {
                 polygons: s.faces,
                 use_normals,
                 textured,
+                ids,
             },
             info,
         ))
@@ -410,6 +434,7 @@ impl ObjSource {
                 .filter(|_| {
                     mesh.texcoord_indices.len() == mesh.indices.len() && !mesh.texcoords.is_empty()
                 });
+            let id = material.and_then(|m| self.ids.get(&m.name).copied());
             let vcol =
                 mesh.vertex_color.len() == mesh.positions.len() && !mesh.vertex_color.is_empty();
             let normals = self.use_normals
@@ -443,7 +468,7 @@ impl ObjSource {
                 };
                 let mut out = Triangle::new([[0.0; 3]; 3]);
                 out.flags = flags;
-                if let Some(m) = tex {
+                if let Some(m) = id {
                     out.set_material(m);
                 }
                 for (k, &vi) in tri.iter().enumerate() {

@@ -127,13 +127,22 @@ fn obj_material_colours_and_normals() {
     assert_eq!((src.info().vertices, src.info().faces), (5, 5));
     let (got, st) = read(&path).unwrap();
     assert_eq!((st.triangles, st.polygons), (6, 5));
+    // two materials: a table (no material, red, green) for the material channel
+    let names: Vec<_> = src
+        .info()
+        .materials
+        .iter()
+        .map(|m| m.name.as_str())
+        .collect();
+    assert_eq!(names, ["", "red", "green"]);
     for (i, t) in got.iter().enumerate() {
-        assert_eq!(t.flags, TRI_HAS_NORMALS | TRI_HAS_COLORS);
-        let (c, n) = if i < 2 {
-            ([255, 0, 0, 255], [0.0, 0.0, -1.0])
+        let (c, n, m) = if i < 2 {
+            ([255, 0, 0, 255], [0.0, 0.0, -1.0], 1)
         } else {
-            ([0, 128, 0, 255], [0.0, 0.0, 1.0])
+            ([0, 128, 0, 255], [0.0, 0.0, 1.0], 2)
         };
+        assert_eq!(t.material(), m, "triangle {i}");
+        assert_eq!(t.flags & 0xFFFF, TRI_HAS_NORMALS | TRI_HAS_COLORS);
         assert_eq!(t.c, [c; 3], "triangle {i}");
         assert_eq!(t.n, [n; 3], "triangle {i}");
     }

@@ -24,6 +24,8 @@
 //! assert_eq!(parent[0].rgba(), [128, 0, 128, 255]);
 //! ```
 
+mod material;
 mod sort_compact;
 
+pub use material::merge_materials;
 pub use sort_compact::{merge_children, parent_key, MergeScratch};

@@ -249,6 +249,8 @@ impl ChunkSource for BinChunk<'_> {
 pub(crate) struct ChunkVoxels {
     pub voxels: Vec<Voxel>,
     pub skipped: u64,
+    /// per-voxel materials, in a build with the material channel (CPU only)
+    pub materials: Option<Vec<u32>>,
 }
 
 /// A chunk voxelizer of the voxelize stage: begins a chunk at its origin, takes its triangles
@@ -276,6 +278,7 @@ impl CpuVoxelizers {
         s: &BuildSettings,
         workers: usize,
         textures: Option<Arc<TextureSet>>,
+        materials: bool,
     ) -> CpuVoxelizers {
         assert!(workers > 0, "at least one chunk voxelizer");
         let slots = (0..workers)
@@ -283,6 +286,7 @@ impl CpuVoxelizers {
                 let mut cv = ChunkVoxelizer::new(s.mode);
                 cv.set_method(s.voxelizer);
                 cv.set_textures(textures.clone());
+                cv.set_materials(materials);
                 Mutex::new(cv)
             })
             .collect();
@@ -308,6 +312,7 @@ impl Voxelize for CpuVoxelizers {
         Ok(ChunkVoxels {
             voxels,
             skipped: vz.skipped() - before,
+            materials: vz.take_materials(),
         })
     }
 }
@@ -346,7 +351,11 @@ impl Voxelize for GpuVoxelizers {
         gpu.fallback += gpu.vz.last_fell_back() as u64;
         gpu.uncertain += gpu.vz.last_uncertain() as u64;
         gpu.fallback_tris += gpu.vz.last_fallback_triangles();
-        Ok(ChunkVoxels { voxels, skipped: 0 })
+        Ok(ChunkVoxels {
+            voxels,
+            skipped: 0,
+            materials: None,
+        })
     }
 
     /// The triangles voxelized in the classification pass (small, under the cutoff) and those
@@ -391,13 +400,14 @@ const READ_BATCH: usize = 64 * 1024;
 /// The voxelizer of one build for `s.backend`, with a description for the summary.
 /// `cpu_workers` CPU voxelizers run on `threads` threads; `bins` is for the cutoff search.
 /// A textured mesh (`textures`) runs on the CPU whatever the backend: the GPU shaders do not
-/// sample textures.
+/// sample textures; nor do they weigh materials (`materials`: the material channel).
 pub(crate) fn select(
     s: &BuildSettings,
     cpu_workers: usize,
     threads: usize,
     bins: &Bins,
     textures: Option<Arc<TextureSet>>,
+    materials: bool,
 ) -> Result<(Box<dyn Voxelize>, String)> {
     let textured = textures.as_ref().map(|t| t.bytes());
     let cpu = || -> (Box<dyn Voxelize>, String) {
@@ -412,10 +422,24 @@ pub(crate) fn select(
             );
         }
         (
-            Box::new(CpuVoxelizers::new(s, cpu_workers, textures.clone())),
+            Box::new(CpuVoxelizers::new(
+                s,
+                cpu_workers,
+                textures.clone(),
+                materials,
+            )),
             d,
         )
     };
+    if materials && textured.is_none() && s.backend != Backend::Cpu {
+        let (v, d) = cpu();
+        return Ok((
+            v,
+            format!(
+                "{d}; per-voxel materials: on the CPU (the GPU shaders do not weigh materials)"
+            ),
+        ));
+    }
     if textured.is_some() && s.backend != Backend::Cpu {
         let (v, d) = cpu();
         let why = if s.backend == Backend::Gpu {

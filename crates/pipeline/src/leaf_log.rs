@@ -104,11 +104,25 @@ impl LeafLog {
     }
 
     /// Appends chunk `chunk`'s result (`None` for a chunk without voxels).
+    #[cfg(test)]
     pub fn append(
         &mut self,
         chunk: u64,
         coord: [u32; 3],
         node: Option<&EncodedNode>,
+        skipped: u64,
+    ) -> Result<()> {
+        self.append_with(chunk, coord, node, &[], skipped)
+    }
+
+    /// [`append`](Self::append) with `extra` bytes after the node's payload, in the same
+    /// checksummed record (the material channel's payload: a second zstd frame).
+    pub fn append_with(
+        &mut self,
+        chunk: u64,
+        coord: [u32; 3],
+        node: Option<&EncodedNode>,
+        extra: &[u8],
         skipped: u64,
     ) -> Result<()> {
         if chunk != self.records {
@@ -118,7 +132,14 @@ impl LeafLog {
                 self.records
             );
         }
-        let payload = node.map_or(&[][..], |n| n.payload());
+        let joined;
+        let payload = match node {
+            Some(n) if !extra.is_empty() => {
+                joined = [n.payload(), extra].concat();
+                &joined[..]
+            }
+            _ => node.map_or(&[][..], |n| n.payload()),
+        };
         let mut h = RecordHeader {
             magic: MAGIC,
             chunk: chunk as u32,

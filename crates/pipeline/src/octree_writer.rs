@@ -14,8 +14,13 @@ use std::collections::VecDeque;
 use std::sync::{mpsc, Arc};
 
 use anyhow::{Context, Result};
-use voxlod_format::{encode_node, EncodedNode, Voxel, Writer};
-use voxlod_lod::MergeScratch;
+use voxlod_format::{encode_materials, encode_node, EncodedChannel, EncodedNode, Voxel, Writer};
+use voxlod_lod::{merge_materials, MergeScratch};
+
+/// A node's voxels and, in a build with the material channel, their materials.
+type NodeVoxels = Arc<(Vec<Voxel>, Option<Vec<u32>>)>;
+/// A node's encoded payloads: the voxels, and the material channel's if the build has one.
+type Encoded = (EncodedNode, Option<EncodedChannel>);
 
 /// Most nodes waiting for their encode, and most voxel bytes they hold, before the writer
 /// waits for the oldest (the LOD stage runs after the voxelizers are gone, and this stays far
@@ -42,8 +47,8 @@ struct Pending {
 
 /// A node's voxels, as its parent's merge needs them: known (leaves) or being merged on the pool.
 enum Child {
-    Done(Arc<Vec<Voxel>>),
-    Merging(mpsc::Receiver<Arc<Vec<Voxel>>>),
+    Done(NodeVoxels),
+    Merging(mpsc::Receiver<NodeVoxels>),
 }
 
 thread_local! {
@@ -53,8 +58,8 @@ thread_local! {
 
 /// A node's payload: encoded already (leaves) or being encoded on the pool.
 enum Payload {
-    Ready(EncodedNode),
-    Encoding(mpsc::Receiver<Result<EncodedNode, voxlod_format::FormatError>>),
+    Ready(Encoded),
+    Encoding(mpsc::Receiver<Result<Encoded, voxlod_format::FormatError>>),
 }
 
 /// A node waiting in post-order for its payload.
@@ -110,11 +115,14 @@ impl<'p> OctreeWriter<'p> {
     /// Writes a leaf whose payload is already encoded (leaves are compressed in parallel) and
     /// schedules it for its parent. Leaves must come in strictly increasing Morton order.
     /// `encoded` is `None` exactly when the chunk has no voxels (then nothing is stored).
+    /// In a build with the material channel, `materials` holds the leaf's per-voxel materials
+    /// and their encoded payload (and the writer was made with that channel).
     pub fn push_leaf(
         &mut self,
         coord: [u32; 3],
         voxels: Vec<Voxel>,
         encoded: Option<EncodedNode>,
+        materials: Option<(Vec<u32>, EncodedChannel)>,
     ) -> Result<()> {
         let m = voxlod_geom::morton3(coord[0], coord[1], coord[2]);
         anyhow::ensure!(
@@ -124,8 +132,9 @@ impl<'p> OctreeWriter<'p> {
         self.last_leaf = Some(m);
         match encoded {
             Some(enc) if !voxels.is_empty() => {
-                let voxels = Child::Done(Arc::new(voxels));
-                self.emit(0, coord, 0, voxels, Payload::Ready(enc), 0)
+                let (mats, menc) = materials.unzip();
+                let voxels = Child::Done(Arc::new((voxels, mats)));
+                self.emit(0, coord, 0, voxels, Payload::Ready((enc, menc)), 0)
             }
             None if voxels.is_empty() => Ok(()),
             _ => anyhow::bail!("leaf {coord:?}: voxels and encoded payload disagree"),
@@ -185,7 +194,7 @@ impl<'p> OctreeWriter<'p> {
         };
         // the children's voxels: wait for merges still running (this thread is not in the
         // pool, and pool tasks never wait, so this cannot deadlock)
-        let mut kids: [Arc<Vec<Voxel>>; 8] = Default::default();
+        let mut kids: [NodeVoxels; 8] = Default::default();
         for (kid, child) in kids.iter_mut().zip(p.children) {
             *kid = match child {
                 None => continue,
@@ -197,20 +206,33 @@ impl<'p> OctreeWriter<'p> {
         }
         let bytes = kids
             .iter()
-            .map(|k| k.len() * std::mem::size_of::<Voxel>())
+            .map(|k| k.0.len() * std::mem::size_of::<Voxel>())
             .sum::<usize>();
         let (vtx, vrx) = mpsc::sync_channel(1);
         let (etx, erx) = mpsc::sync_channel(1);
         let zstd_level = self.zstd_level;
         self.pool.spawn(move || {
-            let refs: [&[Voxel]; 8] = std::array::from_fn(|o| kids[o].as_slice());
+            let refs: [&[Voxel]; 8] = std::array::from_fn(|o| kids[o].0.as_slice());
             let mut merged = Vec::new();
             SCRATCH.with(|s| s.borrow_mut().merge(&refs, &mut merged));
+            // the material LOD rule, where the children have materials (FORMAT.md 14.3)
+            let mats = kids.iter().any(|k| k.1.is_some()).then(|| {
+                let m: [&[u32]; 8] = std::array::from_fn(|o| kids[o].1.as_deref().unwrap_or(&[]));
+                merge_materials(&refs, &m)
+            });
             drop(kids);
-            let merged = Arc::new(merged);
+            let merged = Arc::new((merged, mats));
             // a receiver is gone only if the build already failed
             let _ = vtx.send(Arc::clone(&merged));
-            let _ = etx.send(encode_node(&merged, zstd_level));
+            let enc = encode_node(&merged.0, zstd_level).and_then(|e| {
+                let m = merged
+                    .1
+                    .as_ref()
+                    .map(|m| encode_materials(m, zstd_level))
+                    .transpose()?;
+                Ok((e, m))
+            });
+            let _ = etx.send(enc);
         });
         let (voxels, payload) = (Child::Merging(vrx), Payload::Encoding(erx));
         self.emit(level + 1, p.parent, p.mask, voxels, payload, bytes as u64)
@@ -259,13 +281,17 @@ impl<'p> OctreeWriter<'p> {
             }
             let q = self.queue.pop_front().expect("head exists");
             self.queued_bytes -= q.bytes;
-            let Payload::Ready(enc) = &q.payload else {
+            let Payload::Ready((enc, mat)) = &q.payload else {
                 unreachable!("the head was made ready above")
             };
             self.stats[q.level as usize].nodes += 1;
             self.stats[q.level as usize].voxels += enc.voxel_count() as u64;
+            let channels = match mat {
+                Some(m) => vec![Some(m)],
+                None => Vec::new(),
+            };
             self.writer
-                .write_node(q.level, q.coord, q.child_mask, enc)
+                .write_node_with(q.level, q.coord, q.child_mask, enc, &channels)
                 .with_context(|| format!("writing node level {} {:?}", q.level, q.coord))?;
         }
         Ok(())
@@ -421,7 +447,7 @@ mod tests {
             );
             for (coord, v) in leaves.values() {
                 let enc = encode_node(v, 3).unwrap();
-                ow.push_leaf(*coord, v.clone(), Some(enc)).unwrap();
+                ow.push_leaf(*coord, v.clone(), Some(enc), None).unwrap();
             }
             ow.finish(|_| serde_json::json!({})).unwrap();
             assert!(

@@ -35,3 +35,10 @@ pub(crate) fn load(
     }
     (!set.is_empty()).then(|| Arc::new(set))
 }
+
+/// True if the build writes the per-voxel material channel (docs/FORMAT.md 14.3): the mesh's
+/// material table names at least two materials besides entry 0. A mesh with at most one
+/// material accumulates no material weights and its file is version 1, as before.
+pub(crate) fn has_material_channel(info: &MeshInfo) -> bool {
+    info.materials.len() > 2
+}

@@ -15,8 +15,10 @@ use crate::BuildSettings;
 
 /// Version of the intermediate files (spool and bins records, markers): a work folder left by a
 /// build with another layout is never resumed. 2: compact records (`voxlod_tile::RecordLayout`),
-/// no spool for memory-mapped inputs.
-pub const WORK_FORMAT: u32 = 2;
+/// no spool for memory-mapped inputs. 3: OBJ material ids for every used material, and in a
+/// build with the material channel each leaf log record holds a second zstd frame (the
+/// materials).
+pub const WORK_FORMAT: u32 = 3;
 
 /// The files of a work folder: the one place that names them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

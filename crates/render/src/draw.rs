@@ -9,7 +9,7 @@ use glam::DVec3;
 use voxlod_format::Reader;
 
 use crate::camera::Shot;
-use crate::faces::{face_direction, node_faces};
+use crate::faces::{face_direction, node_faces_by, ColorBy};
 use crate::picture::Picture;
 use crate::RenderError;
 
@@ -199,12 +199,24 @@ impl Renderer {
         nodes: &[usize],
         shot: &Shot,
     ) -> Result<Picture, RenderError> {
+        self.render_by(reader, nodes, shot, ColorBy::Voxel)
+    }
+
+    /// [`render`](Self::render) with the faces coloured as `color` says (the voxels' colours,
+    /// or their materials).
+    pub fn render_by(
+        &self,
+        reader: &Reader,
+        nodes: &[usize],
+        shot: &Shot,
+        color: ColorBy,
+    ) -> Result<Picture, RenderError> {
         let centre = shot.target;
         let mut faces: Vec<FaceInstance> = Vec::new();
         let mut buf = Vec::new();
         let mut voxels = 0u64;
         for &i in nodes {
-            node_faces(reader, i, &mut buf, &mut |f| {
+            node_faces_by(reader, i, &mut buf, color, &mut |f| {
                 // a face is seen only from its outer side: (eye − point on its plane)·d > 0
                 let d = face_direction(f.dir);
                 let a = (f.dir >> 1) as usize;

@@ -3,7 +3,9 @@
 //! vertices in world coordinates. Vertices are not shared between quads, so every quad carries
 //! its voxel's attributes: the **vertex normal is the voxel's normal** (normalized; the face
 //! direction where the voxel's normal is zero), which shades like the Chajdas renderer, and the
-//! colour is the voxel's RGBA.
+//! colour is the voxel's RGBA. A file with the material channel (FORMAT.md 14.3) also gives
+//! each vertex its voxel's material id (`property uint material`; the names are in the file's
+//! manifest, `"materials"`).
 //!
 //! Two passes over the level's nodes (count, then write), so memory does not grow with the
 //! level: the PLY header needs the counts first.
@@ -13,7 +15,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use voxlod_format::voxel::unpack_normal;
-use voxlod_format::Reader;
+use voxlod_format::{Reader, Voxel};
 
 use crate::faces::{face_direction, level_nodes, node_faces, unit_face_corners, Face};
 use crate::RenderError;
@@ -65,6 +67,13 @@ pub fn export_ply_with(
         )));
     }
     let spec = reader.spec();
+    let materials = reader.has_materials();
+    let vertex_bytes = VERTEX_BYTES + if materials { 4 } else { 0 };
+    let material_property = if materials {
+        "property uint material\n"
+    } else {
+        ""
+    };
     let header = format!(
         "ply\nformat binary_little_endian 1.0\n\
          comment voxlod export: level {level} of {}³ grid, voxel edge {}, {voxels} voxels\n\
@@ -73,6 +82,7 @@ pub fn export_ply_with(
          property float x\nproperty float y\nproperty float z\n\
          property float nx\nproperty float ny\nproperty float nz\n\
          property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n\
+         {material_property}\
          element face {quads}\n\
          property list uchar int vertex_indices\n\
          end_header\n",
@@ -83,7 +93,7 @@ pub fn export_ply_with(
         voxels,
         quads,
         vertices,
-        bytes: header.len() as u64 + vertices * VERTEX_BYTES + quads * FACE_BYTES,
+        bytes: header.len() as u64 + vertices * vertex_bytes + quads * FACE_BYTES,
     };
     before_write(&summary)?;
     let io = |op: &'static str| {
@@ -100,12 +110,19 @@ pub fn export_ply_with(
     // vertices, node by node, in the same order as counted
     let mut err = None;
     let mut written = 0u64;
+    let mut face_materials = Vec::new();
     for &i in &nodes {
+        if materials {
+            face_materials = faces_materials(reader, i, &mut buf)?;
+        }
+        let mut k = 0;
         node_faces(reader, i, &mut buf, &mut |f: Face| {
             if err.is_some() {
                 return;
             }
-            if let Err(e) = write_quad_vertices(&mut w, &f) {
+            let m = face_materials.get(k).copied();
+            k += 1;
+            if let Err(e) = write_quad_vertices(&mut w, &f, m) {
                 err = Some(e);
             }
             written += 1;
@@ -144,9 +161,25 @@ pub fn shading_normal(f: &Face) -> [f32; 3] {
     }
 }
 
-fn write_quad_vertices(w: &mut impl Write, f: &Face) -> std::io::Result<()> {
+/// The material of each active face of node `index`, in the order [`node_faces`] gives them.
+fn faces_materials(
+    reader: &Reader,
+    index: usize,
+    buf: &mut Vec<Voxel>,
+) -> Result<Vec<u32>, RenderError> {
+    reader.read_node_into(index, buf)?;
+    let m = reader.read_materials(index)?.unwrap_or_default();
+    Ok(buf
+        .iter()
+        .zip(&m)
+        .flat_map(|(v, &m)| std::iter::repeat_n(m, v.mask().count_ones() as usize))
+        .collect())
+}
+
+fn write_quad_vertices(w: &mut impl Write, f: &Face, material: Option<u32>) -> std::io::Result<()> {
     let n = shading_normal(f);
-    let mut rec = [0u8; VERTEX_BYTES as usize];
+    let mut rec = [0u8; VERTEX_BYTES as usize + 4];
+    let len = VERTEX_BYTES as usize + if material.is_some() { 4 } else { 0 };
     for c in unit_face_corners(f.dir) {
         for a in 0..3 {
             let p = (f.min[a] + f.edge * c[a] as f64) as f32;
@@ -154,7 +187,10 @@ fn write_quad_vertices(w: &mut impl Write, f: &Face) -> std::io::Result<()> {
             rec[12 + 4 * a..16 + 4 * a].copy_from_slice(&n[a].to_le_bytes());
         }
         rec[24..28].copy_from_slice(&f.rgba);
-        w.write_all(&rec)?;
+        if let Some(m) = material {
+            rec[28..32].copy_from_slice(&m.to_le_bytes());
+        }
+        w.write_all(&rec[..len])?;
     }
     Ok(())
 }

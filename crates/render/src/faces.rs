@@ -50,6 +50,38 @@ pub fn unit_face_corners(dir: u8) -> [[f32; 3]; 4] {
     })
 }
 
+/// What a face's colour shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ColorBy {
+    /// The voxel's RGBA colour.
+    #[default]
+    Voxel,
+    /// The voxel's material (FORMAT.md 14.3) as [`material_color`]: needs the material channel.
+    Material,
+}
+
+/// A distinct opaque colour for material id `id`: mid grey for 0 (no material), otherwise hues
+/// spaced by the golden angle (so neighbouring ids differ clearly), fully saturated, at two
+/// alternating brightnesses.
+pub fn material_color(id: u32) -> [u8; 4] {
+    if id == 0 {
+        return [128, 128, 128, 255];
+    }
+    let h = (id as f64 * 0.618_033_988_749_895).fract() * 6.0;
+    let v = if id % 2 == 0 { 1.0 } else { 0.75 };
+    let x = 1.0 - ((h % 2.0) - 1.0).abs();
+    let (r, g, b) = match h as u32 {
+        0 => (1.0, x, 0.0),
+        1 => (x, 1.0, 0.0),
+        2 => (0.0, 1.0, x),
+        3 => (0.0, x, 1.0),
+        4 => (x, 0.0, 1.0),
+        _ => (1.0, 0.0, x),
+    };
+    let q = |c: f64| (c * v * 255.0).round() as u8;
+    [q(r), q(g), q(b), 255]
+}
+
 /// Calls `f` with every active face of the voxels of node `index` (decoded into `buf`).
 pub fn node_faces(
     reader: &Reader,
@@ -57,15 +89,39 @@ pub fn node_faces(
     buf: &mut Vec<Voxel>,
     f: &mut dyn FnMut(Face),
 ) -> Result<(), RenderError> {
+    node_faces_by(reader, index, buf, ColorBy::Voxel, f)
+}
+
+/// [`node_faces`] with the faces coloured as `color` says; [`ColorBy::Material`] on a file
+/// without the material channel is an error saying so.
+pub fn node_faces_by(
+    reader: &Reader,
+    index: usize,
+    buf: &mut Vec<Voxel>,
+    color: ColorBy,
+    f: &mut dyn FnMut(Face),
+) -> Result<(), RenderError> {
     reader.read_node_into(index, buf)?;
+    let materials = match color {
+        ColorBy::Voxel => None,
+        ColorBy::Material => Some(reader.read_materials(index)?.ok_or_else(|| {
+            RenderError::Option(
+                "the file has no material channel (built from a mesh with fewer than two materials)"
+                    .into(),
+            )
+        })?),
+    };
     let e = reader.nodes()[index];
     let spec = reader.spec();
     let edge = spec.voxel_size_at(e.level);
-    for v in buf.iter() {
+    for (j, v) in buf.iter().enumerate() {
         let mask = v.mask();
         if mask == 0 {
             continue;
         }
+        let rgba = materials
+            .as_ref()
+            .map_or(v.rgba(), |m| material_color(m[j]));
         let min = spec.voxel_min_corner(e.level, e.pos(), v.pos());
         for dir in 0..6u8 {
             if mask >> dir & 1 == 1 {
@@ -74,7 +130,7 @@ pub fn node_faces(
                     edge,
                     dir,
                     normal: v.normal,
-                    rgba: v.rgba(),
+                    rgba,
                 });
             }
         }
@@ -97,6 +153,18 @@ pub fn level_nodes(reader: &Reader, level: u32) -> Result<Vec<usize>, RenderErro
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn material_colours_are_distinct_and_opaque() {
+        let c: Vec<_> = (0..64).map(material_color).collect();
+        assert_eq!(c[0], [128, 128, 128, 255]);
+        for i in 0..64 {
+            assert_eq!(c[i][3], 255);
+            for j in 0..i {
+                assert_ne!(c[i], c[j], "ids {i} and {j}");
+            }
+        }
+    }
 
     #[test]
     fn corners_wind_around_the_face_direction() {

@@ -43,7 +43,9 @@ pub use camera::{model_bounds, robust_bounds, up_from_shape, Shot, View};
 pub use draw::{Renderer, BACKGROUND};
 pub use error::RenderError;
 pub use export::{export_ply, export_ply_with, shading_normal, ExportSummary};
-pub use faces::{face_direction, node_faces, unit_face_corners, Face};
+pub use faces::{
+    face_direction, material_color, node_faces, node_faces_by, unit_face_corners, ColorBy, Face,
+};
 pub use picture::Picture;
 
 use voxlod_format::Reader;

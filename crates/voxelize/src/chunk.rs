@@ -15,6 +15,7 @@ use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
 use voxlod_texture::{linear_to_srgb, TextureSet};
 
 use crate::column::Columns;
+use crate::material::MaterialSums;
 use crate::overlap::{cross_f64, interior_voxel, to_f64, TriSetup};
 use crate::texcolor::{linear_color, TexAt};
 use crate::{scanline, Method, Mode};
@@ -264,6 +265,10 @@ pub struct ChunkVoxelizer {
     method: Method,
     /// the build's textures: colours from them, averaged in linear light
     textures: Option<Arc<TextureSet>>,
+    /// per-voxel material weights ([`crate::material`]), only for meshes with materials
+    materials: Option<MaterialSums>,
+    /// the last finished chunk's per-voxel materials, in voxel order
+    finished_materials: Option<Vec<u32>>,
 }
 
 impl ChunkVoxelizer {
@@ -281,7 +286,23 @@ impl ChunkVoxelizer {
             cols: Columns::idle(true),
             method: Method::default(),
             textures: None,
+            materials: None,
+            finished_materials: None,
         }
+    }
+
+    /// With `true`, each voxel also gets a material ([`crate::material`]: the largest summed
+    /// area of its triangles' [`Triangle::material`]), taken after
+    /// [`finish`](Self::finish) by [`take_materials`](Self::take_materials). Off by default
+    /// (a mesh with at most one material): then nothing is accumulated.
+    pub fn set_materials(&mut self, on: bool) {
+        self.materials = on.then(MaterialSums::new);
+    }
+
+    /// The per-voxel material ids of the chunk the last [`finish`](Self::finish) returned, in
+    /// the same order; `None` unless [`set_materials`](Self::set_materials) is on.
+    pub fn take_materials(&mut self) -> Option<Vec<u32>> {
+        self.finished_materials.take()
     }
 
     /// The textures of the mesh's materials ([`voxlod_texture::TextureSet`], indexed by
@@ -341,6 +362,9 @@ impl ChunkVoxelizer {
         self.touched.clear();
         self.blocks.clear();
         self.acc.clear();
+        if let Some(m) = &mut self.materials {
+            m.clear();
+        }
     }
 
     /// Add triangles in grid coordinates. Each is clipped to the chunk (voxel range clamped to
@@ -376,6 +400,10 @@ impl ChunkVoxelizer {
                 blocks: &mut self.blocks,
                 touched: &mut self.touched,
                 acc: &mut self.acc,
+                mats: self
+                    .materials
+                    .as_mut()
+                    .map(|m| m.set_triangle(t.material())),
             };
             let each = |p: [i32; 3], first: bool| {
                 if first {
@@ -438,6 +466,10 @@ impl ChunkVoxelizer {
             blocks: &mut self.blocks,
             touched: &mut self.touched,
             acc: &mut self.acc,
+            mats: self
+                .materials
+                .as_mut()
+                .map(|m| m.set_triangle(t.material())),
         }
         .add(local, (0.5 * len) as f32, values(normal, c));
         true
@@ -452,8 +484,19 @@ impl ChunkVoxelizer {
     /// in its brick.
     pub fn finish(&mut self) -> Vec<Voxel> {
         let mut out = vec![Voxel::default(); self.acc.len()];
+        // per accumulator (made in slot order: `ranked` passes it as `i`) its material
+        let winners: Option<Vec<u32>> = self
+            .materials
+            .as_ref()
+            .map(|m| (0..m.len()).map(|i| m.winner(i)).collect());
+        let mut mats = vec![0u32; winners.as_ref().map_or(0, Vec::len)];
         if self.textures.is_some() {
-            self.ranked(|r, _, pos, a| out[r] = encode(pos, a, true));
+            self.ranked(|r, i, pos, a| {
+                out[r] = encode(pos, a, true);
+                if let Some(w) = &winners {
+                    mats[r] = w[i];
+                }
+            });
         } else {
             let mut words = std::mem::take(&mut self.words);
             encode_words(&self.acc, &mut words);
@@ -461,9 +504,13 @@ impl ChunkVoxelizer {
                 let [normal, color] = words[i];
                 let mask = face_mask(normal) | border_caps(pos);
                 out[r] = Voxel::new(pos, mask, normal, color);
+                if let Some(w) = &winners {
+                    mats[r] = w[i];
+                }
             });
             self.words = words;
         }
+        self.finished_materials = winners.map(|_| mats);
         out
     }
 
@@ -528,6 +575,8 @@ struct Sink<'a> {
     blocks: &'a mut Vec<u32>,
     touched: &'a mut Vec<(u32, [u64; 8])>,
     acc: &'a mut Vec<Acc>,
+    /// the material hook: weights per voxel slot, if the mesh has materials
+    mats: Option<&'a mut MaterialSums>,
 }
 
 impl Sink<'_> {
@@ -552,6 +601,9 @@ impl Sink<'_> {
             self.touched[b - 1].1[v >> 6] |= 1 << (v & 63);
         } else {
             self.acc[*sl as usize - 1].add(w, x);
+        }
+        if let Some(m) = self.mats.as_deref_mut() {
+            m.add(*sl as usize - 1, w);
         }
     }
 }

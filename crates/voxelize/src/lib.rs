@@ -134,6 +134,7 @@ pub mod chunk;
 pub mod clip;
 pub mod column;
 pub mod grid;
+pub mod material;
 pub mod overlap;
 pub mod predicates;
 pub mod scanline;

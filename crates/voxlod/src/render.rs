@@ -8,7 +8,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 use voxlod_format::Reader;
 use voxlod_pipeline::{OutputGuard, OutputKind};
-use voxlod_render::{Lod, Renderer, View};
+use voxlod_render::{ColorBy, Lod, Renderer, View};
 
 #[derive(Args)]
 pub struct RenderArgs {
@@ -44,6 +44,18 @@ pub struct RenderArgs {
     /// Replace an existing output file even if it is not a PNG image.
     #[arg(long)]
     force: bool,
+    /// What the faces' colour shows: `voxel` (the voxels' colours) or `material` (one colour
+    /// per material id of the file's material channel; grey for no material).
+    #[arg(long, default_value = "voxel", value_parser = parse_color)]
+    color: ColorBy,
+}
+
+fn parse_color(s: &str) -> Result<ColorBy, String> {
+    match s {
+        "voxel" => Ok(ColorBy::Voxel),
+        "material" => Ok(ColorBy::Material),
+        _ => Err(format!("'{s}' is neither voxel nor material")),
+    }
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -75,6 +87,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
     // the output is checked (not the input, not another kind of file) and locked first
     let guard = OutputGuard::acquire(&a.output, &[&a.file], OutputKind::Png, a.force)?;
     let r = Reader::open(&a.file)?;
+    if a.color == ColorBy::Material && !r.has_materials() {
+        bail!(
+            "{}: --color material: the file has no material channel (built from a mesh with fewer than two materials)",
+            a.file.display()
+        );
+    }
     let lod = match (a.level, a.error) {
         (Some(l), _) => Lod::Level(l),
         (None, Some(e)) => Lod::Error(e),
@@ -91,7 +109,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     };
     let (shot, nodes) = voxlod_render::frame(&r, &view, lod)?;
     let renderer = Renderer::new()?;
-    let pic = renderer.render(&r, &nodes, &shot)?;
+    let pic = renderer.render_by(&r, &nodes, &shot, a.color)?;
     if pic.coverage().iter().all(|&c| !c) {
         bail!("nothing of the model is in the picture (check --view, --up and --zoom)");
     }

@@ -26,6 +26,12 @@ pub fn run(a: VerifyArgs) -> Result<()> {
                 "  checked      {} nodes ({} decoded), {} voxels, {} parents against the merge of their children, {} leaf face masks",
                 r.nodes, r.nodes_decoded, r.voxels, r.parents_checked, r.leaf_voxels_checked
             );
+            if r.materials_checked > 0 {
+                println!(
+                    "  materials    {} parents against the material LOD rule",
+                    r.materials_checked
+                );
+            }
         }
         for p in &r.problems {
             println!("  FAILED       {p}");

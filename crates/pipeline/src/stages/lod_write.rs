@@ -9,7 +9,8 @@
 use std::time::Instant;
 
 use anyhow::Context;
-use voxlod_format::{EncodedNode, FileSpec, Voxel, Writer};
+use voxlod_format::channel::{decode_materials, first_frame_len};
+use voxlod_format::{EncodedChannel, EncodedNode, FileSpec, Voxel, Writer, CHANNEL_MATERIAL};
 
 use super::ingest::Ingested;
 use super::voxelize::Voxelized;
@@ -46,9 +47,12 @@ pub(crate) fn run(
         origin: grid.origin,
         voxel_size: grid.voxel_size,
     };
-    let writer = Writer::create(ctx.output.staged(), spec)?;
+    // the material channel: its records follow each leaf's payload in the leaf log
+    let materials = crate::textures::has_material_channel(ctx.source.info());
+    let channels: &[u32] = if materials { &[CHANNEL_MATERIAL] } else { &[] };
+    let writer = Writer::create_with_channels(ctx.output.staged(), spec, channels)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &ctx.pool);
-    write_leaves(ctx, &mut octree, voxelized.marker.records)?;
+    write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
     let manifest = manifest_fields(ctx, ingested);
     let (bytes, levels) = octree.finish(|levels| {
         let mut m = manifest;
@@ -95,8 +99,14 @@ fn check_output_space(ctx: &mut BuildContext, records: u64) -> Result<(), StageE
     Ok(())
 }
 
-/// A decoded leaf: chunk coordinates, voxels, encoded payload (None when empty).
-type Leaf = ([u32; 3], Vec<Voxel>, Option<EncodedNode>);
+/// A decoded leaf: chunk coordinates, voxels, encoded payload (None when empty), and in a
+/// build with the material channel the voxels' materials and their payload.
+type Leaf = (
+    [u32; 3],
+    Vec<Voxel>,
+    Option<EncodedNode>,
+    Option<(Vec<u32>, EncodedChannel)>,
+);
 
 /// Feeds the leaf log to `octree`. The log is read and decoded on a second thread, one leaf
 /// ahead of the merges and parent encodes of this one (two decoded leaves in flight at most).
@@ -104,6 +114,7 @@ fn write_leaves(
     ctx: &BuildContext,
     octree: &mut OctreeWriter,
     records: u64,
+    materials: bool,
 ) -> Result<(), StageError> {
     let leaves = ctx.work.file(WorkFile::Leaves);
     let bar = Stage::items(ctx.progress, "lod+write", records);
@@ -114,7 +125,7 @@ fn write_leaves(
                 if let Err(e) = ctx.check_interrupt() {
                     return Err(anyhow::anyhow!(ctx.stop.set(e)));
                 }
-                let leaf = decode_leaf(h, payload)?;
+                let leaf = decode_leaf(h, payload, materials)?;
                 // a closed channel means the writer failed: stop reading
                 tx.send(Ok(leaf))
                     .map_err(|_| anyhow::anyhow!("the octree writer stopped"))
@@ -128,8 +139,8 @@ fn write_leaves(
         let rx = rx;
         let mut n = 0u64;
         for leaf in rx.iter() {
-            let (coord, voxels, enc) = leaf?;
-            octree.push_leaf(coord, voxels, enc)?;
+            let (coord, voxels, enc, mats) = leaf?;
+            octree.push_leaf(coord, voxels, enc, mats)?;
             n += 1;
             bar.set(n, records);
         }
@@ -140,14 +151,32 @@ fn write_leaves(
 }
 
 /// A leaf log record decoded.
-fn decode_leaf(h: &leaf_log::RecordHeader, payload: Vec<u8>) -> anyhow::Result<Leaf> {
+/// With `materials`, the record holds the voxel frame and then the material frame.
+fn decode_leaf(
+    h: &leaf_log::RecordHeader,
+    mut payload: Vec<u8>,
+    materials: bool,
+) -> anyhow::Result<Leaf> {
     if h.voxel_count == 0 {
-        return Ok((h.coord, Vec::new(), None));
+        return Ok((h.coord, Vec::new(), None, None));
     }
+    let what = || format!("leaf log record {}", h.chunk);
+    let (mats, crc) = if materials {
+        let at = first_frame_len(&payload)
+            .map_err(anyhow::Error::msg)
+            .with_context(what)?;
+        let rest = payload.split_off(at);
+        let m = decode_materials(rest, h.voxel_count)
+            .map_err(anyhow::Error::msg)
+            .with_context(what)?;
+        (Some(m), crc32fast::hash(&payload))
+    } else {
+        (None, h.payload_crc32)
+    };
     let mut voxels: Vec<Voxel> = Vec::new();
-    let enc = EncodedNode::from_payload(payload, h.voxel_count, h.payload_crc32, &mut voxels)
-        .with_context(|| format!("leaf log record {}", h.chunk))?;
-    Ok((h.coord, voxels, Some(enc)))
+    let enc =
+        EncodedNode::from_payload(payload, h.voxel_count, crc, &mut voxels).with_context(what)?;
+    Ok((h.coord, voxels, Some(enc), mats))
 }
 
 /// The manifest without its `levels` (known once the file is written).
@@ -169,7 +198,7 @@ fn manifest_fields(ctx: &BuildContext, ingested: &Ingested) -> serde_json::Value
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let m = &ingested.marker;
-    serde_json::json!({
+    let mut manifest = serde_json::json!({
         "tool": "voxlod",
         "tool_version": env!("CARGO_PKG_VERSION"),
         "input": { "file": input_name, "format": ctx.source.info().format, "triangles": m.triangles,
@@ -182,5 +211,12 @@ fn manifest_fields(ctx: &BuildContext, ingested: &Ingested) -> serde_json::Value
             "levels": grid.levels(),
         },
         "levels": serde_json::Value::Null,
-    })
+    });
+    // the source material names, indexed by material id (FORMAT.md 14.3)
+    let info = ctx.source.info();
+    if crate::textures::has_material_channel(info) {
+        let names: Vec<&str> = info.materials.iter().map(|m| m.name.as_str()).collect();
+        manifest["materials"] = serde_json::json!(names);
+    }
+    manifest
 }

@@ -274,6 +274,7 @@ mod tests {
             Ok(ChunkVoxels {
                 voxels: Vec::new(),
                 skipped: n as u64,
+                materials: None,
             })
         }
     }
@@ -318,7 +319,7 @@ mod tests {
             .starts_with(&format!("voxelizing leaf chunk 1 {coord:?} panicked")));
         assert!(ctx.work.marker::<voxelize::LeavesMarker>().is_none());
         // the log holds chunk 0 only; the real voxelizer continues from there
-        let cpu = Box::new(CpuVoxelizers::new(&fx.settings, 2, None));
+        let cpu = Box::new(CpuVoxelizers::new(&fx.settings, 2, None, false));
         let (m, gpu) = voxelize::run_with(&mut ctx, &tiled, cpu).unwrap();
         assert_eq!((m.records, gpu), (n as u64, None));
         assert_eq!(

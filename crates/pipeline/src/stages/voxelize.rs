@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
-use voxlod_format::{encode_node, EncodedNode};
+use voxlod_format::{encode_materials, encode_node, EncodedNode};
 use voxlod_tile::Bins;
 
 use super::tile::Tiled;
@@ -70,12 +70,14 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, Sta
         ctx.settings.memory,
         &mut ctx.warnings,
     );
+    let materials = crate::textures::has_material_channel(ctx.source.info());
     let (vz, backend) = crate::backend::select(
         ctx.settings,
         ctx.plan.voxelizers,
         threads,
         &tiled.bins,
         textures,
+        materials,
     )?;
     let (marker, gpu_stats) = run_with(ctx, &tiled, vz)?;
     tiled.bins.remove()?;
@@ -133,17 +135,21 @@ fn append_chunks(
     let bar = Stage::items(ctx.progress, "voxelize", chunks.len() as u64);
     bar.set(start as u64, chunks.len() as u64);
     let zstd_level = ctx.settings.zstd_level;
-    let voxelize_one = |i: usize| -> Result<(Option<EncodedNode>, u64), StageError> {
+    type Encoded = (Option<EncodedNode>, Vec<u8>, u64);
+    let voxelize_one = |i: usize| -> Result<Encoded, StageError> {
         let r = vz.voxelize(&BinChunk { bins, index: i })?;
+        let what = || format!("encoding leaf chunk {:?}", chunks[i].coord);
         let enc = if r.voxels.is_empty() {
             None
         } else {
-            Some(
-                encode_node(&r.voxels, zstd_level)
-                    .with_context(|| format!("encoding leaf chunk {:?}", chunks[i].coord))?,
-            )
+            Some(encode_node(&r.voxels, zstd_level).with_context(what)?)
         };
-        Ok((enc, r.skipped))
+        // the material channel's payload goes after the voxels' in the leaf log record
+        let mats = match &r.materials {
+            Some(m) if !m.is_empty() => encode_materials(m, zstd_level).with_context(what)?.payload,
+            _ => Vec::new(),
+        };
+        Ok((enc, mats, r.skipped))
     };
     let interrupt_after = ctx.settings.interrupt_after_chunks;
     crate::window::ordered(
@@ -154,8 +160,8 @@ fn append_chunks(
         &voxelize_one,
         &mut |i, r| {
             ctx.check_interrupt()?;
-            let (enc, skipped) = r?;
-            log.append(i as u64, chunks[i].coord, enc.as_ref(), skipped)?;
+            let (enc, mats, skipped) = r?;
+            log.append_with(i as u64, chunks[i].coord, enc.as_ref(), &mats, skipped)?;
             log.flush()?;
             bar.set(i as u64 + 1, chunks.len() as u64);
             if interrupt_after.is_some_and(|n| i as u64 + 1 >= n) {

@@ -1,0 +1,122 @@
+//! The LOD rule of the material channel (docs/FORMAT.md 14.3; the per-voxel material ids of
+//! Chajdas, Reitinger & Westermann, "Scalable rendering for very large meshes", WSCG 2014,
+//! section 3.1, carried through their sort-and-compact LOD, section 4): a parent voxel takes
+//! the material held by the most child voxels of its run, ties to the smallest id. Each child
+//! voxel stands for the same area at its level, so this is the largest summed area weight with
+//! the child voxel as the unit (the colour rule of section 8 makes the same assumption).
+//!
+//! The parent's voxels are the runs in the order [`crate::merge_children`] makes them: child
+//! octants in order 0…7, and inside a child its voxels in Morton order, a run being the voxels
+//! whose Morton codes agree above the lowest 3 bits (the 2×2×2 block of one parent voxel). So
+//! the materials are found by one scan of each child, aligned with the merged voxels.
+
+use voxlod_format::voxel::{morton8, Voxel};
+
+/// The parent's per-voxel materials, in the order of [`crate::merge_children`]`(children)`:
+/// `materials[i][j]` is the material of `children[i][j]`.
+///
+/// # Panics
+/// If `materials[i]` and `children[i]` differ in length.
+pub fn merge_materials(children: &[&[Voxel]; 8], materials: &[&[u32]; 8]) -> Vec<u32> {
+    let mut out = Vec::new();
+    for (voxels, mats) in children.iter().zip(materials) {
+        assert_eq!(voxels.len(), mats.len(), "one material per child voxel");
+        let mut j = 0;
+        while j < voxels.len() {
+            let p = voxels[j].pos();
+            let key = morton8(p[0], p[1], p[2]) >> 3;
+            let mut end = j + 1;
+            while end < voxels.len() && {
+                let q = voxels[end].pos();
+                morton8(q[0], q[1], q[2]) >> 3 == key
+            } {
+                end += 1;
+            }
+            out.push(majority(&mats[j..end]));
+            j = end;
+        }
+    }
+    out
+}
+
+/// The id held most often in `run` (at most 8 entries), ties to the smallest id.
+fn majority(run: &[u32]) -> u32 {
+    debug_assert!(!run.is_empty() && run.len() <= 8);
+    let mut best = (0usize, u32::MAX);
+    for (i, &m) in run.iter().enumerate() {
+        if run[..i].contains(&m) {
+            continue;
+        }
+        let count = run[i..].iter().filter(|&&x| x == m).count();
+        if count > best.0 || (count == best.0 && m < best.1) {
+            best = (count, m);
+        }
+    }
+    best.1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{merge_children, parent_key};
+    use std::collections::BTreeMap;
+    use voxlod_format::voxel::{pack_color, pack_normal};
+
+    #[test]
+    fn majority_then_smallest_id() {
+        assert_eq!(majority(&[4]), 4);
+        assert_eq!(majority(&[4, 2, 4]), 4);
+        assert_eq!(majority(&[4, 2, 2, 4]), 2);
+        assert_eq!(majority(&[9, 8, 7, 6, 5, 4, 3, 1]), 1);
+    }
+
+    /// Against a map from parent position to the child materials, built with `parent_key`.
+    #[test]
+    fn aligned_with_merge_children_and_equal_to_a_map() {
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let n = pack_normal([0.0, 1.0, 0.0]);
+        let mut kids: Vec<Vec<Voxel>> = Vec::new();
+        let mut mats: Vec<Vec<u32>> = Vec::new();
+        for _ in 0..8 {
+            let mut codes: Vec<u32> = (0..3000).map(|_| (next() % (1 << 12)) as u32).collect();
+            codes.sort_unstable();
+            codes.dedup();
+            let v: Vec<Voxel> = codes
+                .iter()
+                .map(|&c| {
+                    let p: [u8; 3] = std::array::from_fn(|a| {
+                        (0..8).map(|b| ((c >> (3 * b + a)) & 1) << b).sum::<u32>() as u8
+                    });
+                    Voxel::new(p, 0, n, pack_color([1, 2, 3, 4]))
+                })
+                .collect();
+            mats.push(v.iter().map(|_| (next() % 4) as u32).collect());
+            kids.push(v);
+        }
+        let children: [&[Voxel]; 8] = std::array::from_fn(|i| kids[i].as_slice());
+        let materials: [&[u32]; 8] = std::array::from_fn(|i| mats[i].as_slice());
+        let parent = merge_children(&children);
+        let got = merge_materials(&children, &materials);
+        assert_eq!(got.len(), parent.len());
+        let mut by_pos: BTreeMap<[u8; 3], Vec<u32>> = BTreeMap::new();
+        for o in 0..8 {
+            for (v, &m) in kids[o].iter().zip(&mats[o]) {
+                by_pos.entry(parent_key(o, v.pos()).0).or_default().push(m);
+            }
+        }
+        for (v, m) in parent.iter().zip(&got) {
+            let list = &by_pos[&v.pos()];
+            let count = |x: u32| list.iter().filter(|&&y| y == x).count();
+            let want = (0..4)
+                .max_by_key(|&x| (count(x), std::cmp::Reverse(x)))
+                .unwrap();
+            assert_eq!(*m, want, "parent voxel {:?}", v.pos());
+        }
+    }
+}
