@@ -109,6 +109,8 @@ pub struct GpuVoxelizer {
     resident: Option<Resident>,
     /// triangles per batch
     batch: usize,
+    /// most voxel slots per accumulation window (`MAX_WINDOW` but for tests)
+    max_window: u64,
     /// host copy of the batch being filled
     pending: Vec<Triangle>,
     /// leave out second passes that would draw nothing (see `may_defer`)
@@ -344,6 +346,7 @@ impl GpuVoxelizer {
             next: 0,
             resident: None,
             batch: BATCH,
+            max_window: MAX_WINDOW,
             pending: Vec::new(),
             skip_empty: true,
             split: (0, 0),
@@ -430,6 +433,15 @@ impl GpuVoxelizer {
     /// cost more submissions; the voxels do not depend on it.
     pub fn set_batch_size(&mut self, n: usize) {
         self.batch = n.clamp(1, BATCH);
+    }
+
+    /// Caps the voxel slots accumulated per pass at `slots` (at least 1; at most the default,
+    /// 2^19): a chunk with more occupied voxels is accumulated in several windows, each
+    /// replaying the chunk. For tests, which reach several windows on small chunks with it;
+    /// the voxels do not depend on it.
+    #[doc(hidden)]
+    pub fn set_max_window(&mut self, slots: u64) {
+        self.max_window = slots.clamp(1, MAX_WINDOW);
     }
 
     /// Whether the second pass (fragment or sweep) of a batch is left out when the host can
@@ -692,7 +704,7 @@ impl GpuVoxelizer {
             .limits
             .max_storage_buffer_binding_size
             .min(self.gpu.limits.max_buffer_size);
-        let window = count.min(MAX_WINDOW).min(limit / SLOT_BYTES).max(1);
+        let window = count.min(self.max_window).min(limit / SLOT_BYTES).max(1);
         self.ensure(Which::Accum, window * SLOT_BYTES);
         self.ensure(Which::Staging, (window * SLOT_BYTES).max(2 * OCC_BYTES));
         // occupancy and slot bases, for decoding
