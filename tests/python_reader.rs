@@ -14,40 +14,6 @@ use voxlod_format::Reader;
 const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
 const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
 
-fn ci() -> bool {
-    std::env::var("CI").is_ok_and(|v| v == "true")
-}
-
-/// The shared test meshes (`voxlod_testkit::shared_meshes`: skipped with a note without
-/// `../shared`, a failure under CI).
-fn shared_meshes() -> Option<PathBuf> {
-    voxlod_testkit::shared_meshes(module_path!())
-}
-
-/// True if python3 with numpy and zstandard runs; otherwise fails under CI, skips elsewhere.
-fn python_ready() -> bool {
-    let o = Command::new("python3")
-        .args(["-c", "import numpy, zstandard"])
-        .output();
-    match o {
-        Ok(o) if o.status.success() => true,
-        other => {
-            let why = match other {
-                Ok(o) => String::from_utf8_lossy(&o.stderr).into_owned(),
-                Err(e) => e.to_string(),
-            };
-            if ci() {
-                panic!("CI=true but python3 with numpy and zstandard is not available: {why}");
-            }
-            eprintln!(
-                "python_reader: SKIPPED: python3 with numpy and zstandard is not available \
-                 (pip install numpy zstandard): {why}"
-            );
-            false
-        }
-    }
-}
-
 fn run(cmd: &mut Command) -> Output {
     let o = cmd.output().expect("running a command");
     assert!(
@@ -162,10 +128,10 @@ fn check_file(path: &Path, dir: &Path) {
 
 #[test]
 fn python_reader_matches_rust() {
-    let Some(meshes) = shared_meshes() else {
+    let Some(meshes) = voxlod_testkit::shared_meshes("python_reader") else {
         return;
     };
-    if !python_ready() {
+    if !voxlod_testkit::python_ready("python_reader") {
         return;
     }
     let dir = tempfile::tempdir().unwrap();

@@ -20,31 +20,6 @@ use voxlod_format::Reader;
 const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
 const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
 
-fn ci() -> bool {
-    std::env::var("CI").is_ok_and(|v| v == "true")
-}
-
-/// True if python3 with numpy and zstandard runs; otherwise fails under CI, skips elsewhere.
-fn python_ready() -> bool {
-    let o = Command::new("python3")
-        .args(["-c", "import numpy, zstandard"])
-        .output();
-    match o {
-        Ok(o) if o.status.success() => true,
-        other => {
-            let why = match other {
-                Ok(o) => String::from_utf8_lossy(&o.stderr).into_owned(),
-                Err(e) => e.to_string(),
-            };
-            if ci() {
-                panic!("CI=true but python3 with numpy and zstandard is not available: {why}");
-            }
-            eprintln!("validation: Python reader SKIPPED (pip install numpy zstandard): {why}");
-            false
-        }
-    }
-}
-
 /// The 12·n-byte block of `voxels` (Morton-sorted) as FORMAT.md 5.2 transforms it.
 fn block_of(voxels: &[Voxel]) -> Vec<u8> {
     let n = voxels.len();
@@ -227,7 +202,7 @@ fn all_readers_apply_the_same_rules() {
         ),
     )
     .unwrap();
-    let python = python_ready();
+    let python = voxlod_testkit::python_ready("validation: Python reader");
     let script = Path::new(REPO).join("scripts/voxlod_read.py");
     // each reader's verdict: Ok or the error text
     let rust = |p: &Path| -> Result<(), String> {

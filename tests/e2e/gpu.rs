@@ -77,22 +77,7 @@ fn gpu_backend_writes_the_same_file_as_cpu() {
     for (mode, cutoff) in [("conservative", "8"), ("thin", "auto")] {
         let cpu = d.join(format!("cpu-{mode}.voxlod"));
         let gpu = d.join(format!("gpu-{mode}.voxlod"));
-        ok(&voxlod(
-            &[
-                "build",
-                "-q",
-                s.to_str().unwrap(),
-                "-o",
-                cpu.to_str().unwrap(),
-                "-r",
-                "256",
-                "-m",
-                mode,
-                "--backend",
-                "cpu",
-            ],
-            d,
-        ));
+        build_ok(&s, &cpu, &["-r", "256", "-m", mode, "--backend", "cpu"], d);
         let o = voxlod(
             &[
                 "build",
@@ -175,38 +160,18 @@ fn gpu_backend_matches_cpu_on_real_meshes() {
     ] {
         let input = meshes.join(mesh);
         let (cpu, gpu) = (d.join("cpu.voxlod"), d.join("gpu.voxlod"));
-        ok(&voxlod(
-            &[
-                "build",
-                "-q",
-                input.to_str().unwrap(),
-                "-o",
-                cpu.to_str().unwrap(),
-                "-r",
-                "256",
-                "-m",
-                "thin",
-                "--backend",
-                "cpu",
-            ],
+        build_ok(
+            &input,
+            &cpu,
+            &["-r", "256", "-m", "thin", "--backend", "cpu"],
             d,
-        ));
-        ok(&voxlod(
-            &[
-                "build",
-                "-q",
-                input.to_str().unwrap(),
-                "-o",
-                gpu.to_str().unwrap(),
-                "-r",
-                "256",
-                "-m",
-                "thin",
-                "--backend",
-                "gpu",
-            ],
+        );
+        build_ok(
+            &input,
+            &gpu,
+            &["-r", "256", "-m", "thin", "--backend", "gpu"],
             d,
-        ));
+        );
         let r = gpu_contract(&cpu, &gpu);
         eprintln!("{mesh}: {r:?}");
         assert!(r.normal_outliers * 100 <= r.leaves, "{mesh}: {r:?}");

@@ -55,6 +55,15 @@ fn build_args(input: &Path, out: &Path, extra: &[&str]) -> Vec<String> {
     a
 }
 
+/// Runs `voxlod build -q INPUT -o OUT EXTRA…` in `cwd` and asserts that it succeeded.
+fn build_ok(input: &Path, out: &Path, extra: &[&str], cwd: &Path) -> Output {
+    let args = build_args(input, out, extra);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = voxlod(&args, cwd);
+    ok(&o);
+    o
+}
+
 fn ok(o: &Output) {
     assert!(
         o.status.success(),

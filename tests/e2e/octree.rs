@@ -10,22 +10,7 @@ fn thread_counts_give_identical_bytes() {
         let mut files = vec![];
         for j in ["1", "2", "3"] {
             let out = dir.path().join(format!("{mode}-{j}.voxlod"));
-            ok(&voxlod(
-                &[
-                    "build",
-                    "-q",
-                    s.to_str().unwrap(),
-                    "-o",
-                    out.to_str().unwrap(),
-                    "-r",
-                    "2048",
-                    "-m",
-                    mode,
-                    "-j",
-                    j,
-                ],
-                dir.path(),
-            ));
+            build_ok(&s, &out, &["-r", "2048", "-m", mode, "-j", j], dir.path());
             files.push(std::fs::read(&out).unwrap());
         }
         assert!(
@@ -39,20 +24,7 @@ fn thread_counts_give_identical_bytes() {
 fn lod_levels_are_or_merges_of_their_children() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("b.voxlod");
-    ok(&voxlod(
-        &[
-            "build",
-            "-q",
-            sample().to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "-r",
-            "2048",
-            "-m",
-            "thin",
-        ],
-        dir.path(),
-    ));
+    build_ok(&sample(), &out, &["-r", "2048", "-m", "thin"], dir.path());
     let per_level = check_octree(&out);
     assert_eq!(per_level.len(), 4);
 }
@@ -65,20 +37,7 @@ fn leaves_equal_direct_voxelization_without_tiling() {
     let dir = tempfile::tempdir().unwrap();
     for (mode, name) in [(Mode::Conservative, "conservative"), (Mode::Thin, "thin")] {
         let out = dir.path().join(format!("{name}.voxlod"));
-        ok(&voxlod(
-            &[
-                "build",
-                "-q",
-                sample().to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-                "-r",
-                "1024",
-                "-m",
-                name,
-            ],
-            dir.path(),
-        ));
+        build_ok(&sample(), &out, &["-r", "1024", "-m", name], dir.path());
         let (r, nodes) = read_nodes(&out);
         let h = r.header();
         let grid = voxlod_geom::Grid {
@@ -145,20 +104,7 @@ fn real_meshes_build_with_stable_counts() {
     for (file, res, mode) in cases {
         let out = dir.path().join("m.voxlod");
         let input = meshes.join(file);
-        ok(&voxlod(
-            &[
-                "build",
-                "-q",
-                input.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-                "-r",
-                res,
-                "-m",
-                mode,
-            ],
-            dir.path(),
-        ));
+        build_ok(&input, &out, &["-r", res, "-m", mode], dir.path());
         let per_level = check_octree(&out);
         got.insert(format!("{file}@{res}/{mode}"), per_level);
     }

@@ -100,6 +100,7 @@
 //! assert_eq!(gpu.last_split(), (1, 0)); // small: voxelized in the classification pass
 //! ```
 
+pub mod bindings;
 mod device;
 mod encode;
 mod fallback;
@@ -215,7 +216,7 @@ pub enum GpuError {
     },
     /// The chunk origin is not a multiple of 256 or too large for the i32 coordinates of the
     /// shaders.
-    #[error("chunk origin {0:?} is not a multiple of 256 below 2^31")]
+    #[error("chunk origin {0:?} is not a multiple of {chunk} below 2^31", chunk = voxlod_geom::CHUNK)]
     Origin([u32; 3]),
 }
 

@@ -1,4 +1,7 @@
-//! The WGSL sources (in `shaders/` at the repository root) and how the host assembles them:
+//! The WGSL sources and how the host assembles them. The one source is `shaders/` at the
+//! repository root; the crate reaches it through `crates/gpu/shaders`, a symbolic link to that
+//! folder, so that `cargo package` puts the files into the crate (a path out of the crate is
+//! not packaged); `tests/shaders.rs` checks that both hold the same files. The assembly:
 //! each entry file gets the shared routines of `voxelize.wgsl` appended and the `real` alias
 //! (f64 or f32) prepended, with the constants of the filter bounds for that type: `UNIT`, the
 //! unit roundoff (2⁻⁵³ or 2⁻²⁴), and `TINY`, an absolute slack covering underflow (in f32 also
@@ -8,11 +11,11 @@
 //! `voxelize.wgsl`). The host's certification flags are likewise set for f64 shaders only.
 
 /// Classification and compaction compute entry points (`classify`, `compact`).
-pub const CLASSIFY_WGSL: &str = include_str!("../../../shaders/classify.wgsl");
+pub const CLASSIFY_WGSL: &str = include_str!("../shaders/classify.wgsl");
 /// Fragment-parallel pass (`vs`, `fs`).
-pub const RASTER_WGSL: &str = include_str!("../../../shaders/raster.wgsl");
+pub const RASTER_WGSL: &str = include_str!("../shaders/raster.wgsl");
 /// Setup, overlap tests, clipping and attribute accumulation shared by both.
-pub const VOXELIZE_WGSL: &str = include_str!("../../../shaders/voxelize.wgsl");
+pub const VOXELIZE_WGSL: &str = include_str!("../shaders/voxelize.wgsl");
 
 /// Floating-point type of the overlap tests and clipping in the shaders.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -7,6 +7,7 @@ use voxlod_format::Voxel;
 use voxlod_geom::{Triangle, CHUNK};
 use voxlod_voxelize::{ChunkVoxelizer, Mode};
 
+use crate::bindings::{ACCUM, BASE, COUNTER, DEFERRED, DRAW_ARGS, OCC, PARAMS, TRIS};
 use crate::device::{open, Gpu};
 use crate::encode::{decode, SLOT_BYTES};
 use crate::fallback::{exact_flags, Listed, TRI_EXACT_DEPTH, TRI_EXACT_EDGES};
@@ -34,6 +35,9 @@ const DEFERRED_BYTES: u64 = 48;
 /// Most voxel slots accumulated per pass (96 MiB of accumulators, under the 128 MiB binding limit).
 const MAX_WINDOW: u64 = 1 << 19;
 const WG: u32 = 64;
+/// Buffer sizes are rounded up to a multiple of this many bytes: a multiple of
+/// `wgpu::COPY_BUFFER_ALIGNMENT` (4) and of every record the shaders index.
+const BUFFER_ROUND: u64 = 256;
 
 /// `Params` of voxelize.wgsl. Bound as a read-only storage buffer, not a uniform buffer:
 /// lavapipe (Mesa 22.3) inlines uniform values into the shaders and recompiles the
@@ -105,6 +109,8 @@ pub struct GpuVoxelizer {
     resident: Option<Resident>,
     /// triangles per batch
     batch: usize,
+    /// most voxel slots per accumulation window (`MAX_WINDOW` but for tests)
+    max_window: u64,
     /// host copy of the batch being filled
     pending: Vec<Triangle>,
     /// leave out second passes that would draw nothing (see `may_defer`)
@@ -178,26 +184,26 @@ impl GpuVoxelizer {
         let bgl_compute = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("voxlod compute"),
             entries: &[
-                storage_entry(0, cs, true),
-                storage_entry(1, cs, true),
-                storage_entry(2, cs, false),
-                storage_entry(3, cs, false),
-                storage_entry(4, cs, false),
-                storage_entry(5, cs, false),
-                storage_entry(6, cs, false),
-                storage_entry(7, cs, false),
+                storage_entry(PARAMS, cs, true),
+                storage_entry(TRIS, cs, true),
+                storage_entry(OCC, cs, false),
+                storage_entry(DEFERRED, cs, false),
+                storage_entry(DRAW_ARGS, cs, false),
+                storage_entry(BASE, cs, false),
+                storage_entry(ACCUM, cs, false),
+                storage_entry(COUNTER, cs, false),
             ],
         });
         let bgl_raster = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("voxlod raster"),
             entries: &[
-                storage_entry(0, vfs, true),
-                storage_entry(1, fs, true),
-                storage_entry(2, fs, false),
-                storage_entry(3, vfs, true),
-                storage_entry(5, fs, true),
-                storage_entry(6, fs, false),
-                storage_entry(7, fs, false),
+                storage_entry(PARAMS, vfs, true),
+                storage_entry(TRIS, fs, true),
+                storage_entry(OCC, fs, false),
+                storage_entry(DEFERRED, vfs, true),
+                storage_entry(BASE, fs, true),
+                storage_entry(ACCUM, fs, false),
+                storage_entry(COUNTER, fs, false),
             ],
         });
         let layout = |bgl: &wgpu::BindGroupLayout| {
@@ -340,6 +346,7 @@ impl GpuVoxelizer {
             next: 0,
             resident: None,
             batch: BATCH,
+            max_window: MAX_WINDOW,
             pending: Vec::new(),
             skip_empty: true,
             split: (0, 0),
@@ -428,6 +435,15 @@ impl GpuVoxelizer {
         self.batch = n.clamp(1, BATCH);
     }
 
+    /// Caps the voxel slots accumulated per pass at `slots` (at least 1; at most the default,
+    /// 2^19): a chunk with more occupied voxels is accumulated in several windows, each
+    /// replaying the chunk. For tests, which reach several windows on small chunks with it;
+    /// the voxels do not depend on it.
+    #[doc(hidden)]
+    pub fn set_max_window(&mut self, slots: u64) {
+        self.max_window = slots.clamp(1, MAX_WINDOW);
+    }
+
     /// Whether the second pass (fragment or sweep) of a batch is left out when the host can
     /// tell, from the triangles' areas and extents, that the classification pass defers
     /// nothing (default on; the voxels do not depend on it). For benchmarks.
@@ -441,7 +457,7 @@ impl GpuVoxelizer {
         if b.size() >= size {
             return;
         }
-        let size = size.max(b.size() * 2).next_multiple_of(256);
+        let size = size.max(b.size() * 2).next_multiple_of(BUFFER_ROUND);
         *b = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("triangles"),
             size,
@@ -472,7 +488,7 @@ impl GpuVoxelizer {
         if b.size() >= size {
             return;
         }
-        let size = size.max(b.size() * 2).next_multiple_of(256);
+        let size = size.max(b.size() * 2).next_multiple_of(BUFFER_ROUND);
         *b = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some(label),
             size,
@@ -500,14 +516,14 @@ impl GpuVoxelizer {
                 label: Some("compute"),
                 layout: &self.bgl_compute,
                 entries: &[
-                    e(0, &self.params),
-                    e(1, tris),
-                    e(2, &self.occ),
-                    e(3, &self.deferred),
-                    e(4, args),
-                    e(5, &self.base),
-                    e(6, &self.accum),
-                    e(7, &self.counter),
+                    e(PARAMS, &self.params),
+                    e(TRIS, tris),
+                    e(OCC, &self.occ),
+                    e(DEFERRED, &self.deferred),
+                    e(DRAW_ARGS, args),
+                    e(BASE, &self.base),
+                    e(ACCUM, &self.accum),
+                    e(COUNTER, &self.counter),
                 ],
             })
         };
@@ -517,13 +533,13 @@ impl GpuVoxelizer {
             label: Some("raster"),
             layout: &self.bgl_raster,
             entries: &[
-                e(0, &self.params),
-                e(1, tris),
-                e(2, &self.occ),
-                e(3, &self.deferred),
-                e(5, &self.base),
-                e(6, &self.accum),
-                e(7, &self.counter),
+                e(PARAMS, &self.params),
+                e(TRIS, tris),
+                e(OCC, &self.occ),
+                e(DEFERRED, &self.deferred),
+                e(BASE, &self.base),
+                e(ACCUM, &self.accum),
+                e(COUNTER, &self.counter),
             ],
         });
         self.bind[slot] = Some((compute.clone(), raster.clone(), sweep.clone()));
@@ -688,7 +704,7 @@ impl GpuVoxelizer {
             .limits
             .max_storage_buffer_binding_size
             .min(self.gpu.limits.max_buffer_size);
-        let window = count.min(MAX_WINDOW).min(limit / SLOT_BYTES).max(1);
+        let window = count.min(self.max_window).min(limit / SLOT_BYTES).max(1);
         self.ensure(Which::Accum, window * SLOT_BYTES);
         self.ensure(Which::Staging, (window * SLOT_BYTES).max(2 * OCC_BYTES));
         // occupancy and slot bases, for decoding
@@ -928,10 +944,7 @@ impl GpuVoxelizer {
         };
         let params = Params {
             origin,
-            mode: match self.mode {
-                Mode::Conservative => 0,
-                Mode::Thin => 1,
-            },
+            mode: self.mode.code(),
             tri_count: len as u32,
             cutoff,
             phase,

@@ -119,57 +119,12 @@ impl OutputGuard {
         kind: OutputKind,
         force: bool,
     ) -> Result<OutputGuard> {
-        let shown = output.display();
-        if output.as_os_str().is_empty() {
-            bail!("the output path is empty");
-        }
-        if output.is_dir() || output.as_os_str().to_string_lossy().ends_with('/') {
-            let folder = output.to_string_lossy();
-            let folder = folder.trim_end_matches('/');
-            bail!(
-                "{shown} is a directory: name the output file, e.g. {folder}/out.{}",
-                ext(kind)
-            );
-        }
-        let dir = output_dir(output);
-        if !dir.is_dir() {
-            bail!(
-                "{shown}: the output's folder {} does not exist",
-                dir.display()
-            );
-        }
-        if let Ok(om) = std::fs::metadata(output) {
-            for input in inputs {
-                if let Ok(im) = std::fs::metadata(input) {
-                    if im.dev() == om.dev() && im.ino() == om.ino() {
-                        bail!(
-                            "{shown} is the input {}: choose another output file",
-                            input.display()
-                        );
-                    }
-                }
-            }
-            if !om.is_file() {
-                bail!("{shown} exists and is not a regular file: choose another output file");
-            }
-            if om.len() > 0 {
-                let mut head = [0u8; 16];
-                let n = File::open(output)
-                    .and_then(|mut f| read_head(&mut f, &mut head))
-                    .unwrap_or(0);
-                let head = &head[..n];
-                if OutputKind::of(head) != Some(kind) && !force {
-                    bail!(
-                        "{shown} exists and is {}, not {}: refusing to replace it (use --force to overwrite it)",
-                        describe(head),
-                        kind.name()
-                    );
-                }
-            }
-        }
+        let dir = check_path(output, kind)?;
+        check_existing(output, inputs, kind, force)?;
         let name = file_name(output);
         let lock_path = dir.join(format!(".voxlod-lock-{name}"));
         let lock = lock_file(&lock_path, output, dir)?;
+        // from here on the guard owns the lock: an error below drops it, removing the lock file
         let guard = OutputGuard {
             output: output.to_path_buf(),
             staged: dir.join(format!(
@@ -182,25 +137,8 @@ impl OutputGuard {
             lock_path,
             lock,
         };
-        if let Some(free) = crate::system::free_disk(dir) {
-            if free < MIN_OUTPUT_FREE {
-                bail!(
-                    "{shown}: the output's folder {} has only {} free (full disk?)",
-                    dir.display(),
-                    format_size(free)
-                );
-            }
-        }
-        // Leftovers of killed runs (their unique temporary names): nobody else writes them
-        // while we hold the lock.
-        let prefix = format!(".voxlod-part-{name}-");
-        if let Ok(entries) = std::fs::read_dir(dir) {
-            for e in entries.flatten() {
-                if e.file_name().to_string_lossy().starts_with(&prefix) {
-                    let _ = std::fs::remove_file(e.path());
-                }
-            }
-        }
+        check_free_space(output, dir)?;
+        remove_leftovers(dir, &name);
         Ok(guard)
     }
 
@@ -239,6 +177,95 @@ impl Drop for OutputGuard {
         // removed while still locked (the lock goes with the descriptor, closed after this)
         if same_inode(&self.lock, &self.lock_path) {
             let _ = std::fs::remove_file(&self.lock_path);
+        }
+    }
+}
+
+/// The output path names a file (not a directory) in an existing folder; returns the folder.
+fn check_path(output: &Path, kind: OutputKind) -> Result<&Path> {
+    let shown = output.display();
+    if output.as_os_str().is_empty() {
+        bail!("the output path is empty");
+    }
+    if output.is_dir() || output.as_os_str().to_string_lossy().ends_with('/') {
+        let folder = output.to_string_lossy();
+        let folder = folder.trim_end_matches('/');
+        bail!(
+            "{shown} is a directory: name the output file, e.g. {folder}/out.{}",
+            ext(kind)
+        );
+    }
+    let dir = output_dir(output);
+    if !dir.is_dir() {
+        bail!(
+            "{shown}: the output's folder {} does not exist",
+            dir.display()
+        );
+    }
+    Ok(dir)
+}
+
+/// An existing file at `output` is none of the `inputs` (same device and inode), is a regular
+/// file, and is empty or of `kind` unless `force`.
+fn check_existing(output: &Path, inputs: &[&Path], kind: OutputKind, force: bool) -> Result<()> {
+    let shown = output.display();
+    let Ok(om) = std::fs::metadata(output) else {
+        return Ok(());
+    };
+    for input in inputs {
+        if let Ok(im) = std::fs::metadata(input) {
+            if im.dev() == om.dev() && im.ino() == om.ino() {
+                bail!(
+                    "{shown} is the input {}: choose another output file",
+                    input.display()
+                );
+            }
+        }
+    }
+    if !om.is_file() {
+        bail!("{shown} exists and is not a regular file: choose another output file");
+    }
+    if om.len() > 0 {
+        let mut head = [0u8; 16];
+        let n = File::open(output)
+            .and_then(|mut f| read_head(&mut f, &mut head))
+            .unwrap_or(0);
+        let head = &head[..n];
+        if OutputKind::of(head) != Some(kind) && !force {
+            bail!(
+                "{shown} exists and is {}, not {}: refusing to replace it (use --force to overwrite it)",
+                describe(head),
+                kind.name()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The output's folder has at least [`MIN_OUTPUT_FREE`] free (when the system tells).
+fn check_free_space(output: &Path, dir: &Path) -> Result<()> {
+    if let Some(free) = crate::system::free_disk(dir) {
+        if free < MIN_OUTPUT_FREE {
+            bail!(
+                "{}: the output's folder {} has only {} free (full disk?)",
+                output.display(),
+                dir.display(),
+                format_size(free)
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Removes the leftovers of killed runs (their unique temporary names `.voxlod-part-NAME-…`):
+/// nobody else writes them while we hold the output's lock.
+fn remove_leftovers(dir: &Path, name: &str) {
+    let prefix = format!(".voxlod-part-{name}-");
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            if e.file_name().to_string_lossy().starts_with(&prefix) {
+                let _ = std::fs::remove_file(e.path());
+            }
         }
     }
 }

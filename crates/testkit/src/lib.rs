@@ -3,6 +3,8 @@
 //! * [`shared_meshes`]: where the real test meshes are (`../shared/data/meshes` beside the
 //!   clone), with the project's rule: missing means "skipped, and say so", except under
 //!   `CI=true`, where missing is a failure.
+//! * [`python_ready`]: whether python3 with numpy and zstandard (the Python reader's needs)
+//!   runs, with the same rule: missing is a skip elsewhere, a failure under `CI=true`.
 //! * [`Rng`]: a deterministic SplitMix64 generator (no dependency, same numbers on every
 //!   platform), with the draws the tests need (floats, ranges, integers, points, rotations).
 //! * [`mesh`]: made-up meshes (icosphere, cube, transforms) and a minimal PLY/OBJ reader
@@ -75,4 +77,26 @@ pub fn shared_mesh(test: &str, rel: &str) -> Option<PathBuf> {
         p.display()
     );
     Some(p)
+}
+
+/// True if `python3` with numpy and zstandard (what `scripts/voxlod_read.py` needs) runs.
+/// Otherwise prints "`test`: SKIPPED …" and returns false, or under CI (`CI=true`, which
+/// installs them) fails with a panic naming the test.
+pub fn python_ready(test: &str) -> bool {
+    let o = std::process::Command::new("python3")
+        .args(["-c", "import numpy, zstandard"])
+        .output();
+    let why = match o {
+        Ok(o) if o.status.success() => return true,
+        Ok(o) => String::from_utf8_lossy(&o.stderr).into_owned(),
+        Err(e) => e.to_string(),
+    };
+    if under_ci() {
+        panic!("{test}: CI=true but python3 with numpy and zstandard is not available: {why}");
+    }
+    eprintln!(
+        "{test}: SKIPPED: python3 with numpy and zstandard is not available \
+         (pip install numpy zstandard): {why}"
+    );
+    false
 }
