@@ -177,7 +177,7 @@ fn python_reader_matches_rust() {
 /// and as written, checks every payload, and refuses a flipped material byte.
 #[test]
 fn python_reader_reads_the_material_channel() {
-    if !python_ready() {
+    if !voxlod_testkit::python_ready("python_reader") {
         return;
     }
     use voxlod_format::voxel::{pack_color, pack_normal, Voxel};
