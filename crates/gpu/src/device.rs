@@ -19,6 +19,8 @@ pub struct Gpu {
     pub name: String,
     /// The adapter's description (name, backend, device type).
     pub info: wgpu::AdapterInfo,
+    /// The adapter (a window's surface asks it for its capabilities).
+    pub adapter: wgpu::Adapter,
     /// `SHADER_F64` was asked for and is enabled.
     pub f64: bool,
     /// A CPU-emulated device (lavapipe, llvmpipe, WARP).
@@ -93,7 +95,28 @@ pub(crate) fn open() -> Result<Gpu, GpuError> {
 /// features the adapter has and the adapter's own limits, and with uncaptured errors kept
 /// for [`Gpu::check`] instead of panicking.
 pub fn open_device(label: &str, wanted: wgpu::Features) -> Result<Gpu, GpuError> {
-    let adapter = find_adapter()?;
+    device_on(find_adapter()?, label, wanted)
+}
+
+/// [`open_device`] on an adapter of `instance` that can present to `surface` (a window).
+pub fn open_device_for_surface(
+    instance: &wgpu::Instance,
+    surface: &wgpu::Surface,
+    label: &str,
+    wanted: wgpu::Features,
+) -> Result<Gpu, GpuError> {
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        force_fallback_adapter: false,
+        compatible_surface: Some(surface),
+        ..Default::default()
+    }))
+    .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+    device_on(adapter, label, wanted)
+}
+
+/// The device on `adapter`: the `wanted` features it has, its own limits, errors captured.
+fn device_on(adapter: wgpu::Adapter, label: &str, wanted: wgpu::Features) -> Result<Gpu, GpuError> {
     let info = adapter.get_info();
     let name = adapter_name(&info);
     let features = wanted & adapter.features();
@@ -123,6 +146,7 @@ pub fn open_device(label: &str, wanted: wgpu::Features) -> Result<Gpu, GpuError>
         name,
         f64: features.contains(wgpu::Features::SHADER_F64),
         info: info.clone(),
+        adapter,
         software: info.device_type == wgpu::DeviceType::Cpu,
         limits,
         error,

@@ -55,22 +55,29 @@ impl std::fmt::Debug for Renderer {
     }
 }
 
+/// The renderer's error for a failure to open the device.
+pub(crate) fn gpu_error(e: voxlod_gpu::GpuError) -> RenderError {
+    match e {
+        voxlod_gpu::GpuError::NoAdapter(why) => RenderError::NoAdapter(why),
+        voxlod_gpu::GpuError::Device { adapter, reason } => RenderError::Gpu { adapter, reason },
+        other => RenderError::Gpu {
+            adapter: String::new(),
+            reason: other.to_string(),
+        },
+    }
+}
+
 impl Renderer {
     /// Finds an adapter (Vulkan first, then GL; `WGPU_BACKEND` overrides) and builds the
     /// pipeline.
     pub fn new() -> Result<Renderer, RenderError> {
-        let gpu = voxlod_gpu::open_device("voxlod-render", wgpu::Features::empty()).map_err(
-            |e| match e {
-                voxlod_gpu::GpuError::NoAdapter(why) => RenderError::NoAdapter(why),
-                voxlod_gpu::GpuError::Device { adapter, reason } => {
-                    RenderError::Gpu { adapter, reason }
-                }
-                other => RenderError::Gpu {
-                    adapter: String::new(),
-                    reason: other.to_string(),
-                },
-            },
-        )?;
+        Renderer::with_gpu(
+            voxlod_gpu::open_device("voxlod-render", wgpu::Features::empty()).map_err(gpu_error)?,
+        )
+    }
+
+    /// The pipeline on a device already open (e.g. one that presents to a window).
+    pub fn with_gpu(gpu: voxlod_gpu::Gpu) -> Result<Renderer, RenderError> {
         let name = format!("{} ({:?})", gpu.info.name, gpu.info.backend);
         let device = &gpu.device;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -226,6 +233,12 @@ impl Renderer {
             voxels,
             faces_drawn: faces.len() as u64,
         })
+    }
+
+    /// The device and adapter.
+    #[cfg(feature = "window")]
+    pub(crate) fn gpu(&self) -> &voxlod_gpu::Gpu {
+        &self.gpu
     }
 
     /// The device (for the viewer's face buffers).

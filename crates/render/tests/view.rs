@@ -98,7 +98,7 @@ fn fly_in_streams_within_its_budgets() {
         max_error_px: 1.0,
     };
     assert!(config.cache_bytes < total && config.upload_bytes_per_frame < largest);
-    let mut viewer = Viewer::new(&r, &renderer, config).unwrap();
+    let mut viewer = Viewer::new(&r, renderer, config).unwrap();
     // the shipped fly-in, then a rest at the close-up while the stream catches up
     let mut path = fly_in();
     path.keyframes.push(*path.keyframes.last().unwrap());
@@ -250,7 +250,7 @@ fn the_cut_matches_a_cpu_recomputation() {
     let path = fly_in();
     let mut viewer = Viewer::new(
         &r,
-        &renderer,
+        renderer,
         StreamConfig {
             cache_bytes: 1 << 30,
             upload_bytes_per_frame: 1 << 30,

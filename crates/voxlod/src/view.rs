@@ -16,8 +16,8 @@ Examples:
   voxlod view dragon.voxlod --fly configs/fly-in.json --frames frames/
   voxlod view dragon.voxlod --fly configs/fly-in.json --frames frames/ --cache-mib 16 --upload-kib-per-frame 512
   voxlod view dragon.voxlod                       # a window (orbit: drag; zoom: wheel; keys below)
-Window keys: left drag orbits, wheel or W/S moves in and out, A/D/Q/E orbit, R resets,
-[ and ] halve and double the pixel error, Esc quits.
+Window keys: left drag or A/D/Q/E orbit, wheel or W/S move in and out, arrow keys move the
+target, R resets, [ and ] halve and double the pixel error, Esc quits.
 Each headless frame prints one JSON line: frame, cut_nodes, cut_leaf_nodes, drawn_nodes,
 drawn_leaf_nodes, faces_drawn, nodes_resident, bytes_resident, cache_budget, bytes_uploaded,
 upload_limit, cache_hits, cache_misses, evictions, pending, starved, ... (bytes are bytes).";
@@ -48,6 +48,16 @@ pub struct ViewArgs {
     error: f64,
 }
 
+#[cfg(feature = "window")]
+fn interactive(reader: &Reader, config: StreamConfig, size: (u32, u32)) -> Result<()> {
+    Ok(voxlod_render::view::window::run(reader, config, size)?)
+}
+
+#[cfg(not(feature = "window"))]
+fn interactive(_: &Reader, _: StreamConfig, _: (u32, u32)) -> Result<()> {
+    bail!("this build of voxlod has no window (feature `window`); render a camera path with --fly PATH.json --frames DIR")
+}
+
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let bad = || format!("'{s}' is not WIDTHxHEIGHT (e.g. 800x600)");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
@@ -72,14 +82,12 @@ pub fn run(a: ViewArgs) -> Result<()> {
     };
     let reader = Reader::open(&a.file)?;
     let (Some(path), Some(dir)) = (a.fly, a.frames) else {
-        bail!(
-            "this build of voxlod has no window; render a camera path with --fly PATH.json --frames DIR"
-        );
+        return interactive(&reader, config, a.size);
     };
     let path = FlyPath::load(&path)?;
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let renderer = Renderer::new()?;
-    let mut viewer = Viewer::new(&reader, &renderer, config)?;
+    let mut viewer = Viewer::new(&reader, renderer, config)?;
     fly(&mut viewer, &path, a.size, &mut |i, frame| {
         frame
             .picture

@@ -1,9 +1,13 @@
 //! The streaming viewer behind `voxlod view`: a frame loop over a [`Stream`] (the node cache
 //! with its upload limit, after Chajdas et al. 2014, Figure 14) drawing with the [`Renderer`]'s
-//! voxel-face pipeline. The headless mode ([`fly`]) renders a [`FlyPath`] to pictures.
+//! voxel-face pipeline. The headless mode ([`fly`]) renders a [`FlyPath`] to pictures; the
+//! interactive window (`window` feature, [`window`]) runs the same [`Viewer::frame`] per
+//! redraw and copies the picture to the window.
 
 mod path;
 mod stream;
+#[cfg(feature = "window")]
+pub mod window;
 
 pub use path::{FlyPath, Keyframe};
 pub use stream::{FrameStats, Stream, StreamConfig};
@@ -19,7 +23,7 @@ use crate::{RenderError, Renderer};
 #[derive(Debug)]
 pub struct Viewer<'a> {
     reader: &'a Reader,
-    renderer: &'a Renderer,
+    renderer: Renderer,
     stream: Stream,
     bounds: Aabb,
 }
@@ -37,7 +41,7 @@ impl<'a> Viewer<'a> {
     /// A viewer of `reader` with an empty cache; fails for a file without voxels.
     pub fn new(
         reader: &'a Reader,
-        renderer: &'a Renderer,
+        renderer: Renderer,
         config: StreamConfig,
     ) -> Result<Viewer<'a>, RenderError> {
         let bounds = model_bounds(reader)
@@ -56,6 +60,16 @@ impl<'a> Viewer<'a> {
         self.bounds
     }
 
+    /// The renderer.
+    pub fn renderer(&self) -> &Renderer {
+        &self.renderer
+    }
+
+    /// Changes the pixel error the cut refines to (the cache is kept).
+    pub fn set_max_error(&mut self, px: f64) {
+        self.stream.set_max_error(px);
+    }
+
     /// The node cache.
     pub fn stream(&self) -> &Stream {
         &self.stream
@@ -63,7 +77,7 @@ impl<'a> Viewer<'a> {
 
     /// Streams and draws one frame for `shot`.
     pub fn frame(&mut self, shot: &Shot) -> Result<Frame, RenderError> {
-        let (mut stats, drawn) = self.stream.frame(self.reader, self.renderer, shot)?;
+        let (mut stats, drawn) = self.stream.frame(self.reader, &self.renderer, shot)?;
         let (batches, all, kept) = self.stream.batches(self.reader, shot, &drawn);
         stats.faces_resident_in_drawn = all;
         stats.faces_drawn = kept;

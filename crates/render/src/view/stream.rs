@@ -161,6 +161,13 @@ impl Stream {
         })
     }
 
+    /// Changes the pixel error of the cut (positive and finite, else ignored).
+    pub fn set_max_error(&mut self, px: f64) {
+        if px.is_finite() && px > 0.0 {
+            self.config.max_error_px = px;
+        }
+    }
+
     /// The point GPU coordinates are relative to.
     pub fn origin(&self) -> DVec3 {
         self.origin
