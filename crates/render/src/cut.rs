@@ -178,6 +178,26 @@ mod tests {
     }
 
     #[test]
+    fn off_axis_the_real_size_is_finer_than_the_distance_rule() {
+        // a voxel near the left edge of a wide picture: its view depth is well below its
+        // distance, so `Camera::error` (by distance) understates its size in pixels
+        let s = shot();
+        let b = Aabb {
+            min: [-15.5, -0.5, -0.5],
+            max: [-14.5, 0.5, 0.5],
+        };
+        let by_distance = s.error_camera().error(b, 1.0);
+        let real = voxel_pixels(&s, b, 1.0);
+        assert!(real > 1.5 * by_distance, "{real} vs {by_distance}");
+        // measured: the voxel's near face spans more pixels than the distance rule says
+        let (p, q) = (
+            s.project([-15.5, 0.0, 0.5]).unwrap(),
+            s.project([-14.5, 0.0, 0.5]).unwrap(),
+        );
+        assert!((q[0] - p[0]).abs() > by_distance);
+    }
+
+    #[test]
     fn frustum() {
         let s = shot();
         let at = |c: [f64; 3]| Aabb {
