@@ -1,6 +1,6 @@
 //! `voxlod`: the command-line tool. A thin layer over `voxlod-pipeline` (`build`),
 //! `voxlod-format` (`inspect`), `voxlod-check` (`verify`, `diff`) and `voxlod-render`
-//! (`render`, `export`); `gen` writes test meshes.
+//! (`render`, `export`, `view`); `gen` writes test meshes.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;

@@ -1,7 +1,7 @@
 //! The streaming viewer behind `voxlod view`: a frame loop over a [`Stream`] (the node cache
 //! with its upload limit, after Chajdas et al. 2014, Figure 14) drawing with the [`Renderer`]'s
 //! voxel-face pipeline. The headless mode ([`fly`]) renders a [`FlyPath`] to pictures; the
-//! interactive window (`window` feature, [`window`]) runs the same [`Viewer::frame`] per
+//! interactive window (`window` feature, module `window`) runs the same [`Viewer::frame`] per
 //! redraw and copies the picture to the window.
 
 mod path;
