@@ -13,7 +13,10 @@ fn view_flies_a_path_to_pngs_within_budgets() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("bunny.voxlod");
     let args = build_args(&sample(), &file, &["--resolution", "512"]);
-    ok(&voxlod(&args.iter().map(|s| s.as_str()).collect::<Vec<_>>(), dir.path()));
+    ok(&voxlod(
+        &args.iter().map(|s| s.as_str()).collect::<Vec<_>>(),
+        dir.path(),
+    ));
     let fly = Path::new(REPO).join("configs/fly-in.json");
     let frames = dir.path().join("frames");
     let o = voxlod(
@@ -46,13 +49,21 @@ fn view_flies_a_path_to_pngs_within_budgets() {
         assert_eq!(s["upload_limit"], 512 << 10);
         assert!(s["bytes_resident"].as_u64().unwrap() <= 4 << 20, "{s}");
         assert!(s["bytes_uploaded"].as_u64().unwrap() <= 512 << 10, "{s}");
-        for key in ["nodes_resident", "cache_hits", "cache_misses", "evictions", "cut_nodes"] {
+        for key in [
+            "nodes_resident",
+            "cache_hits",
+            "cache_misses",
+            "evictions",
+            "cut_nodes",
+        ] {
             assert!(s[key].is_u64(), "{key} in {s}");
         }
         assert!(frames.join(format!("frame_{i:05}.png")).is_file());
     }
     assert!(lines.last().unwrap()["drawn_nodes"].as_u64().unwrap() > 0);
-    let last = image::open(frames.join("frame_00023.png")).unwrap().to_rgb8();
+    let last = image::open(frames.join("frame_00023.png"))
+        .unwrap()
+        .to_rgb8();
     assert_eq!(last.dimensions(), (96, 72));
     let bg = voxlod_render_background();
     let model = last.pixels().filter(|p| p.0 != bg).count();
@@ -62,12 +73,22 @@ fn view_flies_a_path_to_pngs_within_budgets() {
     let bad = dir.path().join("bad.json");
     std::fs::write(&bad, r#"{"keyframes": [], "frames": 3}"#).unwrap();
     let o = voxlod(
-        &["view", file.to_str().unwrap(), "--fly", bad.to_str().unwrap(), "--frames", "f2"],
+        &[
+            "view",
+            file.to_str().unwrap(),
+            "--fly",
+            bad.to_str().unwrap(),
+            "--frames",
+            "f2",
+        ],
         dir.path(),
     );
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("bad.json") && err.contains("no keyframes"), "{err}");
+    assert!(
+        err.contains("bad.json") && err.contains("no keyframes"),
+        "{err}"
+    );
     assert!(!err.contains("panicked"), "{err}");
 }
 

@@ -31,7 +31,8 @@ pub struct ViewArgs {
     /// the model's bounding cube mapped to [-1,1]^3 (optional "up" and "fov" in degrees).
     #[arg(long, requires = "frames")]
     fly: Option<PathBuf>,
-    /// Folder for the frames of --fly (frame_00000.png, ...); created if missing.
+    /// Folder for the frames of --fly (frame_00000.png, ...; files of those names are
+    /// replaced); created if missing, but its parent folder must exist.
     #[arg(long, requires = "fly")]
     frames: Option<PathBuf>,
     /// Image (or window) size, WIDTHxHEIGHT.
@@ -85,7 +86,16 @@ pub fn run(a: ViewArgs) -> Result<()> {
         return interactive(&reader, config, a.size);
     };
     let path = FlyPath::load(&path)?;
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    // the folder itself may be new, its parent must exist (a typo in a path is an error, as
+    // for every output of voxlod)
+    if !dir.is_dir() {
+        std::fs::create_dir(&dir).with_context(|| {
+            format!(
+                "creating the frames folder {} (its parent folder must exist)",
+                dir.display()
+            )
+        })?;
+    }
     let renderer = Renderer::new()?;
     let mut viewer = Viewer::new(&reader, renderer, config)?;
     fly(&mut viewer, &path, a.size, &mut |i, frame| {
