@@ -90,6 +90,24 @@ fn view_flies_a_path_to_pngs_within_budgets() {
         "{err}"
     );
     assert!(!err.contains("panicked"), "{err}");
+
+    // a frames folder under a missing folder is not created
+    let deep = dir.path().join("missing/frames");
+    let o = voxlod(
+        &[
+            "view",
+            file.to_str().unwrap(),
+            "--fly",
+            fly.to_str().unwrap(),
+            "--frames",
+            deep.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("parent folder must exist"), "{err}");
+    assert!(!dir.path().join("missing").exists());
 }
 
 /// The renderer's clear colour (`voxlod_render::BACKGROUND`, light grey).
