@@ -1,7 +1,7 @@
 //! End-to-end tests of `voxlod build` / `voxlod inspect`: the binary on the bundled sample and
 //! on real meshes from `../shared/data/meshes`, checked against independent recomputations.
 //!
-//! One test binary (a single link), split by subject into modules: `cli`, `octree`, `resume`, `gpu`, `gen`;
+//! One test binary (a single link), split by subject into modules: `cli`, `octree`, `resume`, `gpu`, `gen`, `view`;
 //! the helpers shared by all of them are here.
 
 mod cli;
@@ -9,6 +9,7 @@ mod gen;
 mod gpu;
 mod octree;
 mod resume;
+mod view;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};

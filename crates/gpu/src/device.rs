@@ -1,19 +1,33 @@
 //! Finding an adapter and creating the device: Vulkan first (lavapipe on GPU-less machines),
-//! then GL; `WGPU_BACKEND` overrides. Validation errors are captured instead of panicking.
+//! then GL; `WGPU_BACKEND` overrides. Validation errors are captured instead of panicking
+//! (wgpu's default handler panics). The one device setup of the workspace: the voxelizer
+//! and `voxlod-render` (pictures and the streaming viewer) both open their device with
+//! [`open_device`]. Notes on wgpu 30 with lavapipe: `../shared/notes/wgpu-30-on-lavapipe.md`
+//! (the adapter's own limits are requested: wgpu's defaults cap buffers at 256 MiB).
 
 use std::sync::{Arc, Mutex};
 
 use crate::GpuError;
 
 /// A device with its queue and the first uncaptured error, if any.
-pub(crate) struct Gpu {
+pub struct Gpu {
+    /// The device.
     pub device: wgpu::Device,
+    /// Its queue.
     pub queue: wgpu::Queue,
+    /// Name, backend and driver of the adapter.
     pub name: String,
+    /// The adapter's description (name, backend, device type).
+    pub info: wgpu::AdapterInfo,
+    /// The adapter (a window's surface asks it for its capabilities).
+    pub adapter: wgpu::Adapter,
+    /// `SHADER_F64` was asked for and is enabled.
     pub f64: bool,
     /// A CPU-emulated device (lavapipe, llvmpipe, WARP).
     pub software: bool,
+    /// The limits the device was created with (the adapter's own).
     pub limits: wgpu::Limits,
+    /// The first error the device reported since the last [`Gpu::check`].
     pub error: Arc<Mutex<Option<String>>>,
 }
 
@@ -72,15 +86,43 @@ pub fn probe_adapter() -> Result<AdapterProbe, GpuError> {
     })
 }
 
+/// The voxelizer's device: `SHADER_F64` where the adapter has it.
 pub(crate) fn open() -> Result<Gpu, GpuError> {
-    let adapter = find_adapter()?;
+    open_device("voxlod-gpu", wgpu::Features::SHADER_F64)
+}
+
+/// Opens a device on the adapter [`probe_adapter`] names, with those of the `wanted`
+/// features the adapter has and the adapter's own limits, and with uncaptured errors kept
+/// for [`Gpu::check`] instead of panicking.
+pub fn open_device(label: &str, wanted: wgpu::Features) -> Result<Gpu, GpuError> {
+    device_on(find_adapter()?, label, wanted)
+}
+
+/// [`open_device`] on an adapter of `instance` that can present to `surface` (a window).
+pub fn open_device_for_surface(
+    instance: &wgpu::Instance,
+    surface: &wgpu::Surface,
+    label: &str,
+    wanted: wgpu::Features,
+) -> Result<Gpu, GpuError> {
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        power_preference: wgpu::PowerPreference::HighPerformance,
+        force_fallback_adapter: false,
+        compatible_surface: Some(surface),
+        ..Default::default()
+    }))
+    .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+    device_on(adapter, label, wanted)
+}
+
+/// The device on `adapter`: the `wanted` features it has, its own limits, errors captured.
+fn device_on(adapter: wgpu::Adapter, label: &str, wanted: wgpu::Features) -> Result<Gpu, GpuError> {
     let info = adapter.get_info();
     let name = adapter_name(&info);
-    let wanted = wgpu::Features::SHADER_F64;
     let features = wanted & adapter.features();
     let limits = adapter.limits();
     let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-        label: Some("voxlod-gpu"),
+        label: Some(label),
         required_features: features,
         required_limits: limits.clone(),
         experimental_features: wgpu::ExperimentalFeatures::disabled(),
@@ -103,6 +145,8 @@ pub(crate) fn open() -> Result<Gpu, GpuError> {
         queue,
         name,
         f64: features.contains(wgpu::Features::SHADER_F64),
+        info: info.clone(),
+        adapter,
         software: info.device_type == wgpu::DeviceType::Cpu,
         limits,
         error,

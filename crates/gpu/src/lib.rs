@@ -107,7 +107,7 @@ mod fallback;
 pub mod shaders;
 mod voxelizer;
 
-pub use device::{probe_adapter, AdapterProbe};
+pub use device::{open_device, open_device_for_surface, probe_adapter, AdapterProbe, Gpu};
 pub use shaders::Precision;
 pub use voxelizer::{Feed, GpuVoxelizer};
 

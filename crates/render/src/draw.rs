@@ -1,9 +1,12 @@
 //! Headless GPU rendering on wgpu (lavapipe on machines without a GPU): the selected nodes'
 //! active voxel faces as instances of a 6-vertex quad, depth-tested, 4× multisampled, drawn
 //! into an offscreen texture and read back. Only faces turned towards the eye are uploaded
-//! (back faces can never be seen), which halves the buffer.
+//! (back faces can never be seen), which halves the buffer. The device comes from
+//! `voxlod_gpu::open_device` (the workspace's one device setup); the streaming viewer
+//! (`crate::view`) draws its cached per-node face buffers with the same pipeline through
+//! [`Renderer::draw`].
 
-use std::sync::{Arc, Mutex};
+use std::ops::Range;
 
 use glam::DVec3;
 use voxlod_format::Reader;
@@ -22,22 +25,26 @@ pub const BACKGROUND: [u8; 3] = [236, 238, 242];
 /// One face instance as the vertex shader reads it (28 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct FaceInstance {
-    min_corner: [f32; 3],
-    edge: f32,
-    dir: u32,
-    normal: u32,
-    color: u32,
+pub(crate) struct FaceInstance {
+    pub min_corner: [f32; 3],
+    pub edge: f32,
+    pub dir: u32,
+    pub normal: u32,
+    pub color: u32,
 }
+
+/// Bytes of one [`FaceInstance`] in a vertex buffer.
+pub(crate) const FACE_BYTES: u64 = std::mem::size_of::<FaceInstance>() as u64;
+
+/// Instances `range` of a vertex buffer of [`FaceInstance`]s, to be drawn.
+pub(crate) type Batch<'a> = (&'a wgpu::Buffer, Range<u32>);
 
 /// A GPU device with the voxel-face pipeline, reusable for many pictures.
 pub struct Renderer {
-    device: wgpu::Device,
-    queue: wgpu::Queue,
+    gpu: voxlod_gpu::Gpu,
     pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
     adapter: String,
-    error: Arc<Mutex<Option<String>>>,
 }
 
 impl std::fmt::Debug for Renderer {
@@ -48,55 +55,31 @@ impl std::fmt::Debug for Renderer {
     }
 }
 
-fn request_adapter(backends: Option<wgpu::Backends>) -> Result<wgpu::Adapter, String> {
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-    if let Some(b) = backends {
-        desc.backends = b;
+/// The renderer's error for a failure to open the device.
+pub(crate) fn gpu_error(e: voxlod_gpu::GpuError) -> RenderError {
+    match e {
+        voxlod_gpu::GpuError::NoAdapter(why) => RenderError::NoAdapter(why),
+        voxlod_gpu::GpuError::Device { adapter, reason } => RenderError::Gpu { adapter, reason },
+        other => RenderError::Gpu {
+            adapter: String::new(),
+            reason: other.to_string(),
+        },
     }
-    let instance = wgpu::Instance::new(desc);
-    pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-        power_preference: wgpu::PowerPreference::HighPerformance,
-        force_fallback_adapter: false,
-        compatible_surface: None,
-        ..Default::default()
-    }))
-    .map_err(|e| e.to_string())
 }
 
 impl Renderer {
     /// Finds an adapter (Vulkan first, then GL; `WGPU_BACKEND` overrides) and builds the
     /// pipeline.
     pub fn new() -> Result<Renderer, RenderError> {
-        let adapter = if std::env::var_os("WGPU_BACKEND").is_some() {
-            request_adapter(None).map_err(RenderError::NoAdapter)?
-        } else {
-            match request_adapter(Some(wgpu::Backends::VULKAN)) {
-                Ok(a) => a,
-                Err(vk) => request_adapter(Some(wgpu::Backends::GL))
-                    .map_err(|gl| RenderError::NoAdapter(format!("Vulkan: {vk}; GL: {gl}")))?,
-            }
-        };
-        let info = adapter.get_info();
-        let name = format!("{} ({:?})", info.name, info.backend);
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("voxlod-render"),
-            required_features: wgpu::Features::empty(),
-            required_limits: adapter.limits(),
-            experimental_features: wgpu::ExperimentalFeatures::disabled(),
-            memory_hints: wgpu::MemoryHints::Performance,
-            trace: wgpu::Trace::Off,
-        }))
-        .map_err(|e| RenderError::Gpu {
-            adapter: name.clone(),
-            reason: e.to_string(),
-        })?;
-        let error = Arc::new(Mutex::new(None::<String>));
-        let sink = error.clone();
-        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
-            if let Ok(mut slot) = sink.lock() {
-                slot.get_or_insert_with(|| e.to_string());
-            }
-        }));
+        Renderer::with_gpu(
+            voxlod_gpu::open_device("voxlod-render", wgpu::Features::empty()).map_err(gpu_error)?,
+        )
+    }
+
+    /// The pipeline on a device already open (e.g. one that presents to a window).
+    pub fn with_gpu(gpu: voxlod_gpu::Gpu) -> Result<Renderer, RenderError> {
+        let name = format!("{} ({:?})", gpu.info.name, gpu.info.backend);
+        let device = &gpu.device;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("voxel faces"),
             source: wgpu::ShaderSource::Wgsl(include_str!("shader.wgsl").into()),
@@ -166,12 +149,10 @@ impl Renderer {
             cache: None,
         });
         let r = Renderer {
-            device,
-            queue,
+            gpu,
             pipeline,
             layout,
             adapter: name,
-            error,
         };
         r.check()?;
         Ok(r)
@@ -183,7 +164,7 @@ impl Renderer {
     }
 
     fn check(&self) -> Result<(), RenderError> {
-        match self.error.lock().ok().and_then(|mut s| s.take()) {
+        match self.gpu.error.lock().ok().and_then(|mut s| s.take()) {
             Some(reason) => Err(RenderError::Gpu {
                 adapter: self.adapter.clone(),
                 reason,
@@ -236,21 +217,68 @@ impl Renderer {
             })?;
             voxels += buf.len() as u64;
         }
-        let (w, h) = (shot.width, shot.height);
-        let max_dim = self.device.limits().max_texture_dimension_2d;
-        if w > max_dim || h > max_dim {
-            return Err(RenderError::Option(format!(
-                "image {w}x{h} exceeds the adapter's {max_dim} pixels per side"
-            )));
-        }
         let face_bytes = std::mem::size_of_val(faces.as_slice()) as u64;
-        if face_bytes > self.device.limits().max_buffer_size {
+        if face_bytes > self.gpu.device.limits().max_buffer_size {
             return Err(RenderError::Option(format!(
                 "{} faces ({face_bytes} bytes) exceed the adapter's largest buffer; draw a coarser level or a larger --error",
                 faces.len()
             )));
         }
+        use wgpu::util::DeviceExt;
+        let vbuf = (!faces.is_empty()).then(|| {
+            self.gpu
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("faces"),
+                    contents: bytemuck::cast_slice(&faces),
+                    usage: wgpu::BufferUsages::VERTEX,
+                })
+        });
+        let batches: Vec<Batch> = vbuf.iter().map(|b| (b, 0..faces.len() as u32)).collect();
+        let (w, h, rgba) = self.draw(shot, centre, &batches)?;
+        Ok(Picture {
+            width: w,
+            height: h,
+            rgba,
+            shot: *shot,
+            nodes: nodes.to_vec(),
+            voxels,
+            faces_drawn: faces.len() as u64,
+        })
+    }
 
+    /// The device and adapter.
+    #[cfg(feature = "window")]
+    pub(crate) fn gpu(&self) -> &voxlod_gpu::Gpu {
+        &self.gpu
+    }
+
+    /// The device (for the viewer's face buffers).
+    pub(crate) fn device(&self) -> &wgpu::Device {
+        &self.gpu.device
+    }
+
+    /// The queue (for the viewer's uploads).
+    pub(crate) fn queue(&self) -> &wgpu::Queue {
+        &self.gpu.queue
+    }
+
+    /// Draws `batches` of face instances (corners relative to `origin`) as seen by `shot`
+    /// into an offscreen picture and reads it back: width, height and RGBA rows.
+    pub(crate) fn draw(
+        &self,
+        shot: &Shot,
+        origin: DVec3,
+        batches: &[Batch],
+    ) -> Result<(u32, u32, Vec<u8>), RenderError> {
+        let centre = origin;
+        let (w, h) = (shot.width, shot.height);
+        let max_dim = self.gpu.device.limits().max_texture_dimension_2d;
+        if w > max_dim || h > max_dim {
+            return Err(RenderError::Option(format!(
+                "image {w}x{h} exceeds the adapter's {max_dim} pixels per side"
+            )));
+        }
         let view_proj = shot.view_proj(centre).as_mat4();
         // light from the upper left behind the eye, fixed relative to the camera
         let fwd = (shot.target - shot.eye).normalize();
@@ -264,35 +292,31 @@ impl Renderer {
 
         use wgpu::util::DeviceExt;
         let ubuf = self
+            .gpu
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("uniforms"),
                 contents: bytemuck::cast_slice(&uniforms),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-        let bind = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &self.layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: ubuf.as_entire_binding(),
-            }],
-        });
-        let vbuf = (!faces.is_empty()).then(|| {
-            self.device
-                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("faces"),
-                    contents: bytemuck::cast_slice(&faces),
-                    usage: wgpu::BufferUsages::VERTEX,
-                })
-        });
+        let bind = self
+            .gpu
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &self.layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: ubuf.as_entire_binding(),
+                }],
+            });
         let size = wgpu::Extent3d {
             width: w,
             height: h,
             depth_or_array_layers: 1,
         };
         let texture = |format, samples, usage| {
-            self.device.create_texture(&wgpu::TextureDescriptor {
+            self.gpu.device.create_texture(&wgpu::TextureDescriptor {
                 label: None,
                 size,
                 mip_level_count: 1,
@@ -324,7 +348,7 @@ impl Renderer {
             depth.create_view(&Default::default()),
         );
         let bg = BACKGROUND.map(|c| c as f64 / 255.0);
-        let mut enc = self.device.create_command_encoder(&Default::default());
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("voxel faces"),
@@ -352,16 +376,18 @@ impl Renderer {
                 }),
                 ..Default::default()
             });
-            if let Some(vbuf) = &vbuf {
+            if !batches.is_empty() {
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, &bind, &[]);
+            }
+            for (vbuf, range) in batches {
                 pass.set_vertex_buffer(0, vbuf.slice(..));
-                pass.draw(0..6, 0..faces.len() as u32);
+                pass.draw(0..6, range.clone());
             }
         }
         let row = (4 * w).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
             * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+        let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
             size: row as u64 * h as u64,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
@@ -384,7 +410,7 @@ impl Renderer {
             },
             size,
         );
-        self.queue.submit([enc.finish()]);
+        self.gpu.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, .., move |r| {
             let _ = tx.send(r);
@@ -393,7 +419,8 @@ impl Renderer {
             adapter: self.adapter.clone(),
             reason,
         };
-        self.device
+        self.gpu
+            .device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| gpu(e.to_string()))?;
         self.check()?;
@@ -411,14 +438,6 @@ impl Renderer {
             }
         }
         staging.unmap();
-        Ok(Picture {
-            width: w,
-            height: h,
-            rgba,
-            shot: *shot,
-            nodes: nodes.to_vec(),
-            voxels,
-            faces_drawn: faces.len() as u64,
-        })
+        Ok((w, h, rgba))
     }
 }

@@ -5,9 +5,12 @@
 //!   large meshes", WSCG 2014) does: each voxel a small cube of which only the faces in its
 //!   face mask are drawn, shaded with its normal under a directional light and its colour.
 //!   The nodes drawn are one level, or the screen-space error cut for the camera
-//!   ([`Lod`], `Reader::select_by_error`); the camera frames the bulk of the model's voxels
+//!   ([`Lod`], [`cut::select`]: the voxels' real size in pixels, frustum culled); the camera frames the bulk of the model's voxels
 //!   ([`robust_bounds`], so stray fragments do not shrink it) from a [`View`].
 //! - [`export_ply`] writes one level as a quad mesh (binary PLY with normals and colours).
+//! - [`view`] streams nodes by that same cut into a fixed GPU budget (least recently used
+//!   eviction, an upload limit per frame) and draws frames along a camera path (`voxlod view`),
+//!   or in a window with the `window` feature.
 //!
 //! ```
 //! use voxlod_format::voxel::{border_caps, face_mask, pack_color, pack_normal, Voxel};
@@ -33,11 +36,13 @@
 //! [`Renderer::new`], [`frame`] and [`Renderer::render`].
 
 mod camera;
+pub mod cut;
 mod draw;
 mod error;
 mod export;
 mod faces;
 mod picture;
+pub mod view;
 
 pub use camera::{model_bounds, robust_bounds, up_from_shape, Shot, View};
 pub use draw::{Renderer, BACKGROUND};
@@ -56,7 +61,7 @@ pub enum Lod {
     /// Every node of one level (0 = the finest).
     Level(u32),
     /// The screen-space error cut: refine while a node's voxels project to more than this
-    /// many pixels (`Reader::select_by_error`).
+    /// many pixels ([`cut::select`], the rule the viewer streams by).
     Error(f64),
 }
 
@@ -76,7 +81,10 @@ pub fn frame(reader: &Reader, view: &View, lod: Lod) -> Result<(Shot, Vec<usize>
                     "screen-space error {px} must be a positive number of pixels"
                 )));
             }
-            reader.select_by_error(&shot.error_camera(), px)
+            cut::select(reader, &shot, px)
+                .into_iter()
+                .map(|c| c.index)
+                .collect()
         }
     };
     Ok((shot, nodes))

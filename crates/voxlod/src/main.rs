@@ -1,6 +1,6 @@
 //! `voxlod`: the command-line tool. A thin layer over `voxlod-pipeline` (`build`),
 //! `voxlod-format` (`inspect`), `voxlod-check` (`verify`, `diff`) and `voxlod-render`
-//! (`render`, `export`); `gen` writes test meshes.
+//! (`render`, `export`, `view`); `gen` writes test meshes.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -18,6 +18,7 @@ mod inspect;
 mod json;
 mod render;
 mod verify;
+mod view;
 
 /// The sample mesh bundled with the tool (the npm `bunny` package's Stanford bunny, 3,674
 /// triangles, public domain), used when `build` is given no input.
@@ -60,6 +61,10 @@ enum Command {
     /// Write one level of an octree file as a quad mesh (binary PLY with normals and colours).
     #[command(after_help = EXAMPLES_EXPORT)]
     Export(export::ExportArgs),
+    /// Stream an octree file by screen-space error into a GPU cache and draw it: a camera
+    /// path to PNGs (--fly, headless) or a window.
+    #[command(after_help = view::EXAMPLES)]
+    View(view::ViewArgs),
     /// List and remove stale work folders of killed builds (`.voxlod-work-*`) in a folder.
     #[command(after_help = EXAMPLES_CLEAN)]
     Clean(clean::CleanArgs),
@@ -244,6 +249,7 @@ fn main() -> ExitCode {
         Command::Diff(a) => diff::run(a),
         Command::Render(a) => render::run(a),
         Command::Export(a) => export::run(a),
+        Command::View(a) => view::run(a),
         Command::Clean(a) => clean::run(a),
     };
     match r {
@@ -556,6 +562,7 @@ mod tests {
             EXAMPLES_RENDER,
             EXAMPLES_EXPORT,
             EXAMPLES_CLEAN,
+            view::EXAMPLES,
         ];
         // every subcommand shows examples (a new one without them fails here)
         for sub in Cli::command()

@@ -1,0 +1,112 @@
+//! `voxlod view FILE`: the streaming viewer of `voxlod-render` (`voxlod_render::view`).
+//! With `--fly PATH.json --frames DIR` it renders a camera path headless to PNGs and prints one
+//! JSON object of counters per frame; without `--fly` it opens a window.
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use voxlod_format::Reader;
+use voxlod_render::view::{fly, FlyPath, StreamConfig, Viewer};
+use voxlod_render::Renderer;
+
+/// Examples shown by `voxlod view --help`.
+pub const EXAMPLES: &str = "\
+Examples:
+  voxlod view dragon.voxlod --fly configs/fly-in.json --frames frames/
+  voxlod view dragon.voxlod --fly configs/fly-in.json --frames frames/ --cache-mib 16 --upload-kib-per-frame 512
+  voxlod view dragon.voxlod                       # a window (orbit: drag; zoom: wheel; keys below)
+Window keys: left drag or A/D/Q/E orbit, wheel or W/S move in and out, arrow keys move the
+target, R resets, [ and ] halve and double the pixel error, Esc quits.
+Each headless frame prints one JSON line: frame, cut_nodes, cut_leaf_nodes, drawn_nodes,
+drawn_leaf_nodes, faces_drawn, nodes_resident, bytes_resident, cache_budget, bytes_uploaded,
+upload_limit, cache_hits, cache_misses, evictions, pending, starved, ... (bytes are bytes).";
+
+#[derive(Args)]
+pub struct ViewArgs {
+    /// An octree file.
+    file: PathBuf,
+    /// Render this camera path headless instead of opening a window: JSON
+    /// {"keyframes": [{"eye": [x,y,z], "target": [x,y,z]}, ...], "frames": N}, coordinates in
+    /// the model's bounding cube mapped to [-1,1]^3 (optional "up" and "fov" in degrees).
+    #[arg(long, requires = "frames")]
+    fly: Option<PathBuf>,
+    /// Folder for the frames of --fly (frame_00000.png, ...; files of those names are
+    /// replaced); created if missing, but its parent folder must exist.
+    #[arg(long, requires = "fly")]
+    frames: Option<PathBuf>,
+    /// Image (or window) size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "800x600", value_parser = parse_size)]
+    size: (u32, u32),
+    /// GPU cache budget for node face buffers, MiB; least recently used nodes are evicted.
+    #[arg(long, default_value_t = 256.0)]
+    cache_mib: f64,
+    /// Most bytes uploaded to the GPU per frame, KiB (a larger node takes several frames).
+    #[arg(long, default_value_t = 4096.0)]
+    upload_kib_per_frame: f64,
+    /// Refine a node while its voxels project to more than this many pixels.
+    #[arg(long, default_value_t = 1.0)]
+    error: f64,
+}
+
+#[cfg(feature = "window")]
+fn interactive(reader: &Reader, config: StreamConfig, size: (u32, u32)) -> Result<()> {
+    Ok(voxlod_render::view::window::run(reader, config, size)?)
+}
+
+#[cfg(not(feature = "window"))]
+fn interactive(_: &Reader, _: StreamConfig, _: (u32, u32)) -> Result<()> {
+    bail!("this build of voxlod has no window (feature `window`); render a camera path with --fly PATH.json --frames DIR")
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("'{s}' is not WIDTHxHEIGHT (e.g. 800x600)");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let p = |v: &str| v.trim().parse::<u32>().map_err(|_| bad());
+    Ok((p(w)?, p(h)?))
+}
+
+/// Bytes of `amount` units of `unit` bytes, or an error naming the option.
+fn bytes(amount: f64, unit: f64, option: &str) -> Result<u64> {
+    let b = amount * unit;
+    if !(b.is_finite() && b >= 1.0 && b < 1e15) {
+        bail!("{option} {amount} must be a positive size");
+    }
+    Ok(b as u64)
+}
+
+pub fn run(a: ViewArgs) -> Result<()> {
+    let config = StreamConfig {
+        cache_bytes: bytes(a.cache_mib, 1048576.0, "--cache-mib")?,
+        upload_bytes_per_frame: bytes(a.upload_kib_per_frame, 1024.0, "--upload-kib-per-frame")?,
+        max_error_px: a.error,
+    };
+    let reader = Reader::open(&a.file)?;
+    let (Some(path), Some(dir)) = (a.fly, a.frames) else {
+        return interactive(&reader, config, a.size);
+    };
+    let path = FlyPath::load(&path)?;
+    // the folder itself may be new, its parent must exist (a typo in a path is an error, as
+    // for every output of voxlod)
+    if !dir.is_dir() {
+        std::fs::create_dir(&dir).with_context(|| {
+            format!(
+                "creating the frames folder {} (its parent folder must exist)",
+                dir.display()
+            )
+        })?;
+    }
+    let renderer = Renderer::new()?;
+    let mut viewer = Viewer::new(&reader, renderer, config)?;
+    fly(&mut viewer, &path, a.size, &mut |i, frame| {
+        frame
+            .picture
+            .write_png(&dir.join(format!("frame_{i:05}.png")))?;
+        println!(
+            "{}",
+            serde_json::to_string(&frame.stats).expect("plain numbers")
+        );
+        Ok(())
+    })?;
+    Ok(())
+}
