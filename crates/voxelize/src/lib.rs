@@ -150,6 +150,12 @@ pub use scanline::voxelize_triangle_with;
 use std::fmt;
 use std::str::FromStr;
 
+// The chunk edge is defined twice on purpose: by the mesh side (`voxlod_geom`, the grid the
+// voxelizer cuts triangles into) and by the file (`voxlod_format`, 8-bit positions in a node),
+// two crates that do not depend on each other. This crate turns one into the other, so it
+// holds them equal at compile time.
+const _: () = assert!(voxlod_geom::CHUNK == voxlod_format::CHUNK);
+
 /// Surface voxelization mode (Schwarz & Seidel 2010 separability).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
