@@ -90,6 +90,27 @@ pub fn transform(v: &[[f64; 3]], r: [[f64; 3]; 3], s: f64, t: [f64; 3]) -> Vec<[
         .collect()
 }
 
+/// The mesh's bounding cube: the lower corner of its bounding box and the box's largest edge.
+pub fn bounding_cube(v: &[[f64; 3]]) -> ([f64; 3], f64) {
+    let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
+    for p in v {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max))
+}
+
+/// The vertices fitted into a grid: the bounding cube scaled to `extent` voxels and shifted by
+/// `offset` voxels on every axis, rounded to f32 (`((p − lo) / size · extent + offset) as f32`).
+pub fn fit_to_grid(v: &[[f64; 3]], extent: f64, offset: f64) -> Vec<[f32; 3]> {
+    let (lo, size) = bounding_cube(v);
+    v.iter()
+        .map(|p| [0, 1, 2].map(|k| ((p[k] - lo[k]) / size * extent + offset) as f32))
+        .collect()
+}
+
 /// The triangles of an indexed mesh as vertex triples.
 pub fn triangles(m: &Indexed) -> Vec<[[f64; 3]; 3]> {
     m.1.iter().map(|f| f.map(|i| m.0[i as usize])).collect()

@@ -229,18 +229,7 @@ fn f32_sums_within_the_bound_on_the_npm_bunny() {
     let (v, f) = read_ply(&dir.join("npm-bunny/bunny.ply"));
     // into a 512³ grid, with vertex colours from the position and smooth-ish vertex normals
     // on every other triangle
-    let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
-    for p in &v {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let size = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
-    let g: Vec<[f32; 3]> = v
-        .iter()
-        .map(|p| [0, 1, 2].map(|k| ((p[k] - lo[k]) / size * 500.0 + 3.3) as f32))
-        .collect();
+    let g = voxlod_testkit::mesh::fit_to_grid(&v, 500.0, 3.3);
     let tris: Vec<Triangle> = f
         .iter()
         .enumerate()

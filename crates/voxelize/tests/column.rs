@@ -150,14 +150,7 @@ fn fast_chunk_voxelizer_gives_the_same_records_on_the_npm_bunny() {
     };
     let (v, f) = read_ply(&dir.join("npm-bunny/bunny.ply"));
     // fitted to a 1024³ grid; the chunk at the bunny's centre
-    let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
-    for p in &v {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let size = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+    let (lo, size) = voxlod_testkit::mesh::bounding_cube(&v);
     let s = 1023.0 / size;
     let tris: Vec<Triangle> = f
         .iter()

@@ -142,18 +142,7 @@ fn brute_force_on_the_npm_bunny() {
         return;
     };
     let (v, f) = read_ply(&dir.join("npm-bunny/bunny.ply"));
-    let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
-    for p in &v {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let size = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
-    let g: Vec<[f32; 3]> = v
-        .iter()
-        .map(|p| [0, 1, 2].map(|k| ((p[k] - lo[k]) / size * 250.0 + 2.7) as f32))
-        .collect();
+    let g = voxlod_testkit::mesh::fit_to_grid(&v, 250.0, 2.7);
     // materials by region: bands of the x coordinate of the first corner, and every 7th
     // triangle another material, so voxels see several
     let tris: Vec<Triangle> = f
