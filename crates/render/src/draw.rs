@@ -33,6 +33,21 @@ pub(crate) struct FaceInstance {
     pub color: u32,
 }
 
+impl FaceInstance {
+    /// The instance of a voxel face, its corner relative to `origin` (f32 keeps the precision
+    /// near the camera's subject, not near the world's origin).
+    pub(crate) fn of(f: &crate::faces::Face, origin: DVec3) -> Self {
+        let rel = DVec3::from(f.min) - origin;
+        FaceInstance {
+            min_corner: rel.as_vec3().into(),
+            edge: f.edge as f32,
+            dir: f.dir as u32,
+            normal: f.normal,
+            color: u32::from_le_bytes(f.rgba),
+        }
+    }
+}
+
 /// Bytes of one [`FaceInstance`] in a vertex buffer.
 pub(crate) const FACE_BYTES: u64 = std::mem::size_of::<FaceInstance>() as u64;
 
@@ -206,14 +221,7 @@ impl Renderer {
                 if side <= 0.0 {
                     return;
                 }
-                let rel = DVec3::from(f.min) - centre;
-                faces.push(FaceInstance {
-                    min_corner: rel.as_vec3().into(),
-                    edge: f.edge as f32,
-                    dir: f.dir as u32,
-                    normal: f.normal,
-                    color: u32::from_le_bytes(f.rgba),
-                });
+                faces.push(FaceInstance::of(&f, centre));
             })?;
             voxels += buf.len() as u64;
         }

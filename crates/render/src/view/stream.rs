@@ -478,14 +478,7 @@ impl Stream {
         let mut by_dir: [Vec<FaceInstance>; 6] = Default::default();
         let origin = self.origin;
         node_faces(reader, i, &mut self.voxels, &mut |f| {
-            let rel = DVec3::from(f.min) - origin;
-            by_dir[f.dir as usize].push(FaceInstance {
-                min_corner: rel.as_vec3().into(),
-                edge: f.edge as f32,
-                dir: f.dir as u32,
-                normal: f.normal,
-                color: u32::from_le_bytes(f.rgba),
-            });
+            by_dir[f.dir as usize].push(FaceInstance::of(&f, origin));
         })?;
         let mut data = Vec::new();
         let mut at = 0u32;
