@@ -169,6 +169,36 @@ fn block_world_materials() {
         .collect();
     assert_eq!(got, want);
 
+    // inspect lists the channel: its id, name, and payload bytes equal to the sum of the
+    // per-node material payloads read back; the one-material file lists none
+    let inspect = |f: &Path| -> serde_json::Value {
+        let o = Command::new(BIN)
+            .arg("inspect")
+            .arg(f)
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let payload: u64 = (0..r.nodes().len())
+        .map(|i| {
+            r.read_channel_payload(i, 1)
+                .unwrap()
+                .map_or(0, |p| p.len() as u64)
+        })
+        .sum();
+    assert!(payload > 0);
+    assert_eq!(
+        inspect(&out)["channels"],
+        serde_json::json!([{"id": 1, "name": "materials", "payload_bytes": payload}])
+    );
+    assert_eq!(inspect(&one)["channels"], serde_json::json!([]));
+    let o = Command::new(BIN).arg("inspect").arg(&out).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("channel 1    materials ("), "{text}");
+    assert!(text.contains(", 4 materials)"), "{text}");
+
     // render --color material on a file without the channel: a clear error, nothing written
     let png = dir.path().join("one.png");
     let o = Command::new(BIN)

@@ -381,6 +381,17 @@ impl Reader {
         self.channels.descriptors.iter().map(|d| d.id).collect()
     }
 
+    /// Compressed payload bytes of channel `id` summed over all nodes (0 if the file has no
+    /// such channel).
+    pub fn channel_payload_bytes(&self, id: u32) -> u64 {
+        self.channels.position(id).map_or(0, |k| {
+            self.channels.entries[k]
+                .iter()
+                .map(|c| c.payload_size)
+                .sum()
+        })
+    }
+
     /// True if the file has the per-voxel material channel.
     pub fn has_materials(&self) -> bool {
         self.channels.position(CHANNEL_MATERIAL).is_some()

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use serde::Serialize;
-use voxlod_format::Reader;
+use voxlod_format::{Reader, CHANNEL_MATERIAL};
 use voxlod_pipeline::format_size;
 
 #[derive(Serialize)]
@@ -13,6 +13,22 @@ struct LevelInfo {
     nodes: u64,
     voxels: u64,
     payload_bytes: u64,
+}
+
+#[derive(Serialize)]
+struct ChannelInfo {
+    id: u32,
+    name: &'static str,
+    payload_bytes: u64,
+}
+
+/// The name of an optional channel (FORMAT.md 14); ids this version does not read (id 2 is
+/// reserved for issue 15's source triangles, not written yet) are listed as "unknown".
+fn channel_name(id: u32) -> &'static str {
+    match id {
+        CHANNEL_MATERIAL => "materials",
+        _ => "unknown",
+    }
 }
 
 #[derive(Serialize)]
@@ -29,6 +45,7 @@ struct FileInfo {
     bytes: u64,
     bytes_per_voxel: f64,
     per_level: Vec<LevelInfo>,
+    channels: Vec<ChannelInfo>,
     manifest: serde_json::Value,
 }
 
@@ -74,6 +91,15 @@ fn gather(path: &Path) -> Result<FileInfo> {
             0.0
         },
         per_level,
+        channels: r
+            .channel_ids()
+            .into_iter()
+            .map(|id| ChannelInfo {
+                id,
+                name: channel_name(id),
+                payload_bytes: r.channel_payload_bytes(id),
+            })
+            .collect(),
         manifest: r.manifest()?,
     })
 }
@@ -111,6 +137,20 @@ pub fn run(path: &Path, json: bool) -> Result<()> {
         format_size(info.bytes),
         info.bytes_per_voxel
     );
+    for c in &info.channels {
+        let extra = match (c.id, info.manifest.get("materials")) {
+            (CHANNEL_MATERIAL, Some(serde_json::Value::Array(names))) => {
+                format!(", {} materials", names.len())
+            }
+            _ => String::new(),
+        };
+        println!(
+            "  channel {:<4} {} ({}{extra})",
+            c.id,
+            c.name,
+            format_size(c.payload_bytes)
+        );
+    }
     if let Some(s) = info.manifest.get("settings") {
         println!("  built with   {s}");
     }
