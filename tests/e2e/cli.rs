@@ -135,17 +135,9 @@ fn config_file_with_flag_overrides() {
     .unwrap();
     let out = d.join("o.voxlod");
     let run = |extra: &[&str]| {
-        let mut args = vec![
-            "build",
-            "-q",
-            sample().to_str().unwrap().to_owned().leak(),
-            "-o",
-            out.to_str().unwrap().to_owned().leak(),
-            "--config",
-            cfg.to_str().unwrap().to_owned().leak(),
-        ];
+        let mut args = vec!["--config", cfg.to_str().unwrap()];
         args.extend_from_slice(extra);
-        ok(&voxlod(&args, d));
+        build_ok(&sample(), &out, &args, d);
         let r = Reader::open(&out).unwrap();
         (r.header().resolution, r.header().mode)
     };
@@ -155,21 +147,12 @@ fn config_file_with_flag_overrides() {
     // the shipped presets parse
     for p in ["default", "preview", "scan"] {
         let path = Path::new(REPO).join(format!("configs/{p}.toml"));
-        let o = voxlod(
-            &[
-                "build",
-                "-q",
-                sample().to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-                "--config",
-                path.to_str().unwrap(),
-                "-r",
-                "256",
-            ],
+        build_ok(
+            &sample(),
+            &out,
+            &["--config", path.to_str().unwrap(), "-r", "256"],
             d,
         );
-        ok(&o);
     }
     std::fs::write(&cfg, "resolutoin = 512\n").unwrap();
     let o = voxlod(
