@@ -162,7 +162,8 @@ fn run(args: &[&str], cwd: &Path) -> Output {
         .args(args)
         .current_dir(cwd)
         .output()
-        .unwrap()
+        // says why: a spawn failure seen once (2026-12-02) printed no reason
+        .unwrap_or_else(|e| panic!("cannot run {BIN} {args:?} in {}: {e}", cwd.display()))
 }
 
 fn json_of(o: &Output) -> Value {
