@@ -51,6 +51,10 @@ const BRICK: usize = 512;
 ///
 /// `tests/attributes.rs` checks these bounds against sums of the f64 reference
 /// ([`crate::clipped_area`] and the barycentric interpolation of the crate docs).
+/// The top bit of [`Acc::k`]: the voxel's record words are already in the voxelizer's `words`
+/// (a voxel skipped by [`crate::single`], encoded once per triangle); its sums are not kept.
+const ENCODED: u32 = 1 << 31;
+
 #[derive(Clone, Copy, Debug)]
 struct Acc {
     s: [f32; 8],
@@ -354,34 +358,50 @@ impl ChunkVoxelizer {
             cols,
             textures,
             materials,
+            words,
             ..
         } = self;
         let textures = textures.as_deref();
         let skip = skip && *single_skip && textures.is_none();
         let o = origin.map(|c| c as i64);
         let acc = &mut slots.acc;
+        // the records of the skipped voxels, encoded once per triangle (`finish` encodes the rest)
+        words.clear();
+        if skip {
+            words.resize(acc.len(), [0; 2]);
+        }
         for (i, m) in marked.iter().enumerate() {
             let end = marked.get(i + 1).map_or(pairs.len(), |n| n.first as usize);
             let pairs = &pairs[m.first as usize..end];
             let t = &m.t;
             let mut mats = materials.as_mut().map(|ms| ms.set_triangle(t.material()));
-            let mut add = |acc: &mut [Acc], slot: u32, w: f32, x: [f32; 8]| {
-                acc[slot as usize].add(w, x);
-                if let Some(ms) = mats.as_deref_mut() {
-                    ms.add(slot as usize, w);
-                }
-            };
+            // one contribution: weight `w` and values `x` into the sums, or, for a voxel the
+            // skip leaves unclipped (weight 1), its record's words
+            let mut add =
+                |acc: &mut [Acc], slot: u32, w: f32, x: [f32; 8], rec: Option<[u32; 2]>| {
+                    match rec {
+                        Some(r) => {
+                            acc[slot as usize].k |= ENCODED;
+                            words[slot as usize] = r;
+                        }
+                        None => acc[slot as usize].add(w, x),
+                    }
+                    if let Some(ms) = mats.as_deref_mut() {
+                        ms.add(slot as usize, w);
+                    }
+                };
             if m.interior {
                 let (w, x) = interior_contribution(t, textures);
-                add(acc, pairs[0].slot, w, x);
+                add(acc, pairs[0].slot, w, x, None);
                 continue;
             }
             let flat = skip && single::is_flat(t);
             let xflat = flat.then(|| single::flat_values(t));
-            if let Some(x) = xflat {
+            let record = xflat.map(|x| (x, record_words(&x)));
+            if let Some((x, r)) = record {
                 if pairs.iter().all(|p| acc[p.slot as usize].k == 1) {
                     for p in pairs {
-                        add(acc, p.slot, 1.0, x);
+                        add(acc, p.slot, 1.0, x, Some(r));
                     }
                     continue;
                 }
@@ -392,8 +412,8 @@ impl ChunkVoxelizer {
             cols.set(&s);
             let mut column = u32::MAX;
             for p in pairs {
-                if let (Some(x), 1) = (xflat, acc[p.slot as usize].k) {
-                    add(acc, p.slot, 1.0, x);
+                if let (Some((x, r)), 1) = (record, acc[p.slot as usize].k) {
+                    add(acc, p.slot, 1.0, x, Some(r));
                     continue;
                 }
                 let [x, y, z] = [p.swz & 255, p.swz >> 8 & 255, p.swz >> 16];
@@ -410,7 +430,7 @@ impl ChunkVoxelizer {
                     (None, Some(x)) => x,
                     (None, None) => unreachable!("a triangle is flat or interpolated"),
                 };
-                add(acc, p.slot, w as f32, x);
+                add(acc, p.slot, w as f32, x, None);
             }
         }
     }
@@ -628,7 +648,8 @@ fn encode(pos: [u8; 3], a: &Acc, linear: bool) -> Voxel {
 const LANES: usize = 64;
 
 /// The normal and colour words of [`encode`] (plain colours, `linear == false`) for every
-/// accumulator of `acc`, in order, bit for bit, into `out` (cleared first).
+/// accumulator of `acc` not marked [`ENCODED`], in order, bit for bit, into `out` (resized to
+/// `acc.len()`; the words of marked accumulators are left as they are).
 ///
 /// The sums are transposed into batches of [`LANES`] voxels and each word is computed by a loop
 /// without branches, so that the compiler runs the square roots, divisions, roundings and
@@ -637,15 +658,18 @@ const LANES: usize = 64;
 /// garbage in its lane (NaN, saturating conversions) and is then replaced by 0, as
 /// [`pack_normal_f64`] returns.
 fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
-    out.clear();
-    out.reserve(acc.len());
+    out.resize(acc.len(), [0; 2]);
+    let todo: Vec<u32> = (0..acc.len() as u32)
+        .filter(|&i| acc[i as usize].k & ENCODED == 0)
+        .collect();
     let mut n = [[0f64; LANES]; 3];
     let mut w = [0f32; LANES];
     let mut c = [[0f32; LANES]; 4];
     let mut nw = [0u32; LANES];
     let mut cw = [0u32; LANES];
-    for batch in acc.chunks(LANES) {
-        for (i, a) in batch.iter().enumerate() {
+    for batch in todo.chunks(LANES) {
+        for (i, &j) in batch.iter().enumerate() {
+            let a = &acc[j as usize];
             for k in 0..3 {
                 n[k][i] = a.s[k] as f64;
             }
@@ -670,8 +694,25 @@ fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
             let q = |m: f32| (m * inv).round().clamp(0.0, 255.0) as u8 as u32;
             cw[i] = q(c[0][i]) | q(c[1][i]) << 8 | q(c[2][i]) << 16 | q(c[3][i]) << 24;
         }
-        out.extend((0..batch.len()).map(|i| [nw[i], cw[i]]));
+        for (i, &j) in batch.iter().enumerate() {
+            out[j as usize] = [nw[i], cw[i]];
+        }
     }
+}
+
+/// The normal and colour words of a voxel whose only contribution has values `x` and weight 1
+/// (what [`encode`] gives it; see [`crate::single`]).
+fn record_words(x: &[f32; 8]) -> [u32; 2] {
+    let v = encode(
+        [0; 3],
+        &Acc {
+            s: *x,
+            idx: 0,
+            k: 1,
+        },
+        false,
+    );
+    [v.normal, v.color]
 }
 
 #[cfg(test)]
@@ -716,6 +757,17 @@ mod tests {
         for (a, w) in accs.iter().zip(&words) {
             let v = encode([1, 2, 3], a, false);
             assert_eq!([v.normal, v.color], *w, "sums {:?}, k {}", a.s, a.k);
+        }
+        // accumulators marked ENCODED keep the words they have; the others are computed
+        let mut marked = vec![[7u32, 9]; accs.len()];
+        for (i, a) in accs.iter_mut().enumerate() {
+            if i % 3 == 0 {
+                a.k |= ENCODED;
+            }
+        }
+        encode_words(&accs, &mut marked);
+        for (i, (m, w)) in marked.iter().zip(&words).enumerate() {
+            assert_eq!(*m, if i % 3 == 0 { [7, 9] } else { *w });
         }
     }
 }
