@@ -21,6 +21,11 @@ use crate::overlap::{cross_f64, interior_voxel, to_f64, TriSetup};
 use crate::texcolor::{linear_color, TexAt};
 use crate::{scanline, single, Method, Mode};
 
+/// The most bytes of triangles and pairs a chunk keeps for its attribute pass
+/// ([`crate::single`]); a chunk with more clips every pair instead (a mesh with very many
+/// triangles per chunk, e.g. a fine scan at a coarse resolution).
+pub const DEFER_BYTES: usize = 32 << 20;
+
 /// Bricks of 8³ voxels per chunk, slots per brick.
 const BRICKS: usize = 32 * 32 * 32;
 const BRICK: usize = 512;
@@ -130,6 +135,13 @@ pub struct ChunkVoxelizer {
     pairs: Vec<Pair>,
     /// skip the clipping where it cannot change the record ([`Self::set_single_skip`])
     single_skip: bool,
+    /// this chunk's kept pairs and triangles outgrew [`DEFER_BYTES`]: the rest of the chunk is
+    /// accumulated batch by batch, every pair clipped
+    eager: bool,
+    /// [`DEFER_BYTES`] unless set for a test
+    defer_bytes: usize,
+    /// pairs given their triangle's record without clipping, since this voxelizer was made
+    unclipped: u64,
     /// the encoded normal and colour words of the accumulators ([`encode_words`]), reused by
     /// `finish`
     words: Vec<[u32; 2]>,
@@ -177,6 +189,9 @@ impl ChunkVoxelizer {
             marked: Vec::new(),
             pairs: Vec::new(),
             single_skip: true,
+            eager: false,
+            defer_bytes: DEFER_BYTES,
+            unclipped: 0,
             words: Vec::new(),
             skipped: 0,
             cols: Columns::idle(true),
@@ -248,6 +263,12 @@ impl ChunkVoxelizer {
         self.single_skip = on;
     }
 
+    /// For tests: the most bytes of triangles and pairs a chunk keeps for the skip
+    /// ([`DEFER_BYTES`] by default); past it the chunk clips every pair.
+    pub fn set_defer_bytes(&mut self, bytes: usize) {
+        self.defer_bytes = bytes;
+    }
+
     /// The voxelization mode.
     pub fn mode(&self) -> Mode {
         self.mode
@@ -268,6 +289,7 @@ impl ChunkVoxelizer {
         self.slots.clear();
         self.marked.clear();
         self.pairs.clear();
+        self.eager = false;
         if let Some(m) = &mut self.materials {
             m.clear();
         }
@@ -336,10 +358,16 @@ impl ChunkVoxelizer {
                 });
             }
         }
-        assert!(
-            self.pairs.len() <= u32::MAX as usize,
-            "more than 2³² (triangle, voxel) pairs in one chunk"
-        );
+        // memory stays bounded by the chunk's voxels, not its triangles: past the budget the
+        // chunk gives up the skip and clips every pair, accumulating each batch at once
+        let kept = self.marked.len() * std::mem::size_of::<Marked>()
+            + self.pairs.len() * std::mem::size_of::<Pair>();
+        self.eager |= kept > self.defer_bytes;
+        if self.eager {
+            self.accumulate(false);
+            self.marked.clear();
+            self.pairs.clear();
+        }
     }
 
     /// The attribute pass ([`crate::single`]): every marked triangle's contributions, in `add`
@@ -359,6 +387,7 @@ impl ChunkVoxelizer {
             textures,
             materials,
             words,
+            unclipped,
             ..
         } = self;
         let textures = textures.as_deref();
@@ -381,6 +410,7 @@ impl ChunkVoxelizer {
                 |acc: &mut [Acc], slot: u32, w: f32, x: [f32; 8], rec: Option<[u32; 2]>| {
                     match rec {
                         Some(r) => {
+                            *unclipped += 1;
                             acc[slot as usize].k |= ENCODED;
                             words[slot as usize] = r;
                         }
@@ -443,7 +473,7 @@ impl ChunkVoxelizer {
     /// sort: the voxels of the bricks before its brick (in Morton order) plus those before it
     /// in its brick.
     pub fn finish(&mut self) -> Vec<Voxel> {
-        self.accumulate(true);
+        self.accumulate(!self.eager);
         let mut out = vec![Voxel::default(); self.slots.acc.len()];
         // per accumulator (made in slot order: `ranked` passes it as `i`) its material
         let winners: Option<Vec<u32>> = self
@@ -529,6 +559,12 @@ impl ChunkVoxelizer {
             f(r as usize, i, pos, a);
         }
         self.reset();
+    }
+
+    /// (Triangle, voxel) pairs given their triangle's record without clipping
+    /// ([`crate::single`]) since this voxelizer was made.
+    pub fn unclipped(&self) -> u64 {
+        self.unclipped
     }
 
     /// Triangles skipped (zero area or non-finite) since this voxelizer was made.

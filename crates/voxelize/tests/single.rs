@@ -242,3 +242,35 @@ fn skip_changes_only_single_flat_voxels_on_the_bunnies() {
     eprintln!("Stanford bunny 256³: {c:?}");
     assert!(c.voxels > 100_000, "{c:?}");
 }
+
+/// Past the memory limit for kept triangles and pairs a chunk clips every pair: its records
+/// equal the reference's bit for bit, also when the limit is crossed in the middle of a batch
+/// and of the chunk; below it the skip's records.
+#[test]
+fn chunks_over_the_defer_limit_clip_every_pair() {
+    let mut rng = Rng(0xdef);
+    let tris: Vec<Triangle> = (0..600)
+        .map(|i| {
+            let t = random_triangle(&mut rng, i, 20.0).map(|p| p.map(|x| x + 10.0));
+            decorate(&mut rng, Triangle::new(f32tri(t)), i)
+        })
+        .collect();
+    for mode in Mode::ALL {
+        let r = run(&tris, [0; 3], mode, 50);
+        for limit in [0, 20_000, 200_000, usize::MAX] {
+            let mut cv = ChunkVoxelizer::new(mode);
+            cv.set_defer_bytes(limit);
+            cv.begin([0; 3]);
+            for b in tris.chunks(50) {
+                cv.add(b);
+            }
+            let got = cv.finish();
+            let want = if limit == usize::MAX {
+                &r.skip
+            } else {
+                &r.clip
+            };
+            assert!(got == *want, "{mode}, limit {limit}");
+        }
+    }
+}
