@@ -102,17 +102,11 @@ fn compare(r: &Run, owner: impl Fn([u8; 3]) -> Option<Triangle>, c: &mut Count) 
     }
 }
 
-/// Random vertex normals on every third triangle, random colours on every fourth, one colour
-/// on all three vertices on every fifth (flat, not the default colour).
-fn decorate(rng: &mut Rng, mut t: Triangle, i: usize) -> Triangle {
-    if i.is_multiple_of(3) {
-        t.flags |= TRI_HAS_NORMALS;
-        t.n = [0, 1, 2].map(|_| rng.point(-1.0, 1.0).map(|x| x as f32));
-    }
-    if i.is_multiple_of(4) {
-        t.flags |= TRI_HAS_COLORS;
-        t.c = [0, 1, 2].map(|_| [0, 1, 2, 3].map(|_| rng.int(0, 255) as u8));
-    } else if i.is_multiple_of(5) {
+/// [`with_attributes`] (vertex normals on every third triangle, random colours on every
+/// second), and one colour on all three vertices of every other fifth (flat, not the default).
+fn decorate(rng: &mut Rng, t: Triangle, i: usize) -> Triangle {
+    let mut t = with_attributes(rng, t, i);
+    if i % 10 == 5 {
         t.flags |= TRI_HAS_COLORS;
         t.c = [[rng.int(0, 255) as u8, 7, 200, 255]; 3];
     }
