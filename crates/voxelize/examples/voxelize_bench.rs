@@ -6,7 +6,8 @@
 //! (`-` keeps the icosphere). A fifth argument `fast` or `general` runs only that chunk path and
 //! skips the grid driver (for profiling). A sixth argument `sums` also counts, per mode, the
 //! voxels whose normal sum nearly cancels (`|N|/W < 1.06e-4·(K+2)`, where the f32 sums do not
-//! bound the normal to one step; see `chunk::Acc`).
+//! bound the normal to one step; see `chunk::Acc`), and the voxels with one contribution (whose
+//! records need no clipped area when the mesh's attributes are flat).
 //!
 //! Reports, per mode: the bare overlap test (`voxelize_triangle`, counting voxels), the full
 //! chunk voxelizer on one thread (overlap + clipping + attributes + encoding) with the fast paths
@@ -171,11 +172,20 @@ fn main() {
             }
             let mut cv = ChunkVoxelizer::new(mode);
             let (mut total, mut cancel) = (0u64, 0u64);
+            // voxels with one contribution, and (triangle, voxel) pairs in all and in voxels
+            // with two or more contributions (the ones whose records need clipped areas)
+            let (mut single, mut pairs, mut multi_pairs) = (0u64, 0u64, 0u64);
             for (k, ts) in &bins {
                 cv.begin(k.map(|x| x * CHUNK));
                 cv.add(ts);
                 for s in cv.finish_sums() {
                     total += 1;
+                    pairs += s.k as u64;
+                    if s.k == 1 {
+                        single += 1;
+                    } else {
+                        multi_pairs += s.k as u64;
+                    }
                     let n = s.n.map(|c| c as f64);
                     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
                     let w = if s.w > 0.0 { s.w as f64 } else { s.k as f64 };
@@ -183,6 +193,11 @@ fn main() {
                 }
             }
             println!("{mode:>12} near-cancelling normal sums: {cancel} of {total} voxels");
+            println!(
+                "{mode:>12} contributors: {single} of {total} voxels ({:.1} %) have one; {pairs} pairs, {multi_pairs} ({:.1} %) in voxels with two or more",
+                100.0 * single as f64 / total as f64,
+                100.0 * multi_pairs as f64 / pairs as f64
+            );
         }
         if outputs.len() < 2 {
             continue;

@@ -15,10 +15,16 @@ use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
 use voxlod_texture::{linear_to_srgb, TextureSet};
 
 use crate::column::Columns;
+use crate::interp::{unit_or, values, Interp};
 use crate::material::MaterialSums;
 use crate::overlap::{cross_f64, interior_voxel, to_f64, TriSetup};
 use crate::texcolor::{linear_color, TexAt};
-use crate::{scanline, Method, Mode};
+use crate::{scanline, single, Method, Mode};
+
+/// The most bytes of triangles and pairs a chunk keeps for its attribute pass
+/// ([`crate::single`]); a chunk with more clips every pair instead (a mesh with very many
+/// triangles per chunk, e.g. a fine scan at a coarse resolution).
+pub const DEFER_BYTES: usize = 32 << 20;
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
 const BRICKS: usize = 32 * 32 * 32;
@@ -50,6 +56,10 @@ const BRICK: usize = 512;
 ///
 /// `tests/attributes.rs` checks these bounds against sums of the f64 reference
 /// ([`crate::clipped_area`] and the barycentric interpolation of the crate docs).
+/// The top bit of [`Acc::k`]: the voxel's record words are already in the voxelizer's `words`
+/// (a voxel skipped by [`crate::single`], encoded once per triangle); its sums are not kept.
+const ENCODED: u32 = 1 << 31;
+
 #[derive(Clone, Copy, Debug)]
 struct Acc {
     s: [f32; 8],
@@ -59,25 +69,20 @@ struct Acc {
 }
 
 impl Acc {
-    /// The sums after one contribution of weight `w` and values `x` (`x[3] = 1`).
+    /// A voxel the marking pass found, with its first contribution counted and no sums yet.
     #[inline]
-    fn first(idx: u32, w: f32, x: [f32; 8]) -> Acc {
-        if w > 0.0 {
-            Acc {
-                s: x.map(|v| w * v),
-                idx,
-                k: 1,
-            }
-        } else {
-            let mut s = x;
-            s[3] = 0.0;
-            Acc { s, idx, k: 1 }
+    fn marked(idx: u32) -> Acc {
+        Acc {
+            s: [0.0; 8],
+            idx,
+            k: 1,
         }
     }
 
+    /// Adds one contribution of weight `w` and values `x` (`x[3] = 1`) to the sums (the
+    /// marking pass has counted it in `k` already).
     #[inline]
     fn add(&mut self, w: f32, x: [f32; 8]) {
-        self.k += 1;
         if self.s[3] > 0.0 {
             if w > 0.0 {
                 for (s, v) in self.s.iter_mut().zip(x) {
@@ -94,138 +99,6 @@ impl Acc {
             self.s[3] = 0.0;
         }
     }
-}
-
-/// Per-triangle attribute interpolation (see the crate docs): the barycentrics are affine in
-/// the point, and every interpolation point lies in the triangle's plane, so each attribute is
-/// an affine function of the point's swizzled `(x, y)`, the dominant projection:
-/// `a(q) = a₀ + g_x·(q_x − v0_x) + g_y·(q_y − v0_y)` with per-triangle gradients. This equals
-/// `Σ λ_k a_k` with the crate docs' barycentrics up to rounding (relative 1e-15 for a
-/// non-degenerate triangle: `|n_z| ≥ |n|/√3` on the dominant axis).
-struct Interp<'a> {
-    o: [f64; 2],
-    /// colours (r, g, b, a) at v0 and their gradients
-    c0: [f64; 4],
-    cx: [f64; 4],
-    cy: [f64; 4],
-    /// vertex normals (unswizzled) at v0 and their gradients, if the triangle has them
-    vn: Option<[[f64; 3]; 3]>,
-    /// unit face normal `n/|n|` (unswizzled, sign of the winding)
-    face: [f64; 3],
-    /// the swizzled `(x, y)` of the triangle's centroid (the point of an empty part)
-    centroid: [f64; 2],
-    /// a build with textures: colours in linear light ([`crate::texcolor`]), and this
-    /// triangle's texture if it has one
-    linear: bool,
-    tex: Option<TexAt<'a>>,
-}
-
-impl<'a> Interp<'a> {
-    fn new(t: &Triangle, s: &TriSetup, textures: Option<&'a TextureSet>) -> Interp<'a> {
-        let [p0, p1, p2] = s.v;
-        let e1 = [p1[0] - p0[0], p1[1] - p0[1]];
-        let e2 = [p2[0] - p0[0], p2[1] - p0[1]];
-        // the dominant projection's signed doubled area: never 0 for a triangle TriSetup took
-        let inv = 1.0 / (e1[0] * e2[1] - e1[1] * e2[0]);
-        // a(d) = a0 + (a1 − a0)·λ1 + (a2 − a0)·λ2, λ1 = (d×e2)_z/det, λ2 = (e1×d)_z/det
-        let grad = |a: [f64; 3]| {
-            let (d1, d2) = (a[1] - a[0], a[2] - a[0]);
-            (
-                (d1 * e2[1] - d2 * e1[1]) * inv,
-                (d2 * e1[0] - d1 * e2[0]) * inv,
-            )
-        };
-        let mut c0 = [0.0; 4];
-        let mut cx = [0.0; 4];
-        let mut cy = [0.0; 4];
-        for k in 0..4 {
-            let a = [0, 1, 2].map(|i| t.c[i][k] as f64);
-            c0[k] = a[0];
-            (cx[k], cy[k]) = grad(a);
-        }
-        let vn = (t.flags & TRI_HAS_NORMALS != 0).then(|| {
-            let (mut a0, mut gx, mut gy) = ([0.0; 3], [0.0; 3], [0.0; 3]);
-            for k in 0..3 {
-                let a = [0, 1, 2].map(|i| t.n[i][k] as f64);
-                a0[k] = a[0];
-                (gx[k], gy[k]) = grad(a);
-            }
-            [a0, gx, gy]
-        });
-        let n = cross_f64(&to_f64(&t.v));
-        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        let face = n.map(|c| c / len);
-        let centroid = [0, 1].map(|k| (p0[k] + p1[k] + p2[k]) / 3.0);
-        let tex = textures.and_then(|set| TexAt::new(t, set, grad, len));
-        Interp {
-            o: [p0[0], p0[1]],
-            c0,
-            cx,
-            cy,
-            vn,
-            face,
-            centroid,
-            linear: textures.is_some(),
-            tex,
-        }
-    }
-
-    /// The accumulated values `[n_x, n_y, n_z, 1, r, g, b, a]` at the swizzled point `(x, y)`
-    /// of a part of `w` voxel².
-    #[inline]
-    fn at(&self, x: f64, y: f64, w: f64) -> [f32; 8] {
-        let (dx, dy) = (x - self.o[0], y - self.o[1]);
-        let normal = match &self.vn {
-            Some([a, gx, gy]) => {
-                let m = [
-                    a[0] + gx[0] * dx + gy[0] * dy,
-                    a[1] + gx[1] * dx + gy[1] * dy,
-                    a[2] + gx[2] * dx + gy[2] * dy,
-                ];
-                unit_or(m, self.face)
-            }
-            None => self.face,
-        };
-        // written out: `[0, 1, 2, 3].map(..)` here compiled to a call (core's try_map, 2–3 %
-        // of a build's profile)
-        let (c0, cx, cy) = (&self.c0, &self.cx, &self.cy);
-        let mut c = [
-            c0[0] + cx[0] * dx + cy[0] * dy,
-            c0[1] + cx[1] * dx + cy[1] * dy,
-            c0[2] + cx[2] * dx + cy[2] * dy,
-            c0[3] + cx[3] * dx + cy[3] * dy,
-        ];
-        if self.linear {
-            c = linear_color(c, self.tex.as_ref().map(|t| t.sample(dx, dy, w)));
-        }
-        values(normal, c)
-    }
-}
-
-/// `m / |m|`, or `fallback` if that is zero or not finite.
-#[inline]
-fn unit_or(m: [f64; 3], fallback: [f64; 3]) -> [f64; 3] {
-    let len = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
-    if len > 0.0 && len.is_finite() {
-        let inv = 1.0 / len;
-        m.map(|c| c * inv)
-    } else {
-        fallback
-    }
-}
-
-#[inline]
-fn values(n: [f64; 3], c: [f64; 4]) -> [f32; 8] {
-    [
-        n[0] as f32,
-        n[1] as f32,
-        n[2] as f32,
-        1.0,
-        c[0] as f32,
-        c[1] as f32,
-        c[2] as f32,
-        c[3] as f32,
-    ]
 }
 
 /// The unencoded sums of one voxel ([`ChunkVoxelizer::finish_sums`]): position in the chunk,
@@ -246,17 +119,31 @@ pub struct VoxelSums {
 }
 
 /// Reusable per-thread chunk voxelizer; see the crate docs for the attribute rules.
+///
+/// Two passes per chunk ([`crate::single`]): [`add`](Self::add) only marks, i.e. finds each
+/// triangle's voxels, counts the contributions per voxel and keeps the (triangle, voxel) pairs;
+/// [`finish`](Self::finish) then computes the contributions in triangle order, clipping only
+/// where the record depends on the clipped areas.
 pub struct ChunkVoxelizer {
     mode: Mode,
     origin: [u32; 3],
-    /// block + 1 of each brick (`morton >> 9`), 0 = none yet
-    bricks: Vec<u32>,
-    /// per touched brick, slot + 1 of each voxel (`morton & 511`), 0 = empty
-    blocks: Vec<u32>,
-    /// per touched brick: its brick index and the occupancy bits of its 512 voxels
-    touched: Vec<(u32, [u64; 8])>,
-    acc: Vec<Acc>,
-    /// the encoded normal and colour words of `acc` ([`encode_words`]), reused by `finish`
+    /// the slot index and the accumulators
+    slots: Slots,
+    /// the triangles that mark voxels of this chunk, in `add` order
+    marked: Vec<Marked>,
+    /// their (triangle, voxel) pairs, triangle after triangle, each in scan order
+    pairs: Vec<Pair>,
+    /// skip the clipping where it cannot change the record ([`Self::set_single_skip`])
+    single_skip: bool,
+    /// this chunk's kept pairs and triangles outgrew [`DEFER_BYTES`]: the rest of the chunk is
+    /// accumulated batch by batch, every pair clipped
+    eager: bool,
+    /// [`DEFER_BYTES`] unless set for a test
+    defer_bytes: usize,
+    /// pairs given their triangle's record without clipping, since this voxelizer was made
+    unclipped: u64,
+    /// the encoded normal and colour words of the accumulators ([`encode_words`]), reused by
+    /// `finish`
     words: Vec<[u32; 2]>,
     skipped: u64,
     /// the column clipping state, reused from triangle to triangle
@@ -271,16 +158,40 @@ pub struct ChunkVoxelizer {
     finished_materials: Option<Vec<u32>>,
 }
 
+/// A triangle that marks voxels of the chunk: its pairs are `pairs[first..]` up to the next
+/// marked triangle's `first`; `interior`: it lies inside its one voxel's interior.
+struct Marked {
+    t: Triangle,
+    first: u32,
+    interior: bool,
+}
+
+/// One (triangle, voxel) pair: the voxel's accumulator slot, and its position in the chunk in
+/// the triangle's swizzled coordinates, `x | y << 8 | z << 16` (0 for an interior triangle).
+#[derive(Clone, Copy, Debug)]
+struct Pair {
+    slot: u32,
+    swz: u32,
+}
+
 impl ChunkVoxelizer {
     /// A voxelizer for `mode`.
     pub fn new(mode: Mode) -> Self {
         ChunkVoxelizer {
             mode,
             origin: [0; 3],
-            bricks: vec![0u32; BRICKS],
-            blocks: Vec::new(),
-            touched: Vec::new(),
-            acc: Vec::new(),
+            slots: Slots {
+                bricks: vec![0u32; BRICKS],
+                blocks: Vec::new(),
+                touched: Vec::new(),
+                acc: Vec::new(),
+            },
+            marked: Vec::new(),
+            pairs: Vec::new(),
+            single_skip: true,
+            eager: false,
+            defer_bytes: DEFER_BYTES,
+            unclipped: 0,
             words: Vec::new(),
             skipped: 0,
             cols: Columns::idle(true),
@@ -333,10 +244,29 @@ impl ChunkVoxelizer {
     }
 
     /// For tests and benchmarks: `false` computes every weight by the general clipping of
-    /// [`crate::clipped_area`] (bit-identical to it), `true` (the default) uses the closed forms
-    /// of [`crate::column`](mod@crate::column) where they apply (equal up to rounding).
+    /// [`crate::clipped_area`] (bit-identical to it) and clips every voxel (also
+    /// [`set_single_skip`](Self::set_single_skip)`(false)`), `true` (the default) uses the closed
+    /// forms of [`crate::column`](mod@crate::column) where they apply (equal up to rounding) and
+    /// skips the clipping where it cannot change the record.
     pub fn set_fast_paths(&mut self, on: bool) {
         self.cols = Columns::idle(on);
+        self.single_skip = on;
+    }
+
+    /// For tests and benchmarks: `false` clips every (triangle, voxel) pair, as the voxelizer
+    /// did before [`crate::single`] (the records of the present column method, bit for bit);
+    /// `true` (the default) gives a voxel with one contribution of a triangle with flat
+    /// attributes that triangle's normal and colour without clipping (records within one
+    /// quantization step of the clipped ones, and equal bit for bit wherever a voxel has two or
+    /// more contributions).
+    pub fn set_single_skip(&mut self, on: bool) {
+        self.single_skip = on;
+    }
+
+    /// For tests: the most bytes of triangles and pairs a chunk keeps for the skip
+    /// ([`DEFER_BYTES`] by default); past it the chunk clips every pair.
+    pub fn set_defer_bytes(&mut self, bytes: usize) {
+        self.defer_bytes = bytes;
     }
 
     /// The voxelization mode.
@@ -356,12 +286,10 @@ impl ChunkVoxelizer {
     }
 
     fn reset(&mut self) {
-        for &(b, _) in &self.touched {
-            self.bricks[b as usize] = 0;
-        }
-        self.touched.clear();
-        self.blocks.clear();
-        self.acc.clear();
+        self.slots.clear();
+        self.marked.clear();
+        self.pairs.clear();
+        self.eager = false;
         if let Some(m) = &mut self.materials {
             m.clear();
         }
@@ -369,16 +297,27 @@ impl ChunkVoxelizer {
 
     /// Add triangles in grid coordinates. Each is clipped to the chunk (voxel range clamped to
     /// `[origin, origin+255]`). Zero-area and non-finite triangles are skipped and counted.
+    ///
+    /// This is the marking pass: it finds the voxels and counts the contributions; the
+    /// attributes are computed by [`finish`](Self::finish), in the same triangle order.
     pub fn add(&mut self, tris: &[Triangle]) {
         let o = self.origin.map(|c| c as i64);
         let lo = o.map(|c| c.min(i32::MAX as i64) as i32);
         let hi = o.map(|c| (c + CHUNK as i64 - 1).min(i32::MAX as i64) as i32);
         for t in tris {
-            // a triangle inside one voxel's interior (most of a scan's): that voxel, the whole
-            // triangle's area and centroid, no overlap test, no clipping
+            // a triangle inside one voxel's interior (most of a scan's): that voxel, no overlap
+            // test; its contribution is the whole triangle ([`interior_contribution`])
             if self.mode == Mode::Conservative {
                 if let Some(p) = interior_voxel(&t.v) {
-                    if (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]) && self.add_interior(t, p) {
+                    if (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]) && face(t).is_some() {
+                        let local = [0, 1, 2].map(|k| (p[k] as i64 - o[k]) as u32);
+                        let slot = self.slots.mark(local);
+                        self.marked.push(Marked {
+                            t: *t,
+                            first: self.pairs.len() as u32,
+                            interior: true,
+                        });
+                        self.pairs.push(Pair { slot, swz: 0 });
                         continue;
                     }
                 }
@@ -392,87 +331,138 @@ impl ChunkVoxelizer {
             if (0..3).any(|k| s.bmax[k] < lo_s[k] || s.bmin[k] > hi_s[k]) {
                 continue;
             }
-            let ip = Interp::new(t, &s, self.textures.as_deref());
-            let cols = &mut self.cols;
-            cols.set(&s);
-            let mut sink = Sink {
-                bricks: &mut self.bricks,
-                blocks: &mut self.blocks,
-                touched: &mut self.touched,
-                acc: &mut self.acc,
-                mats: self
-                    .materials
-                    .as_mut()
-                    .map(|m| m.set_triangle(t.material())),
-            };
-            let each = |p: [i32; 3], first: bool| {
-                if first {
-                    // x and y one at a time: the scans store them one at a time, and the one
-                    // 8-byte load the compiler makes of both fails store-to-load forwarding
-                    // (≈ 2 % of the dragon's voxelize profile); black_box keeps them apart
-                    let x = std::hint::black_box(p[0]);
-                    cols.begin(x as f64, p[1] as f64);
-                }
-                let (w, c) = cols.voxel(p[2] as f64);
-                let q = match c {
-                    Some(c) => [c[0], c[1]],
-                    None => ip.centroid,
-                };
-                let x = ip.at(q[0], q[1], w);
+            let first = self.pairs.len();
+            let o_s = s.swizzle(o);
+            let (slots, pairs) = (&mut self.slots, &mut self.pairs);
+            let each = |p: [i32; 3], _first: bool| {
                 let g = s.unswizzle(p);
                 let local = [0, 1, 2].map(|k| (g[k] as i64 - o[k]) as u32);
                 debug_assert!(local.iter().all(|&c| c < CHUNK));
-                sink.add(local, w as f32, x);
+                let slot = slots.mark(local);
+                let l = [0, 1, 2].map(|k| (p[k] as i64 - o_s[k]) as u32);
+                pairs.push(Pair {
+                    slot,
+                    swz: l[0] | l[1] << 8 | l[2] << 16,
+                });
             };
             match self.method {
                 Method::Sat => s.scan(lo_s, hi_s, each),
                 Method::Scanline => scanline::scan(&s, lo_s, hi_s, each),
                 Method::ScanlineIlv => scanline::scan_ilv(&s, lo_s, hi_s, each),
             }
+            if self.pairs.len() > first {
+                self.marked.push(Marked {
+                    t: *t,
+                    first: first as u32,
+                    interior: false,
+                });
+            }
+        }
+        // memory stays bounded by the chunk's voxels, not its triangles: past the budget the
+        // chunk gives up the skip and clips every pair, accumulating each batch at once
+        let kept = self.marked.len() * std::mem::size_of::<Marked>()
+            + self.pairs.len() * std::mem::size_of::<Pair>();
+        self.eager |= kept > self.defer_bytes;
+        if self.eager {
+            self.accumulate(false);
+            self.marked.clear();
+            self.pairs.clear();
         }
     }
 
-    /// [`ChunkVoxelizer::add`] for a triangle inside the interior of voxel `p` (grid coordinates,
-    /// inside this chunk): the whole triangle, weight = its area `|n|/2`, interpolation point =
-    /// its centroid, where the barycentrics are all 1/3 (so the normal is the normalized sum of
-    /// the vertex normals and the colour the mean vertex colour); the same contribution as the
-    /// general path up to rounding. `false` (and nothing added) for a triangle that the general
-    /// path skips (zero or non-finite normal).
-    #[inline]
-    fn add_interior(&mut self, t: &Triangle, p: [i32; 3]) -> bool {
-        let n = cross_f64(&to_f64(&t.v));
-        let nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
-        if !(nn > 0.0 && nn.is_finite()) {
-            return false;
+    /// The attribute pass ([`crate::single`]): every marked triangle's contributions, in `add`
+    /// order, into the accumulators (and the material sums). With `skip` (and
+    /// [`set_single_skip`](Self::set_single_skip) on, no textures), a voxel whose only
+    /// contribution comes from a triangle with flat attributes gets weight 1 and that triangle's
+    /// values, without clipping; every other pair is clipped as before.
+    fn accumulate(&mut self, skip: bool) {
+        let ChunkVoxelizer {
+            mode,
+            origin,
+            slots,
+            marked,
+            pairs,
+            single_skip,
+            cols,
+            textures,
+            materials,
+            words,
+            unclipped,
+            ..
+        } = self;
+        let textures = textures.as_deref();
+        let skip = skip && *single_skip && textures.is_none();
+        let o = origin.map(|c| c as i64);
+        let acc = &mut slots.acc;
+        // the records of the skipped voxels, encoded once per triangle (`finish` encodes the rest)
+        words.clear();
+        if skip {
+            words.resize(acc.len(), [0; 2]);
         }
-        let len = nn.sqrt();
-        let inv = 1.0 / len;
-        let face = n.map(|c| c * inv);
-        let normal = if t.flags & TRI_HAS_NORMALS != 0 {
-            let m = [0, 1, 2].map(|k| t.n[0][k] as f64 + t.n[1][k] as f64 + t.n[2][k] as f64);
-            unit_or(m, face)
-        } else {
-            face
-        };
-        let mut c = [0, 1, 2, 3]
-            .map(|k| (t.c[0][k] as u32 + t.c[1][k] as u32 + t.c[2][k] as u32) as f64 / 3.0);
-        if let Some(set) = self.textures.as_deref() {
-            c = linear_color(c, TexAt::centroid(t, set, len));
+        for (i, m) in marked.iter().enumerate() {
+            let end = marked.get(i + 1).map_or(pairs.len(), |n| n.first as usize);
+            let pairs = &pairs[m.first as usize..end];
+            let t = &m.t;
+            let mut mats = materials.as_mut().map(|ms| ms.set_triangle(t.material()));
+            // one contribution: weight `w` and values `x` into the sums, or, for a voxel the
+            // skip leaves unclipped (weight 1), its record's words
+            let mut add =
+                |acc: &mut [Acc], slot: u32, w: f32, x: [f32; 8], rec: Option<[u32; 2]>| {
+                    match rec {
+                        Some(r) => {
+                            *unclipped += 1;
+                            acc[slot as usize].k |= ENCODED;
+                            words[slot as usize] = r;
+                        }
+                        None => acc[slot as usize].add(w, x),
+                    }
+                    if let Some(ms) = mats.as_deref_mut() {
+                        ms.add(slot as usize, w);
+                    }
+                };
+            if m.interior {
+                let (w, x) = interior_contribution(t, textures);
+                add(acc, pairs[0].slot, w, x, None);
+                continue;
+            }
+            let flat = skip && single::is_flat(t);
+            let xflat = flat.then(|| single::flat_values(t));
+            let record = xflat.map(|x| (x, record_words(&x)));
+            if let Some((x, r)) = record {
+                if pairs.iter().all(|p| acc[p.slot as usize].k == 1) {
+                    for p in pairs {
+                        add(acc, p.slot, 1.0, x, Some(r));
+                    }
+                    continue;
+                }
+            }
+            let s = TriSetup::new(&t.v, *mode).expect("a marked triangle has a setup");
+            let o_s = s.swizzle(o);
+            let ip = xflat.is_none().then(|| Interp::new(t, &s, textures));
+            cols.set(&s);
+            let mut column = u32::MAX;
+            for p in pairs {
+                if let (Some((x, r)), 1) = (record, acc[p.slot as usize].k) {
+                    add(acc, p.slot, 1.0, x, Some(r));
+                    continue;
+                }
+                let [x, y, z] = [p.swz & 255, p.swz >> 8 & 255, p.swz >> 16];
+                if p.swz & 0xffff != column {
+                    column = p.swz & 0xffff;
+                    cols.begin((x as i64 + o_s[0]) as f64, (y as i64 + o_s[1]) as f64);
+                }
+                let (w, c) = cols.voxel((z as i64 + o_s[2]) as f64);
+                let x = match (&ip, xflat) {
+                    (Some(ip), _) => {
+                        let q = c.map_or(ip.centroid, |c| [c[0], c[1]]);
+                        ip.at(q[0], q[1], w)
+                    }
+                    (None, Some(x)) => x,
+                    (None, None) => unreachable!("a triangle is flat or interpolated"),
+                };
+                add(acc, p.slot, w as f32, x, None);
+            }
         }
-        let local = [0, 1, 2].map(|k| (p[k] as i64 - self.origin[k] as i64) as u32);
-        debug_assert!(local.iter().all(|&c| c < CHUNK));
-        Sink {
-            bricks: &mut self.bricks,
-            blocks: &mut self.blocks,
-            touched: &mut self.touched,
-            acc: &mut self.acc,
-            mats: self
-                .materials
-                .as_mut()
-                .map(|m| m.set_triangle(t.material())),
-        }
-        .add(local, (0.5 * len) as f32, values(normal, c));
-        true
     }
 
     /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
@@ -483,7 +473,8 @@ impl ChunkVoxelizer {
     /// sort: the voxels of the bricks before its brick (in Morton order) plus those before it
     /// in its brick.
     pub fn finish(&mut self) -> Vec<Voxel> {
-        let mut out = vec![Voxel::default(); self.acc.len()];
+        self.accumulate(!self.eager);
+        let mut out = vec![Voxel::default(); self.slots.acc.len()];
         // per accumulator (made in slot order: `ranked` passes it as `i`) its material
         let winners: Option<Vec<u32>> = self
             .materials
@@ -499,7 +490,7 @@ impl ChunkVoxelizer {
             });
         } else {
             let mut words = std::mem::take(&mut self.words);
-            encode_words(&self.acc, &mut words);
+            encode_words(&self.slots.acc, &mut words);
             self.ranked(|r, i, pos, _| {
                 let [normal, color] = words[i];
                 let mask = face_mask(normal) | border_caps(pos);
@@ -516,8 +507,10 @@ impl ChunkVoxelizer {
 
     /// [`ChunkVoxelizer::finish`] without the encoding: the sums of each voxel, in the same
     /// order (for tests of the accumulation against an exact reference, and diagnostics).
+    /// Every pair is clipped here (no [`crate::single`] skip): `w` is the summed clipped area.
     pub fn finish_sums(&mut self) -> Vec<VoxelSums> {
-        let mut out = vec![VoxelSums::default(); self.acc.len()];
+        self.accumulate(false);
+        let mut out = vec![VoxelSums::default(); self.slots.acc.len()];
         self.ranked(|r, _, pos, a| {
             out[r] = VoxelSums {
                 pos,
@@ -534,33 +527,44 @@ impl ChunkVoxelizer {
     /// (`index`), with its rank in Morton order; then resets.
     #[inline]
     fn ranked(&mut self, mut f: impl FnMut(usize, usize, [u8; 3], &Acc)) {
-        let mut order: Vec<(u32, u32)> = self
-            .touched
+        let Slots {
+            bricks,
+            touched,
+            acc,
+            ..
+        } = &self.slots;
+        let mut order: Vec<(u32, u32)> = touched
             .iter()
             .enumerate()
             .map(|(i, &(b, _))| (b, i as u32))
             .collect();
         order.sort_unstable();
         // rank of the first voxel of each occupancy word of each touched brick
-        let mut first = vec![[0u32; 8]; self.touched.len()];
+        let mut first = vec![[0u32; 8]; touched.len()];
         let mut rank = 0u32;
         for &(_, i) in &order {
-            let occ = &self.touched[i as usize].1;
+            let occ = &touched[i as usize].1;
             for (f, w) in first[i as usize].iter_mut().zip(occ) {
                 *f = rank;
                 rank += w.count_ones();
             }
         }
-        debug_assert_eq!(rank as usize, self.acc.len());
-        for (i, a) in self.acc.iter().enumerate() {
-            let b = self.bricks[(a.idx >> 9) as usize] as usize - 1;
+        debug_assert_eq!(rank as usize, acc.len());
+        for (i, a) in acc.iter().enumerate() {
+            let b = bricks[(a.idx >> 9) as usize] as usize - 1;
             let v = a.idx as usize & (BRICK - 1);
-            let below = self.touched[b].1[v >> 6] & ((1u64 << (v & 63)) - 1);
+            let below = touched[b].1[v >> 6] & ((1u64 << (v & 63)) - 1);
             let r = first[b][v >> 6] + below.count_ones();
             let pos = demorton3(a.idx as u64).map(|c| c as u8);
             f(r as usize, i, pos, a);
         }
         self.reset();
+    }
+
+    /// (Triangle, voxel) pairs given their triangle's record without clipping
+    /// ([`crate::single`]) since this voxelizer was made.
+    pub fn unclipped(&self) -> u64 {
+        self.unclipped
     }
 
     /// Triangles skipped (zero area or non-finite) since this voxelizer was made.
@@ -569,21 +573,33 @@ impl ChunkVoxelizer {
     }
 }
 
-/// The slot index and accumulators, borrowed apart from the column state.
-struct Sink<'a> {
-    bricks: &'a mut [u32],
-    blocks: &'a mut Vec<u32>,
-    touched: &'a mut Vec<(u32, [u64; 8])>,
-    acc: &'a mut Vec<Acc>,
-    /// the material hook: weights per voxel slot, if the mesh has materials
-    mats: Option<&'a mut MaterialSums>,
+/// The slot index and the accumulators.
+struct Slots {
+    /// block + 1 of each brick (`morton >> 9`), 0 = none yet
+    bricks: Vec<u32>,
+    /// per touched brick, slot + 1 of each voxel (`morton & 511`), 0 = empty
+    blocks: Vec<u32>,
+    /// per touched brick: its brick index and the occupancy bits of its 512 voxels
+    touched: Vec<(u32, [u64; 8])>,
+    /// per occupied voxel, in the order of first touch
+    acc: Vec<Acc>,
 }
 
-impl Sink<'_> {
-    /// Adds one contribution to the voxel at in-chunk position `local`, making its slot (and
-    /// its brick's block of slots) on first touch.
+impl Slots {
+    /// Forgets every voxel (a new chunk); keeps the allocations.
+    fn clear(&mut self) {
+        for &(b, _) in &self.touched {
+            self.bricks[b as usize] = 0;
+        }
+        self.touched.clear();
+        self.blocks.clear();
+        self.acc.clear();
+    }
+
+    /// Counts one contribution to the voxel at in-chunk position `local` and returns its slot,
+    /// making the slot (and its brick's block of slots) on first touch.
     #[inline]
-    fn add(&mut self, local: [u32; 3], w: f32, x: [f32; 8]) {
+    fn mark(&mut self, local: [u32; 3]) -> u32 {
         let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
         let bi = (idx >> 9) as usize;
         let mut b = self.bricks[bi] as usize;
@@ -596,16 +612,50 @@ impl Sink<'_> {
         let v = idx as usize & (BRICK - 1);
         let sl = &mut self.blocks[(b - 1) * BRICK + v];
         if *sl == 0 {
-            self.acc.push(Acc::first(idx, w, x));
+            self.acc.push(Acc::marked(idx));
             *sl = self.acc.len() as u32;
             self.touched[b - 1].1[v >> 6] |= 1 << (v & 63);
         } else {
-            self.acc[*sl as usize - 1].add(w, x);
+            self.acc[*sl as usize - 1].k += 1;
         }
-        if let Some(m) = self.mats.as_deref_mut() {
-            m.add(*sl as usize - 1, w);
-        }
+        *sl - 1
     }
+}
+
+/// The unit face normal `n/|n|` of `t` and `|n|` (twice its area), in f64; `None` for a zero
+/// or non-finite normal (a triangle the voxelizer skips).
+#[inline]
+fn face(t: &Triangle) -> Option<([f64; 3], f64)> {
+    let n = cross_f64(&to_f64(&t.v));
+    let nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+    if !(nn > 0.0 && nn.is_finite()) {
+        return None;
+    }
+    let len = nn.sqrt();
+    let inv = 1.0 / len;
+    Some((n.map(|c| c * inv), len))
+}
+
+/// The contribution of a triangle inside the interior of one voxel (marked by
+/// [`ChunkVoxelizer::add`] only if [`face`] is `Some`): the whole triangle, weight = its area
+/// `|n|/2`, interpolation point = its centroid, where the barycentrics are all 1/3 (so the
+/// normal is the normalized sum of the vertex normals and the colour the mean vertex colour);
+/// the same contribution as the general path up to rounding.
+#[inline]
+fn interior_contribution(t: &Triangle, textures: Option<&TextureSet>) -> (f32, [f32; 8]) {
+    let (face, len) = face(t).expect("an interior triangle has a normal");
+    let normal = if t.flags & TRI_HAS_NORMALS != 0 {
+        let m = [0, 1, 2].map(|k| t.n[0][k] as f64 + t.n[1][k] as f64 + t.n[2][k] as f64);
+        unit_or(m, face)
+    } else {
+        face
+    };
+    let mut c =
+        [0, 1, 2, 3].map(|k| (t.c[0][k] as u32 + t.c[1][k] as u32 + t.c[2][k] as u32) as f64 / 3.0);
+    if let Some(set) = textures {
+        c = linear_color(c, TexAt::centroid(t, set, len));
+    }
+    ((0.5 * len) as f32, values(normal, c))
 }
 
 /// The voxel record of an accumulator: area-weighted means, or unweighted means if `Σ w = 0`;
@@ -634,7 +684,8 @@ fn encode(pos: [u8; 3], a: &Acc, linear: bool) -> Voxel {
 const LANES: usize = 64;
 
 /// The normal and colour words of [`encode`] (plain colours, `linear == false`) for every
-/// accumulator of `acc`, in order, bit for bit, into `out` (cleared first).
+/// accumulator of `acc` not marked [`ENCODED`], in order, bit for bit, into `out` (resized to
+/// `acc.len()`; the words of marked accumulators are left as they are).
 ///
 /// The sums are transposed into batches of [`LANES`] voxels and each word is computed by a loop
 /// without branches, so that the compiler runs the square roots, divisions, roundings and
@@ -643,15 +694,18 @@ const LANES: usize = 64;
 /// garbage in its lane (NaN, saturating conversions) and is then replaced by 0, as
 /// [`pack_normal_f64`] returns.
 fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
-    out.clear();
-    out.reserve(acc.len());
+    out.resize(acc.len(), [0; 2]);
+    let todo: Vec<u32> = (0..acc.len() as u32)
+        .filter(|&i| acc[i as usize].k & ENCODED == 0)
+        .collect();
     let mut n = [[0f64; LANES]; 3];
     let mut w = [0f32; LANES];
     let mut c = [[0f32; LANES]; 4];
     let mut nw = [0u32; LANES];
     let mut cw = [0u32; LANES];
-    for batch in acc.chunks(LANES) {
-        for (i, a) in batch.iter().enumerate() {
+    for batch in todo.chunks(LANES) {
+        for (i, &j) in batch.iter().enumerate() {
+            let a = &acc[j as usize];
             for k in 0..3 {
                 n[k][i] = a.s[k] as f64;
             }
@@ -676,8 +730,25 @@ fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
             let q = |m: f32| (m * inv).round().clamp(0.0, 255.0) as u8 as u32;
             cw[i] = q(c[0][i]) | q(c[1][i]) << 8 | q(c[2][i]) << 16 | q(c[3][i]) << 24;
         }
-        out.extend((0..batch.len()).map(|i| [nw[i], cw[i]]));
+        for (i, &j) in batch.iter().enumerate() {
+            out[j as usize] = [nw[i], cw[i]];
+        }
     }
+}
+
+/// The normal and colour words of a voxel whose only contribution has values `x` and weight 1
+/// (what [`encode`] gives it; see [`crate::single`]).
+fn record_words(x: &[f32; 8]) -> [u32; 2] {
+    let v = encode(
+        [0; 3],
+        &Acc {
+            s: *x,
+            idx: 0,
+            k: 1,
+        },
+        false,
+    );
+    [v.normal, v.color]
 }
 
 #[cfg(test)]
@@ -722,6 +793,17 @@ mod tests {
         for (a, w) in accs.iter().zip(&words) {
             let v = encode([1, 2, 3], a, false);
             assert_eq!([v.normal, v.color], *w, "sums {:?}, k {}", a.s, a.k);
+        }
+        // accumulators marked ENCODED keep the words they have; the others are computed
+        let mut marked = vec![[7u32, 9]; accs.len()];
+        for (i, a) in accs.iter_mut().enumerate() {
+            if i % 3 == 0 {
+                a.k |= ENCODED;
+            }
+        }
+        encode_words(&accs, &mut marked);
+        for (i, (m, w)) in marked.iter().zip(&words).enumerate() {
+            assert_eq!(*m, if i % 3 == 0 { [7, 9] } else { *w });
         }
     }
 }

@@ -187,19 +187,6 @@ fn check_chunk(tris: &[Triangle], origin: [u32; 3], st: &mut Stats) {
     }
 }
 
-/// Random vertex normals on every third triangle, random colours on every second.
-fn with_attributes(rng: &mut Rng, mut tri: Triangle, i: usize) -> Triangle {
-    if i.is_multiple_of(3) {
-        tri.flags |= TRI_HAS_NORMALS;
-        tri.n = [0, 1, 2].map(|_| rng.point(-1.0, 1.0).map(|x| x as f32));
-    }
-    if i.is_multiple_of(2) {
-        tri.flags |= TRI_HAS_COLORS;
-        tri.c = [0, 1, 2].map(|_| [0, 1, 2, 3].map(|_| rng.int(0, 255) as u8));
-    }
-    tri
-}
-
 #[test]
 fn f32_sums_within_the_bound_on_random_triangles() {
     let mut st = Stats::default();

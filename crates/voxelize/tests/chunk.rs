@@ -5,23 +5,10 @@ mod common;
 use common::*;
 use std::collections::BTreeMap;
 use voxlod_format::voxel::{border_caps, face_mask, unpack_normal, Voxel};
-use voxlod_geom::{Triangle, TRI_HAS_COLORS, TRI_HAS_NORMALS};
+use voxlod_geom::{Triangle, TRI_HAS_NORMALS};
 use voxlod_voxelize::{clipped_area, voxelize_grid, voxelize_triangle, ChunkVoxelizer, Mode};
 
 const RES: u32 = 512;
-
-/// Random vertex normals on every third triangle `i`, random colours on every second.
-fn with_attributes(rng: &mut Rng, mut tri: Triangle, i: usize) -> Triangle {
-    if i % 3 == 0 {
-        tri.flags |= TRI_HAS_NORMALS;
-        tri.n = [0, 1, 2].map(|_| rng.point(-1.0, 1.0).map(|x| x as f32));
-    }
-    if i % 2 == 0 {
-        tri.flags |= TRI_HAS_COLORS;
-        tri.c = [0, 1, 2].map(|_| [0, 1, 2, 3].map(|_| rng.int(0, 255) as u8));
-    }
-    tri
-}
 
 fn triangles(seed: u64) -> (Vec<Triangle>, u64) {
     let mut rng = Rng(seed);

@@ -6,9 +6,23 @@ use std::path::PathBuf;
 
 pub mod adversarial;
 
+use voxlod_geom::{Triangle, TRI_HAS_COLORS, TRI_HAS_NORMALS};
 #[allow(unused_imports)] // each test binary uses a different part
 pub use voxlod_testkit::mesh::{cube, icosphere, read_ply, transform};
 pub use voxlod_testkit::Rng;
+
+/// Random vertex normals on every third triangle `i`, random colours on every second.
+pub fn with_attributes(rng: &mut Rng, mut tri: Triangle, i: usize) -> Triangle {
+    if i.is_multiple_of(3) {
+        tri.flags |= TRI_HAS_NORMALS;
+        tri.n = [0, 1, 2].map(|_| rng.point(-1.0, 1.0).map(|x| x as f32));
+    }
+    if i.is_multiple_of(2) {
+        tri.flags |= TRI_HAS_COLORS;
+        tri.c = [0, 1, 2].map(|_| [0, 1, 2, 3].map(|_| rng.int(0, 255) as u8));
+    }
+    tri
+}
 
 pub fn f32tri(t: [[f64; 3]; 3]) -> [[f32; 3]; 3] {
     t.map(|p| p.map(|c| c as f32))
