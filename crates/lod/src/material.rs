@@ -20,23 +20,38 @@ use voxlod_format::voxel::{morton8, Voxel};
 pub fn merge_materials(children: &[&[Voxel]; 8], materials: &[&[u32]; 8]) -> Vec<u32> {
     let mut out = Vec::new();
     for (voxels, mats) in children.iter().zip(materials) {
-        assert_eq!(voxels.len(), mats.len(), "one material per child voxel");
-        let mut j = 0;
-        while j < voxels.len() {
-            let p = voxels[j].pos();
-            let key = morton8(p[0], p[1], p[2]) >> 3;
-            let mut end = j + 1;
-            while end < voxels.len() && {
-                let q = voxels[end].pos();
-                morton8(q[0], q[1], q[2]) >> 3 == key
-            } {
-                end += 1;
-            }
-            out.push(majority(&mats[j..end]));
-            j = end;
-        }
+        append_half_materials(voxels, mats, &mut out);
     }
     out
+}
+
+/// The materials of one child's half (`voxlod_lod::MergeScratch::halve`), in its order: the
+/// parent's materials are the concatenation of its children's, as the voxels are.
+///
+/// # Panics
+/// If `voxels` and `materials` differ in length.
+pub fn halve_materials(voxels: &[Voxel], materials: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(voxels.len() / 2);
+    append_half_materials(voxels, materials, &mut out);
+    out
+}
+
+fn append_half_materials(voxels: &[Voxel], mats: &[u32], out: &mut Vec<u32>) {
+    assert_eq!(voxels.len(), mats.len(), "one material per child voxel");
+    let mut j = 0;
+    while j < voxels.len() {
+        let p = voxels[j].pos();
+        let key = morton8(p[0], p[1], p[2]) >> 3;
+        let mut end = j + 1;
+        while end < voxels.len() && {
+            let q = voxels[end].pos();
+            morton8(q[0], q[1], q[2]) >> 3 == key
+        } {
+            end += 1;
+        }
+        out.push(majority(&mats[j..end]));
+        j = end;
+    }
 }
 
 /// The id held most often in `run` (at most 8 entries), ties to the smallest id.
@@ -61,6 +76,55 @@ mod tests {
     use crate::{merge_children, parent_key};
     use std::collections::BTreeMap;
     use voxlod_format::voxel::{pack_color, pack_normal};
+
+    /// Each child's half materials, aligned with its half's voxels, hold each run's majority
+    /// (checked against a map from parent position to the run's materials).
+    #[test]
+    fn half_materials_concatenated_equal_the_parent() {
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let n = pack_normal([0.0, 0.0, 1.0]);
+        let kids: Vec<Vec<Voxel>> = (0..8)
+            .map(|_| {
+                let mut m: BTreeMap<u32, Voxel> = BTreeMap::new();
+                for _ in 0..1500 {
+                    let p = [next() as u8 % 32, next() as u8 % 32, next() as u8 % 32];
+                    let v = Voxel::new(p, 0, n, pack_color([9, 9, 9, 9]));
+                    m.insert(v.morton(), v);
+                }
+                m.into_values().collect()
+            })
+            .collect();
+        let mats: Vec<Vec<u32>> = kids
+            .iter()
+            .map(|k| k.iter().map(|_| (next() % 5) as u32).collect())
+            .collect();
+        let mut scratch = crate::MergeScratch::new();
+        let mut half = Vec::new();
+        for o in 0..8 {
+            let got = halve_materials(&kids[o], &mats[o]);
+            scratch.halve(&kids[o], o, &mut half);
+            assert_eq!(got.len(), half.len(), "octant {o}");
+            // against a map from parent position to the child materials
+            let mut by_pos: BTreeMap<[u8; 3], Vec<u32>> = BTreeMap::new();
+            for (v, &m) in kids[o].iter().zip(&mats[o]) {
+                by_pos.entry(parent_key(o, v.pos()).0).or_default().push(m);
+            }
+            for (v, m) in half.iter().zip(&got) {
+                let list = &by_pos[&v.pos()];
+                let count = |x: u32| list.iter().filter(|&&y| y == x).count();
+                let want = (0..5)
+                    .max_by_key(|&x| (count(x), std::cmp::Reverse(x)))
+                    .unwrap();
+                assert_eq!(*m, want, "octant {o}, parent voxel {:?}", v.pos());
+            }
+        }
+    }
 
     #[test]
     fn majority_then_smallest_id() {
