@@ -1,8 +1,9 @@
 //! The voxelize stage: every leaf chunk's triangles through a [`Voxelize`] implementation (the
 //! CPU chunk voxelizers or the GPU one, `backend.rs`), each chunk's voxels encoded and halved
-//! (merged alone to its parent's resolution, for the LOD stage) on its worker and appended strictly in Morton order to the leaf log (`leaves.bin`), which resumes
-//! at chunk granularity. Workers run at most a window of chunks ahead of the log
-//! (`window.rs`); a worker's panic becomes an error naming its chunk.
+//! (merged alone to its parent's resolution, for the LOD stage) on its worker and appended
+//! strictly in Morton order to the leaf log (`leaves.bin`), which resumes at chunk granularity.
+//! Workers run at most a window of chunks ahead of the log (`window.rs`); a worker's panic
+//! becomes an error naming its chunk.
 //!
 //! Artifact and resume marker: [`LeavesMarker`] (`leaves.json`), written once every chunk is
 //! in the log; the bins are removed then.
