@@ -104,6 +104,44 @@ impl EncodedNode {
     }
 }
 
+impl EncodedNode {
+    /// Rebuilds an encoded node from a payload that [`encode_node`] made earlier, with the
+    /// other fields it returned ([`block_crc32`](Self::block_crc32), [`bounds`](Self::bounds)),
+    /// kept by the caller under a checksum of its own (the pipeline's leaf log), *without*
+    /// decompressing it: for a writer that copies stored payloads into a file. Checks the
+    /// payload's checksum, the count and that the bounds are ordered; that the fields belong
+    /// to the payload is the caller's promise ([`from_payload`](Self::from_payload) checks
+    /// everything, at the cost of a decode).
+    pub fn from_stored(
+        payload: Vec<u8>,
+        voxel_count: u32,
+        payload_crc32: u32,
+        block_crc32: u32,
+        (bounds_min, bounds_max): ([u8; 3], [u8; 3]),
+    ) -> Result<EncodedNode, FormatError> {
+        let bad = |what: String| FormatError::Voxels { what };
+        if crc32fast::hash(&payload) != payload_crc32 {
+            return Err(bad("stored payload: checksum mismatch".into()));
+        }
+        if voxel_count == 0 || voxel_count > MAX_NODE_VOXELS {
+            return Err(bad(format!("stored payload claims {voxel_count} voxels")));
+        }
+        if (0..3).any(|a| bounds_min[a] > bounds_max[a]) {
+            return Err(bad(format!(
+                "stored bounds {bounds_min:?}..{bounds_max:?} are not ordered"
+            )));
+        }
+        Ok(EncodedNode {
+            payload,
+            voxel_count,
+            payload_crc32,
+            block_crc32,
+            bounds_min,
+            bounds_max,
+        })
+    }
+}
+
 /// Compresses one node's voxels at zstd level `zstd_level` (see
 /// [`DEFAULT_ZSTD_LEVEL`](crate::DEFAULT_ZSTD_LEVEL)). The voxels must be non-empty, sorted by
 /// strictly increasing Morton code of their position (no two at one position), with bits
@@ -559,6 +597,19 @@ mod tests {
             &mut out
         )
         .is_err());
+        // without the decode: the stored fields give the same node; a flipped payload byte,
+        // a bad count or unordered bounds are refused
+        let (crc, block, bounds) = (enc.payload_crc32(), enc.block_crc32(), enc.bounds());
+        let n = enc.voxel_count();
+        let stored =
+            |p: &[u8], n: u32, b| super::EncodedNode::from_stored(p.to_vec(), n, crc, block, b);
+        assert_eq!(stored(enc.payload(), n, bounds).unwrap(), enc);
+        let mut flipped = enc.payload().to_vec();
+        flipped[k] ^= 0x40;
+        assert!(stored(&flipped, n, bounds).is_err());
+        assert!(stored(enc.payload(), 0, bounds).is_err());
+        assert!(stored(enc.payload(), crate::MAX_NODE_VOXELS + 1, bounds).is_err());
+        assert!(stored(enc.payload(), n, ([5, 0, 0], [4, 9, 9])).is_err());
     }
 
     use super::*;

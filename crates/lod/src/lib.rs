@@ -27,5 +27,5 @@
 mod material;
 mod sort_compact;
 
-pub use material::merge_materials;
+pub use material::{halve_materials, merge_materials};
 pub use sort_compact::{merge_children, parent_key, MergeScratch};

@@ -20,23 +20,38 @@ use voxlod_format::voxel::{morton8, Voxel};
 pub fn merge_materials(children: &[&[Voxel]; 8], materials: &[&[u32]; 8]) -> Vec<u32> {
     let mut out = Vec::new();
     for (voxels, mats) in children.iter().zip(materials) {
-        assert_eq!(voxels.len(), mats.len(), "one material per child voxel");
-        let mut j = 0;
-        while j < voxels.len() {
-            let p = voxels[j].pos();
-            let key = morton8(p[0], p[1], p[2]) >> 3;
-            let mut end = j + 1;
-            while end < voxels.len() && {
-                let q = voxels[end].pos();
-                morton8(q[0], q[1], q[2]) >> 3 == key
-            } {
-                end += 1;
-            }
-            out.push(majority(&mats[j..end]));
-            j = end;
-        }
+        append_half_materials(voxels, mats, &mut out);
     }
     out
+}
+
+/// The materials of one child's half (`voxlod_lod::MergeScratch::halve`), in its order: the
+/// parent's materials are the concatenation of its children's, as the voxels are.
+///
+/// # Panics
+/// If `voxels` and `materials` differ in length.
+pub fn halve_materials(voxels: &[Voxel], materials: &[u32]) -> Vec<u32> {
+    let mut out = Vec::with_capacity(voxels.len() / 2);
+    append_half_materials(voxels, materials, &mut out);
+    out
+}
+
+fn append_half_materials(voxels: &[Voxel], mats: &[u32], out: &mut Vec<u32>) {
+    assert_eq!(voxels.len(), mats.len(), "one material per child voxel");
+    let mut j = 0;
+    while j < voxels.len() {
+        let p = voxels[j].pos();
+        let key = morton8(p[0], p[1], p[2]) >> 3;
+        let mut end = j + 1;
+        while end < voxels.len() && {
+            let q = voxels[end].pos();
+            morton8(q[0], q[1], q[2]) >> 3 == key
+        } {
+            end += 1;
+        }
+        out.push(majority(&mats[j..end]));
+        j = end;
+    }
 }
 
 /// The id held most often in `run` (at most 8 entries), ties to the smallest id.
@@ -62,18 +77,10 @@ mod tests {
     use std::collections::BTreeMap;
     use voxlod_format::voxel::{pack_color, pack_normal};
 
-    #[test]
-    fn majority_then_smallest_id() {
-        assert_eq!(majority(&[4]), 4);
-        assert_eq!(majority(&[4, 2, 4]), 4);
-        assert_eq!(majority(&[4, 2, 2, 4]), 2);
-        assert_eq!(majority(&[9, 8, 7, 6, 5, 4, 3, 1]), 1);
-    }
-
-    /// Against a map from parent position to the child materials, built with `parent_key`.
-    #[test]
-    fn aligned_with_merge_children_and_equal_to_a_map() {
-        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    /// Eight Morton-sorted children (clustered, so runs of several voxels occur) and a
+    /// material in `0..ids` for each of their voxels.
+    fn children_with_materials(seed: u64, ids: u64) -> (Vec<Vec<Voxel>>, Vec<Vec<u32>>) {
+        let mut state = seed;
         let mut next = move || {
             state ^= state << 13;
             state ^= state >> 7;
@@ -96,9 +103,54 @@ mod tests {
                     Voxel::new(p, 0, n, pack_color([1, 2, 3, 4]))
                 })
                 .collect();
-            mats.push(v.iter().map(|_| (next() % 4) as u32).collect());
+            mats.push(v.iter().map(|_| (next() % ids) as u32).collect());
             kids.push(v);
         }
+        (kids, mats)
+    }
+
+    /// The id held most often in `list`, ties to the smallest, among `0..ids` (by counting).
+    fn most_frequent(list: &[u32], ids: u32) -> u32 {
+        let count = |x: u32| list.iter().filter(|&&y| y == x).count();
+        (0..ids)
+            .max_by_key(|&x| (count(x), std::cmp::Reverse(x)))
+            .unwrap()
+    }
+
+    /// Each child's half materials, aligned with its half's voxels, hold each run's majority
+    /// (checked against a map from parent position to the run's materials).
+    #[test]
+    fn half_materials_hold_each_runs_majority() {
+        let (kids, mats) = children_with_materials(0x2545_F491_4F6C_DD1D, 5);
+        let mut scratch = crate::MergeScratch::new();
+        let mut half = Vec::new();
+        for o in 0..8 {
+            let got = halve_materials(&kids[o], &mats[o]);
+            scratch.halve(&kids[o], o, &mut half);
+            assert_eq!(got.len(), half.len(), "octant {o}");
+            let mut by_pos: BTreeMap<[u8; 3], Vec<u32>> = BTreeMap::new();
+            for (v, &m) in kids[o].iter().zip(&mats[o]) {
+                by_pos.entry(parent_key(o, v.pos()).0).or_default().push(m);
+            }
+            for (v, m) in half.iter().zip(&got) {
+                let want = most_frequent(&by_pos[&v.pos()], 5);
+                assert_eq!(*m, want, "octant {o}, parent voxel {:?}", v.pos());
+            }
+        }
+    }
+
+    #[test]
+    fn majority_then_smallest_id() {
+        assert_eq!(majority(&[4]), 4);
+        assert_eq!(majority(&[4, 2, 4]), 4);
+        assert_eq!(majority(&[4, 2, 2, 4]), 2);
+        assert_eq!(majority(&[9, 8, 7, 6, 5, 4, 3, 1]), 1);
+    }
+
+    /// Against a map from parent position to the child materials, built with `parent_key`.
+    #[test]
+    fn aligned_with_merge_children_and_equal_to_a_map() {
+        let (kids, mats) = children_with_materials(0x9E37_79B9_7F4A_7C15, 4);
         let children: [&[Voxel]; 8] = std::array::from_fn(|i| kids[i].as_slice());
         let materials: [&[u32]; 8] = std::array::from_fn(|i| mats[i].as_slice());
         let parent = merge_children(&children);
@@ -111,11 +163,7 @@ mod tests {
             }
         }
         for (v, m) in parent.iter().zip(&got) {
-            let list = &by_pos[&v.pos()];
-            let count = |x: u32| list.iter().filter(|&&y| y == x).count();
-            let want = (0..4)
-                .max_by_key(|&x| (count(x), std::cmp::Reverse(x)))
-                .unwrap();
+            let want = most_frequent(&by_pos[&v.pos()], 4);
             assert_eq!(*m, want, "parent voxel {:?}", v.pos());
         }
     }

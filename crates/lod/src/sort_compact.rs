@@ -21,6 +21,8 @@ pub fn parent_key(octant: usize, pos: [u8; 3]) -> ([u8; 3], u32) {
 pub struct MergeScratch {
     /// Copy of a child that broke the Morton precondition, sorted.
     sorted: Vec<Voxel>,
+    /// The run totals of the block being scanned (12 KiB, kept off the stack).
+    runs: Box<Runs>,
 }
 
 impl MergeScratch {
@@ -40,20 +42,37 @@ impl MergeScratch {
         // No sort: octant i owns parent keys [i·2^21, (i+1)·2^21), and inside a sorted child
         // the parent key is the child's Morton code shifted right by 3, so the concatenation of
         // the children's runs in octant order is already the parent's Morton order.
-        let mut runs = Runs::default();
         for (octant, &child) in children.iter().enumerate() {
-            let before = out.len();
-            if !runs.merge_child(child, octant, out) {
-                // the child broke the precondition: merge a sorted copy instead
-                out.truncate(before);
-                self.sorted.clear();
-                self.sorted.extend_from_slice(child);
-                self.sorted.sort_by_key(Voxel::morton);
-                assert!(
-                    runs.merge_child(&self.sorted, octant, out),
-                    "child octant {octant} holds a position twice"
-                );
-            }
+            self.append_half(child, octant, out);
+        }
+    }
+
+    /// The parent voxels of one child alone (octant `octant`) into `out` (cleared first): its
+    /// *half*. A parent's runs never span two children, so [`merge`](Self::merge) is the
+    /// concatenation of its children's halves in octant order, and a leaf's half can be made
+    /// on the worker that voxelized it (the pipeline's level-1 merge is then a concatenation).
+    /// Same preconditions as `merge`.
+    pub fn halve(&mut self, child: &[Voxel], octant: usize, out: &mut Vec<Voxel>) {
+        assert!(octant < 8, "octant {octant} is not 0..8");
+        out.clear();
+        out.reserve(child.len() / 2);
+        self.append_half(child, octant, out);
+    }
+
+    /// Appends the half of `child` (octant `octant`) to `out`.
+    fn append_half(&mut self, child: &[Voxel], octant: usize, out: &mut Vec<Voxel>) {
+        let runs = &mut *self.runs;
+        let before = out.len();
+        if !runs.merge_child(child, octant, out) {
+            // the child broke the precondition: merge a sorted copy instead
+            out.truncate(before);
+            self.sorted.clear();
+            self.sorted.extend_from_slice(child);
+            self.sorted.sort_by_key(Voxel::morton);
+            assert!(
+                runs.merge_child(&self.sorted, octant, out),
+                "child octant {octant} holds a position twice"
+            );
         }
     }
 }
@@ -386,6 +405,32 @@ mod tests {
         });
         let refs: [&[Voxel]; 8] = std::array::from_fn(|o| children[o].as_slice());
         assert_eq!(merge_children(&refs), reference(&children));
+    }
+
+    /// Each child's half, made alone, is its octant's share of the reference parent: the
+    /// halves concatenated in octant order equal the parent (the pipeline's level-1 merge),
+    /// with a scratch reused across children of different sizes, an unsorted child among them.
+    #[test]
+    fn halves_concatenated_equal_the_parent() {
+        let mut s = 5u64;
+        let mut children: [Vec<Voxel>; 8] =
+            std::array::from_fn(|o| random_child(&mut s, 300 + 700 * (o % 3)));
+        children[6].reverse();
+        let want = reference(&children);
+        let mut scratch = MergeScratch::new();
+        let mut joined = Vec::new();
+        let mut half = Vec::new();
+        for (o, c) in children.iter().enumerate() {
+            scratch.halve(c, o, &mut half);
+            // every voxel of the half lies in the octant's part of the parent
+            assert!(half.iter().all(|v| v
+                .pos()
+                .iter()
+                .enumerate()
+                .all(|(a, &p)| (p >> 7) as usize == o >> a & 1)));
+            joined.extend_from_slice(&half);
+        }
+        assert_eq!(joined, want);
     }
 
     /// The multiply-and-shift mean equals the integer division for every possible run.

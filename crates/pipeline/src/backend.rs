@@ -492,6 +492,15 @@ fn select_gpu(
         Cutoff::Auto => DEFAULT_CUTOFF,
     };
     if backend == Backend::Auto {
+        // no GPU device node: any adapter would be a software one, which auto does not take;
+        // nothing of Vulkan is loaded to learn that
+        if !crate::system::may_have_gpu() {
+            let (v, d) = cpu();
+            return Ok((
+                v,
+                format!("{d}; no GPU device (/dev/dri/renderD*, /dev/nvidia*, /dev/dxg), no adapter probed (--backend gpu uses a software one)"),
+            ));
+        }
         // decide from the adapter alone: creating the device and its pipelines
         // costs half a second on lavapipe, for an adapter auto would not use
         match voxlod_gpu::probe_adapter() {

@@ -1,9 +1,16 @@
 //! The leaf log: the voxelize stage's output, one record per leaf chunk in Morton order (empty
 //! chunks included, so the record count is the resume position), each with its compressed
-//! payload. Records are checksummed; after a kill, reopening keeps the valid prefix and cuts
-//! off a torn tail, and the build continues with the next chunk.
+//! payload and its *half*: the leaf's voxels merged to its parent's resolution on the worker
+//! that voxelized it (`voxlod_lod::MergeScratch::halve`), so that the LOD stage builds the
+//! level-1 parents by concatenation and copies the leaf payloads into the file without
+//! decoding them. Records are checksummed; after a kill, reopening keeps the valid prefix and
+//! cuts off a torn tail, and the build continues with the next chunk.
 //!
-//! Record: a 40-byte [`RecordHeader`] (little-endian) followed by `payload_len` bytes.
+//! Record: a 64-byte [`RecordHeader`] (little-endian) followed by `payload_len` bytes: the
+//! leaf's zstd frames (`frames_len` bytes: the voxels, then in a build with the material
+//! channel the materials), then its half as `half_count` 12-byte voxel records
+//! (`voxlod_format::Voxel`, three little-endian u32) and, with the material channel,
+//! `half_count` little-endian u32 material ids.
 
 use std::fs::{File, OpenOptions};
 use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
@@ -11,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use bytemuck::{Pod, Zeroable};
-use voxlod_format::EncodedNode;
+use voxlod_format::{EncodedNode, Voxel};
 
 const MAGIC: u32 = u32::from_le_bytes(*b"LEAF");
 
@@ -27,22 +34,55 @@ pub struct RecordHeader {
     pub coord: [u32; 3],
     pub voxel_count: u32,
     pub payload_len: u32,
+    /// CRC-32 of the whole payload (frames and half).
     pub payload_crc32: u32,
     /// Triangles of this chunk the voxelizer skipped.
     pub skipped: u32,
+    /// Bytes of the zstd frames at the start of the payload; the half follows.
+    pub frames_len: u32,
+    /// Voxels of the half (0 for an empty leaf, or when the leaf is the root).
+    pub half_count: u32,
+    /// The leaf's `EncodedNode` fields: CRC-32 of its voxel frame, of its decompressed block,
+    /// and its bounds (min x y z, max x y z, two zero bytes).
+    pub node_crc32: u32,
+    pub block_crc32: u32,
+    pub bounds: [u8; 8],
     header_crc32: u32,
 }
 
+const _: () = assert!(RECORD_HEADER_BYTES == 64);
+
 impl RecordHeader {
     fn crc(&self) -> u32 {
-        crc32fast::hash(&bytemuck::bytes_of(self)[..36])
+        crc32fast::hash(&bytemuck::bytes_of(self)[..RECORD_HEADER_BYTES as usize - 4])
     }
+
+    /// The leaf's bounds (min, max).
+    pub fn bounds(&self) -> ([u8; 3], [u8; 3]) {
+        let b = self.bounds;
+        ([b[0], b[1], b[2]], [b[3], b[4], b[5]])
+    }
+}
+
+/// One non-empty leaf as the voxelize stage appends it.
+pub struct LeafRecord<'a> {
+    /// The leaf's voxels, encoded.
+    pub node: &'a EncodedNode,
+    /// The material channel's payload (a second zstd frame; empty without the channel).
+    pub materials: &'a [u8],
+    /// The leaf's half (empty when the leaf is the root).
+    pub half: &'a [Voxel],
+    /// The half's materials, one per half voxel (empty without the material channel).
+    pub half_materials: &'a [u32],
 }
 
 pub struct LeafLog {
     path: PathBuf,
     out: BufWriter<File>,
     records: u64,
+    /// Totals over the records: skipped triangles, bytes of the leaves' zstd frames.
+    skipped: u64,
+    frame_bytes: u64,
 }
 
 impl LeafLog {
@@ -62,18 +102,20 @@ impl LeafLog {
             .len();
         let mut valid_end = 0u64;
         let mut records = 0u64;
+        let (mut skipped, mut frame_bytes) = (0u64, 0u64);
+        const HEAD: u64 = RECORD_HEADER_BYTES;
         {
             let mut r = BufReader::with_capacity(1 << 20, &mut f);
             let mut h = RecordHeader::zeroed();
             let mut payload = Vec::new();
             loop {
-                if valid_end + 40 > len || r.read_exact(bytemuck::bytes_of_mut(&mut h)).is_err() {
+                if valid_end + HEAD > len || r.read_exact(bytemuck::bytes_of_mut(&mut h)).is_err() {
                     break;
                 }
                 if h.magic != MAGIC
                     || h.crc() != h.header_crc32
                     || h.chunk as u64 != records
-                    || valid_end + 40 + h.payload_len as u64 > len
+                    || valid_end + HEAD + h.payload_len as u64 > len
                 {
                     break;
                 }
@@ -83,8 +125,10 @@ impl LeafLog {
                 {
                     break;
                 }
-                valid_end += 40 + h.payload_len as u64;
+                valid_end += HEAD + h.payload_len as u64;
                 records += 1;
+                skipped += h.skipped as u64;
+                frame_bytes += h.frames_len as u64;
             }
         }
         f.set_len(valid_end)
@@ -95,6 +139,8 @@ impl LeafLog {
             path: path.to_path_buf(),
             out: BufWriter::with_capacity(4 << 20, f),
             records,
+            skipped,
+            frame_bytes,
         })
     }
 
@@ -103,26 +149,22 @@ impl LeafLog {
         self.records
     }
 
+    /// Triangles the voxelizer skipped, over the records in the log.
+    pub fn skipped(&self) -> u64 {
+        self.skipped
+    }
+
+    /// Bytes of the leaves' zstd frames in the log: what the octree file will hold of them.
+    pub fn frame_bytes(&self) -> u64 {
+        self.frame_bytes
+    }
+
     /// Appends chunk `chunk`'s result (`None` for a chunk without voxels).
-    #[cfg(test)]
     pub fn append(
         &mut self,
         chunk: u64,
         coord: [u32; 3],
-        node: Option<&EncodedNode>,
-        skipped: u64,
-    ) -> Result<()> {
-        self.append_with(chunk, coord, node, &[], skipped)
-    }
-
-    /// [`append`](Self::append) with `extra` bytes after the node's payload, in the same
-    /// checksummed record (the material channel's payload: a second zstd frame).
-    pub fn append_with(
-        &mut self,
-        chunk: u64,
-        coord: [u32; 3],
-        node: Option<&EncodedNode>,
-        extra: &[u8],
+        leaf: Option<&LeafRecord>,
         skipped: u64,
     ) -> Result<()> {
         if chunk != self.records {
@@ -132,33 +174,51 @@ impl LeafLog {
                 self.records
             );
         }
-        let joined;
-        let payload = match node {
-            Some(n) if !extra.is_empty() => {
-                joined = [n.payload(), extra].concat();
-                &joined[..]
-            }
-            _ => node.map_or(&[][..], |n| n.payload()),
-        };
+        let mut parts: [&[u8]; 4] = [&[]; 4];
+        let (mut node_crc32, mut block_crc32, mut bounds) = (0, 0, [0u8; 8]);
+        if let Some(r) = leaf {
+            assert!(
+                r.half_materials.is_empty() || r.half_materials.len() == r.half.len(),
+                "one material per half voxel"
+            );
+            parts = [
+                r.node.payload(),
+                r.materials,
+                bytemuck::cast_slice(r.half),
+                bytemuck::cast_slice(r.half_materials),
+            ];
+            let (min, max) = r.node.bounds();
+            bounds = [min[0], min[1], min[2], max[0], max[1], max[2], 0, 0];
+            (node_crc32, block_crc32) = (r.node.payload_crc32(), r.node.block_crc32());
+        }
+        let mut crc = crc32fast::Hasher::new();
+        parts.iter().for_each(|p| crc.update(p));
+        let frames_len = parts[0].len() + parts[1].len();
         let mut h = RecordHeader {
             magic: MAGIC,
             chunk: chunk as u32,
             coord,
-            voxel_count: node.map_or(0, |n| n.voxel_count()),
-            payload_len: payload.len() as u32,
-            payload_crc32: crc32fast::hash(payload),
+            voxel_count: leaf.map_or(0, |l| l.node.voxel_count()),
+            payload_len: parts.iter().map(|p| p.len()).sum::<usize>() as u32,
+            payload_crc32: crc.finalize(),
             skipped: skipped.min(u32::MAX as u64) as u32,
+            frames_len: frames_len as u32,
+            half_count: leaf.map_or(0, |l| l.half.len() as u32),
+            node_crc32,
+            block_crc32,
+            bounds,
             header_crc32: 0,
         };
         h.header_crc32 = h.crc();
         let path = &self.path;
-        self.out
-            .write_all(bytemuck::bytes_of(&h))
-            .with_context(|| format!("writing {}", path.display()))?;
-        self.out
-            .write_all(payload)
-            .with_context(|| format!("writing {}", path.display()))?;
+        for bytes in [bytemuck::bytes_of(&h)].into_iter().chain(parts) {
+            self.out
+                .write_all(bytes)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
         self.records += 1;
+        self.skipped += h.skipped as u64;
+        self.frame_bytes += frames_len as u64;
         Ok(())
     }
 
@@ -209,10 +269,70 @@ pub fn read_log(
     }
 }
 
+/// A non-empty leaf read back from the log.
+pub struct StoredLeaf {
+    /// The leaf's voxels, encoded, as the voxelize stage's `encode_node` made them.
+    pub node: EncodedNode,
+    /// The material channel's frame (empty without the channel).
+    pub materials: Vec<u8>,
+    /// The leaf's half, and its materials in a build with the material channel.
+    pub half: Vec<Voxel>,
+    pub half_materials: Option<Vec<u32>>,
+}
+
+impl StoredLeaf {
+    /// Splits the payload of a non-empty leaf's record (as [`read_log`] hands it on, its
+    /// checksum checked) into its parts; `materials`: the build has the material channel.
+    pub fn split(h: &RecordHeader, mut payload: Vec<u8>, materials: bool) -> Result<StoredLeaf> {
+        let what = || format!("leaf log record {}", h.chunk);
+        let (frames, half) = (h.frames_len as usize, h.half_count as usize);
+        let per_voxel = std::mem::size_of::<Voxel>() + if materials { 4 } else { 0 };
+        if h.voxel_count == 0 || frames + half * per_voxel != payload.len() {
+            bail!(
+                "{}: {} payload bytes do not hold {frames} bytes of frames and a half of {half} voxels",
+                what(),
+                payload.len()
+            );
+        }
+        let rest = payload.split_off(frames);
+        let (voxel_bytes, mat_bytes) = rest.split_at(half * std::mem::size_of::<Voxel>());
+        let mut voxels = vec![Voxel::zeroed(); half];
+        bytemuck::cast_slice_mut(&mut voxels).copy_from_slice(voxel_bytes);
+        let half_materials = materials.then(|| {
+            mat_bytes
+                .chunks_exact(4)
+                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect()
+        });
+        // the voxel frame, then (with the channel) the material frame
+        let voxel_frame = if materials {
+            voxlod_format::channel::first_frame_len(&payload)
+                .map_err(anyhow::Error::msg)
+                .with_context(what)?
+        } else {
+            payload.len()
+        };
+        let materials = payload.split_off(voxel_frame);
+        let node = EncodedNode::from_stored(
+            payload,
+            h.voxel_count,
+            h.node_crc32,
+            h.block_crc32,
+            h.bounds(),
+        )
+        .with_context(what)?;
+        Ok(StoredLeaf {
+            node,
+            materials,
+            half: voxels,
+            half_materials,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use voxlod_format::voxel::Voxel;
 
     #[test]
     fn torn_tail_is_cut_and_appending_continues() {
@@ -222,40 +342,101 @@ mod tests {
             .map(|i| Voxel::new([i as u8, 0, 0], 1, 0, i))
             .collect();
         let enc = voxlod_format::encode_node(&v, 3).unwrap();
+        let mut half = Vec::new();
+        voxlod_lod::MergeScratch::new().halve(&v, 0, &mut half);
+        let leaf = LeafRecord {
+            node: &enc,
+            materials: &[],
+            half: &half,
+            half_materials: &[],
+        };
+        let record_bytes = enc.payload().len() + 12 * half.len();
         let mut log = LeafLog::open(&p).unwrap();
-        log.append(0, [0, 0, 0], Some(&enc), 0).unwrap();
+        log.append(0, [0, 0, 0], Some(&leaf), 0).unwrap();
         log.append(1, [1, 0, 0], None, 2).unwrap();
-        log.append(2, [0, 1, 0], Some(&enc), 0).unwrap();
+        log.append(2, [0, 1, 0], Some(&leaf), 0).unwrap();
         log.finish().unwrap();
         let full = std::fs::metadata(&p).unwrap().len();
+        assert_eq!(full, 3 * RECORD_HEADER_BYTES + 2 * record_bytes as u64);
         // a kill in the middle of record 2
         let f = OpenOptions::new().write(true).open(&p).unwrap();
         f.set_len(full - 7).unwrap();
         let mut log = LeafLog::open(&p).unwrap();
         assert_eq!(log.records(), 2);
+        // the totals of the kept records
+        assert_eq!(
+            (log.skipped(), log.frame_bytes()),
+            (2, enc.payload().len() as u64)
+        );
         assert!(log.append(5, [0; 3], None, 0).is_err());
-        log.append(2, [0, 1, 0], Some(&enc), 0).unwrap();
+        log.append(2, [0, 1, 0], Some(&leaf), 0).unwrap();
         log.finish().unwrap();
         assert_eq!(std::fs::metadata(&p).unwrap().len(), full);
         let mut seen = vec![];
         read_log(&p, &mut |h, pl| {
             seen.push((h.chunk, h.voxel_count, pl.len(), h.skipped));
+            if h.voxel_count > 0 {
+                // the parts come back as they went in: the same encoded node, the same half
+                let back = StoredLeaf::split(h, pl, false)?;
+                assert_eq!(back.node, enc);
+                assert_eq!(back.half, half);
+                assert!(back.materials.is_empty() && back.half_materials.is_none());
+            }
             Ok(())
         })
         .unwrap();
         assert_eq!(
             seen,
             vec![
-                (0, 100, enc.payload().len(), 0),
+                (0, 100, record_bytes, 0),
                 (1, 0, 0, 2),
-                (2, 100, enc.payload().len(), 0)
+                (2, 100, record_bytes, 0)
             ]
         );
         // a flipped payload byte is caught by reopening (record dropped) and by reading
         let mut bytes = std::fs::read(&p).unwrap();
-        bytes[45] ^= 1;
+        bytes[RECORD_HEADER_BYTES as usize + 5] ^= 1;
         std::fs::write(&p, &bytes).unwrap();
         assert!(read_log(&p, &mut |_, _| Ok(())).is_err());
         assert_eq!(LeafLog::open(&p).unwrap().records(), 0);
+    }
+
+    /// With the material channel: the voxel frame, the material frame, the half and its
+    /// materials come back apart; a record whose sizes do not add up is an error.
+    #[test]
+    fn material_leaf_round_trips() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("leaves.bin");
+        let v: Vec<Voxel> = (0..64u32)
+            .map(|i| Voxel::new([i as u8, i as u8 % 4, 0], 2, 0, i))
+            .collect();
+        let enc = voxlod_format::encode_node(&v, 1).unwrap();
+        let mats: Vec<u32> = (0..64).map(|i| i % 3).collect();
+        let menc = voxlod_format::encode_materials(&mats, 1).unwrap();
+        let mut half = Vec::new();
+        voxlod_lod::MergeScratch::new().halve(&v, 5, &mut half);
+        let half_mats = voxlod_lod::halve_materials(&v, &mats);
+        let mut log = LeafLog::open(&p).unwrap();
+        let leaf = LeafRecord {
+            node: &enc,
+            materials: &menc.payload,
+            half: &half,
+            half_materials: &half_mats,
+        };
+        log.append(0, [1, 0, 1], Some(&leaf), 0).unwrap();
+        log.finish().unwrap();
+        let mut n = 0;
+        read_log(&p, &mut |h, pl| {
+            assert!(StoredLeaf::split(h, pl.clone(), false).is_err());
+            let back = StoredLeaf::split(h, pl, true)?;
+            assert_eq!(back.node, enc);
+            assert_eq!(back.materials, menc.payload);
+            assert_eq!(back.half, half);
+            assert_eq!(back.half_materials.as_ref(), Some(&half_mats));
+            n += 1;
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(n, 1);
     }
 }

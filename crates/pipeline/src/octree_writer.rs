@@ -1,4 +1,5 @@
-//! The streamed octree: leaves arrive in Morton order, each parent is built (sort-and-compact)
+//! The streamed octree: leaves arrive in Morton order, each parent is built (sort-and-compact;
+//! at level 1 the concatenation of the leaves' halves, made where the leaves were voxelized)
 //! and written as soon as its last child is done, so only the partial parents on the current
 //! Morton path are held in memory (at most eight children per level).
 //!
@@ -15,7 +16,7 @@ use std::sync::{mpsc, Arc};
 
 use anyhow::{Context, Result};
 use voxlod_format::{encode_materials, encode_node, EncodedChannel, EncodedNode, Voxel, Writer};
-use voxlod_lod::{merge_materials, MergeScratch};
+use voxlod_lod::{halve_materials, merge_materials, MergeScratch};
 
 /// A node's voxels and, in a build with the material channel, their materials.
 type NodeVoxels = Arc<(Vec<Voxel>, Option<Vec<u32>>)>;
@@ -117,6 +118,8 @@ impl<'p> OctreeWriter<'p> {
     /// `encoded` is `None` exactly when the chunk has no voxels (then nothing is stored).
     /// In a build with the material channel, `materials` holds the leaf's per-voxel materials
     /// and their encoded payload (and the writer was made with that channel).
+    /// Makes the leaf's half on this thread; [`push_halved`](Self::push_halved) takes one made
+    /// elsewhere.
     pub fn push_leaf(
         &mut self,
         coord: [u32; 3],
@@ -124,21 +127,54 @@ impl<'p> OctreeWriter<'p> {
         encoded: Option<EncodedNode>,
         materials: Option<(Vec<u32>, EncodedChannel)>,
     ) -> Result<()> {
+        anyhow::ensure!(
+            voxels.is_empty() == encoded.is_none(),
+            "leaf {coord:?}: voxels and encoded payload disagree"
+        );
+        let (mats, menc) = materials.unzip();
+        let mut half = Vec::new();
+        if self.levels > 1 {
+            let octant = (coord[0] & 1 | (coord[1] & 1) << 1 | (coord[2] & 1) << 2) as usize;
+            SCRATCH.with(|s| s.borrow_mut().halve(&voxels, octant, &mut half));
+        }
+        let half_mats = mats.map(|m| halve_materials(&voxels, &m));
+        self.push_halved(coord, half, half_mats, encoded, menc)
+    }
+
+    /// [`push_leaf`](Self::push_leaf) with the leaf's half instead of its voxels: its voxels
+    /// merged alone into its parent (`voxlod_lod::MergeScratch::halve` for the leaf's octant;
+    /// empty when the leaf is the root) and, with the material channel, the half's materials
+    /// (`voxlod_lod::halve_materials`) and the leaf's encoded material payload. The level-1
+    /// parents are then the concatenations of their children's halves.
+    pub fn push_halved(
+        &mut self,
+        coord: [u32; 3],
+        half: Vec<Voxel>,
+        half_materials: Option<Vec<u32>>,
+        encoded: Option<EncodedNode>,
+        materials: Option<EncodedChannel>,
+    ) -> Result<()> {
         let m = voxlod_geom::morton3(coord[0], coord[1], coord[2]);
         anyhow::ensure!(
             self.last_leaf.map_or(true, |l| l < m),
             "leaf chunks out of Morton order at {coord:?}"
         );
         self.last_leaf = Some(m);
-        match encoded {
-            Some(enc) if !voxels.is_empty() => {
-                let (mats, menc) = materials.unzip();
-                let voxels = Child::Done(Arc::new((voxels, mats)));
-                self.emit(0, coord, 0, voxels, Payload::Ready((enc, menc)), 0)
-            }
-            None if voxels.is_empty() => Ok(()),
-            _ => anyhow::bail!("leaf {coord:?}: voxels and encoded payload disagree"),
-        }
+        let Some(enc) = encoded else {
+            anyhow::ensure!(half.is_empty(), "leaf {coord:?}: a half without voxels");
+            return Ok(());
+        };
+        anyhow::ensure!(
+            half.is_empty() == (self.levels == 1)
+                && half_materials
+                    .as_ref()
+                    .is_none_or(|m| m.len() == half.len()),
+            "leaf {coord:?}: a half of {} voxels in a tree of {} levels",
+            half.len(),
+            self.levels
+        );
+        let half = Child::Done(Arc::new((half, half_materials)));
+        self.emit(0, coord, 0, half, Payload::Ready((enc, materials)), 0)
     }
 
     /// Post-order: before node (level, coord) is written, every pending parent of an earlier
@@ -213,13 +249,18 @@ impl<'p> OctreeWriter<'p> {
         let zstd_level = self.zstd_level;
         self.pool.spawn(move || {
             let refs: [&[Voxel]; 8] = std::array::from_fn(|o| kids[o].0.as_slice());
-            let mut merged = Vec::new();
-            SCRATCH.with(|s| s.borrow_mut().merge(&refs, &mut merged));
-            // the material LOD rule, where the children have materials (FORMAT.md 14.3)
-            let mats = kids.iter().any(|k| k.1.is_some()).then(|| {
-                let m: [&[u32]; 8] = std::array::from_fn(|o| kids[o].1.as_deref().unwrap_or(&[]));
-                merge_materials(&refs, &m)
-            });
+            let any_mats = kids.iter().any(|k| k.1.is_some());
+            let m: [&[u32]; 8] = std::array::from_fn(|o| kids[o].1.as_deref().unwrap_or(&[]));
+            let (merged, mats) = if level == 0 {
+                // the leaves' halves: a level-1 parent is their concatenation
+                (refs.concat(), any_mats.then(|| m.concat()))
+            } else {
+                let mut merged = Vec::new();
+                SCRATCH.with(|s| s.borrow_mut().merge(&refs, &mut merged));
+                // the material LOD rule, where the children have materials (FORMAT.md 14.3)
+                let mats = any_mats.then(|| merge_materials(&refs, &m));
+                (merged, mats)
+            };
             drop(kids);
             let merged = Arc::new((merged, mats));
             // a receiver is gone only if the build already failed

@@ -1,5 +1,5 @@
-//! What the process asks of the operating system: peak resident memory, free disk space, and
-//! the interrupt flag set by Ctrl-C.
+//! What the process asks of the operating system: peak resident memory, free disk space,
+//! whether a GPU device exists, and the interrupt flag set by Ctrl-C.
 
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -64,6 +64,37 @@ pub fn free_disk(dir: &Path) -> Option<u64> {
     Some(st.f_bavail as u64 * st.f_frsize as u64)
 }
 
+/// Whether a hardware GPU may be present, decided from device nodes without loading a graphics
+/// driver. On Linux every GPU driver a Vulkan or GL driver can use exposes one: the kernel's
+/// DRM drivers `/dev/dri/renderD*` (Mesa's drivers open it), NVIDIA's driver `/dev/nvidia*`,
+/// WSL2 `/dev/dxg`; with none of them every adapter found would be a CPU emulation (lavapipe)
+/// or nothing, so `--backend auto` need not load the Vulkan loader and driver (about 50 MiB
+/// of resident LLVM for lavapipe) to learn it. True elsewhere, and when `WGPU_BACKEND`,
+/// `VK_ICD_FILENAMES` or `VK_DRIVER_FILES` choose a driver (then the adapter is probed).
+pub(crate) fn may_have_gpu() -> bool {
+    if !cfg!(target_os = "linux")
+        || ["WGPU_BACKEND", "VK_ICD_FILENAMES", "VK_DRIVER_FILES"]
+            .iter()
+            .any(|v| std::env::var_os(v).is_some())
+    {
+        return true;
+    }
+    gpu_device_node(Path::new("/dev")).is_some()
+}
+
+/// The first GPU device node under `dev` (a `/dev`): `dri/renderD*`, `nvidia*`, `dxg`.
+fn gpu_device_node(dev: &Path) -> Option<std::path::PathBuf> {
+    let named = |dir: &Path, f: &dyn Fn(&str) -> bool| {
+        std::fs::read_dir(dir)
+            .ok()?
+            .flatten()
+            .map(|e| e.path())
+            .find(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(f))
+    };
+    named(&dev.join("dri"), &|n| n.starts_with("renderD"))
+        .or_else(|| named(dev, &|n| n.starts_with("nvidia") || n == "dxg"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -77,5 +108,25 @@ mod tests {
         let v = vec![1u8; 32 << 20];
         assert!(peak_rss() >= 32 << 20, "{}", peak_rss());
         drop(v);
+    }
+
+    /// Device nodes in a made-up `/dev`: only a render node, an NVIDIA node or WSL's dxg
+    /// count (a DRM card node without a render node, as on a display-only controller, does not).
+    #[test]
+    fn gpu_device_nodes_are_found() {
+        let dev = tempfile::tempdir().unwrap();
+        let d = dev.path();
+        assert_eq!(gpu_device_node(d), None);
+        std::fs::create_dir(d.join("dri")).unwrap();
+        std::fs::write(d.join("dri/card0"), "").unwrap();
+        std::fs::write(d.join("null"), "").unwrap();
+        assert_eq!(gpu_device_node(d), None);
+        std::fs::write(d.join("dri/renderD128"), "").unwrap();
+        assert_eq!(gpu_device_node(d), Some(d.join("dri/renderD128")));
+        for node in ["nvidia0", "dxg"] {
+            let other = tempfile::tempdir().unwrap();
+            std::fs::write(other.path().join(node), "").unwrap();
+            assert_eq!(gpu_device_node(other.path()), Some(other.path().join(node)));
+        }
     }
 }

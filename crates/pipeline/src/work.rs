@@ -17,8 +17,9 @@ use crate::BuildSettings;
 /// build with another layout is never resumed. 2: compact records (`voxlod_tile::RecordLayout`),
 /// no spool for memory-mapped inputs. 3: OBJ material ids for every used material, and in a
 /// build with the material channel each leaf log record holds a second zstd frame (the
-/// materials).
-pub const WORK_FORMAT: u32 = 3;
+/// materials). 4: leaf log records hold the leaf's half and its encoded node's fields (the
+/// LOD stage does not decode the leaves).
+pub const WORK_FORMAT: u32 = 4;
 
 /// The files of a work folder: the one place that names them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

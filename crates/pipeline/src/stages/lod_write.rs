@@ -1,5 +1,6 @@
-//! The LOD + write stage: the leaves from the leaf log in Morton order (decoded on a second
-//! thread, one leaf ahead), their parents by sort-and-compact (`octree_writer.rs`, `voxlod_lod`),
+//! The LOD + write stage: the leaves from the leaf log in Morton order (read on a second
+//! thread, one leaf ahead; their payloads copied, not decoded), their parents by
+//! sort-and-compact (`octree_writer.rs`, `voxlod_lod`; level 1 from the leaves' halves),
 //! written in post-order as soon as their last child is done; then the manifest, and the
 //! output renamed into place.
 //!
@@ -9,7 +10,7 @@
 use std::time::Instant;
 
 use anyhow::Context;
-use voxlod_format::channel::{decode_materials, first_frame_len};
+use voxlod_format::channel::decode_materials;
 use voxlod_format::{EncodedChannel, EncodedNode, FileSpec, Voxel, Writer, CHANNEL_MATERIAL};
 
 use super::ingest::Ingested;
@@ -39,7 +40,7 @@ pub(crate) fn run(
     let t = Instant::now();
     let s = ctx.settings;
     let grid = &ingested.grid;
-    check_output_space(ctx, voxelized.marker.records)?;
+    check_output_space(ctx, voxelized.marker.leaf_payload_bytes)?;
     let spec = FileSpec {
         resolution: grid.resolution,
         levels: grid.levels(),
@@ -68,11 +69,7 @@ pub(crate) fn run(
 
 /// The file holds every leaf payload: refuses before writing if the output's folder cannot
 /// hold even those (the work folder is kept, see `build`), warns if it may not hold the rest.
-fn check_output_space(ctx: &mut BuildContext, records: u64) -> Result<(), StageError> {
-    let leaves = ctx.work.file(WorkFile::Leaves);
-    let leaf_payloads = std::fs::metadata(&leaves)
-        .map_or(0, |m| m.len())
-        .saturating_sub(leaf_log::RECORD_HEADER_BYTES * records);
+fn check_output_space(ctx: &mut BuildContext, leaf_payloads: u64) -> Result<(), StageError> {
     let output = ctx.output.output();
     let out_dir = crate::output::output_dir(output);
     let Some(free) = crate::system::free_disk(out_dir) else {
@@ -99,17 +96,20 @@ fn check_output_space(ctx: &mut BuildContext, records: u64) -> Result<(), StageE
     Ok(())
 }
 
-/// A decoded leaf: chunk coordinates, voxels, encoded payload (None when empty), and in a
-/// build with the material channel the voxels' materials and their payload.
+/// A leaf from the log: chunk coordinates, its half, the half's materials, its encoded payload
+/// (None when empty) and its encoded material payload (with the material channel).
 type Leaf = (
     [u32; 3],
     Vec<Voxel>,
+    Option<Vec<u32>>,
     Option<EncodedNode>,
-    Option<(Vec<u32>, EncodedChannel)>,
+    Option<EncodedChannel>,
 );
 
-/// Feeds the leaf log to `octree`. The log is read and decoded on a second thread, one leaf
-/// ahead of the merges and parent encodes of this one (two decoded leaves in flight at most).
+/// Feeds the leaf log to `octree`. The log is read and split on a second thread, one leaf
+/// ahead of the merges and parent encodes of this one (two leaves in flight at most). The
+/// leaves' payloads are not decoded: they go into the file as the voxelize stage encoded
+/// them, and their parents are made from their halves.
 fn write_leaves(
     ctx: &BuildContext,
     octree: &mut OctreeWriter,
@@ -125,7 +125,7 @@ fn write_leaves(
                 if let Err(e) = ctx.check_interrupt() {
                     return Err(anyhow::anyhow!(ctx.stop.set(e)));
                 }
-                let leaf = decode_leaf(h, payload, materials)?;
+                let leaf = split_leaf(h, payload, materials)?;
                 // a closed channel means the writer failed: stop reading
                 tx.send(Ok(leaf))
                     .map_err(|_| anyhow::anyhow!("the octree writer stopped"))
@@ -139,8 +139,8 @@ fn write_leaves(
         let rx = rx;
         let mut n = 0u64;
         for leaf in rx.iter() {
-            let (coord, voxels, enc, mats) = leaf?;
-            octree.push_leaf(coord, voxels, enc, mats)?;
+            let (coord, half, half_mats, enc, menc) = leaf?;
+            octree.push_halved(coord, half, half_mats, enc, menc)?;
             n += 1;
             bar.set(n, records);
         }
@@ -150,33 +150,32 @@ fn write_leaves(
     Ok(())
 }
 
-/// A leaf log record decoded.
-/// With `materials`, the record holds the voxel frame and then the material frame.
-fn decode_leaf(
+/// A leaf log record split into its parts. With `materials`, the material frame is checked
+/// (decoded) and kept encoded.
+fn split_leaf(
     h: &leaf_log::RecordHeader,
-    mut payload: Vec<u8>,
+    payload: Vec<u8>,
     materials: bool,
 ) -> anyhow::Result<Leaf> {
     if h.voxel_count == 0 {
-        return Ok((h.coord, Vec::new(), None, None));
+        return Ok((h.coord, Vec::new(), None, None, None));
     }
-    let what = || format!("leaf log record {}", h.chunk);
-    let (mats, crc) = if materials {
-        let at = first_frame_len(&payload)
+    let leaf = leaf_log::StoredLeaf::split(h, payload, materials)?;
+    let menc = if materials {
+        let (_, m) = decode_materials(leaf.materials, h.voxel_count)
             .map_err(anyhow::Error::msg)
-            .with_context(what)?;
-        let rest = payload.split_off(at);
-        let m = decode_materials(rest, h.voxel_count)
-            .map_err(anyhow::Error::msg)
-            .with_context(what)?;
-        (Some(m), crc32fast::hash(&payload))
+            .with_context(|| format!("leaf log record {}", h.chunk))?;
+        Some(m)
     } else {
-        (None, h.payload_crc32)
+        None
     };
-    let mut voxels: Vec<Voxel> = Vec::new();
-    let enc =
-        EncodedNode::from_payload(payload, h.voxel_count, crc, &mut voxels).with_context(what)?;
-    Ok((h.coord, voxels, Some(enc), mats))
+    Ok((
+        h.coord,
+        leaf.half,
+        leaf.half_materials,
+        Some(leaf.node),
+        menc,
+    ))
 }
 
 /// The manifest without its `levels` (known once the file is written).

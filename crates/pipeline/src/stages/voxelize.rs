@@ -1,24 +1,27 @@
 //! The voxelize stage: every leaf chunk's triangles through a [`Voxelize`] implementation (the
-//! CPU chunk voxelizers or the GPU one, `backend.rs`), each chunk's voxels encoded on its
-//! worker and appended strictly in Morton order to the leaf log (`leaves.bin`), which resumes
-//! at chunk granularity. Workers run at most a window of chunks ahead of the log
-//! (`window.rs`); a worker's panic becomes an error naming its chunk.
+//! CPU chunk voxelizers or the GPU one, `backend.rs`), each chunk's voxels encoded and halved
+//! (merged alone to its parent's resolution, for the LOD stage) on its worker and appended
+//! strictly in Morton order to the leaf log (`leaves.bin`), which resumes at chunk granularity.
+//! Workers run at most a window of chunks ahead of the log (`window.rs`); a worker's panic
+//! becomes an error naming its chunk.
 //!
 //! Artifact and resume marker: [`LeavesMarker`] (`leaves.json`), written once every chunk is
 //! in the log; the bins are removed then.
 
+use std::cell::RefCell;
 use std::time::Instant;
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
-use voxlod_format::{encode_materials, encode_node, EncodedNode};
+use voxlod_format::{encode_materials, encode_node, EncodedNode, Voxel};
+use voxlod_lod::MergeScratch;
 use voxlod_tile::Bins;
 
 use super::tile::Tiled;
 use super::BuildContext;
 use crate::backend::{BinChunk, GpuStats, Voxelize};
 use crate::error::StageError;
-use crate::leaf_log::{self, LeafLog};
+use crate::leaf_log::{LeafLog, LeafRecord};
 use crate::progress::Stage;
 use crate::work::{Marker, WorkFile};
 
@@ -31,6 +34,8 @@ pub(crate) struct LeavesMarker {
     pub skipped: u64,
     /// Triangle records in the bins.
     pub binned_triangles: u64,
+    /// Bytes of the leaves' payloads in the log (what the octree file holds of them).
+    pub leaf_payload_bytes: u64,
 }
 
 impl Marker for LeavesMarker {
@@ -105,21 +110,31 @@ pub(crate) fn run_with(
     }
     let gpu_stats = vz.gpu_stats()?;
     drop(vz);
-    let records = log.records();
-    log.finish()?;
-    let mut skipped = 0u64;
-    leaf_log::read_log(&leaves_path, &mut |h, _| {
-        skipped += h.skipped as u64;
-        Ok(())
-    })?;
     let m = LeavesMarker {
-        records,
-        skipped,
+        records: log.records(),
+        skipped: log.skipped(),
         binned_triangles: tiled.bins.total(),
+        leaf_payload_bytes: log.frame_bytes(),
     };
+    log.finish()?;
     ctx.work.set_marker(&m)?;
     ctx.stage_done("voxelize", t, start > 0);
     Ok((m, gpu_stats))
+}
+
+/// A leaf chunk's result, as its worker leaves it for the leaf log (`leaf_log::LeafRecord`).
+#[derive(Default)]
+struct Encoded {
+    node: Option<EncodedNode>,
+    materials: Vec<u8>,
+    half: Vec<Voxel>,
+    half_materials: Vec<u32>,
+    skipped: u64,
+}
+
+thread_local! {
+    /// The halving buffers of each worker.
+    static HALVE: RefCell<MergeScratch> = RefCell::new(MergeScratch::new());
 }
 
 /// Voxelizes and encodes the chunks after those in `log` on the workers, at most a window
@@ -135,21 +150,40 @@ fn append_chunks(
     let bar = Stage::items(ctx.progress, "voxelize", chunks.len() as u64);
     bar.set(start as u64, chunks.len() as u64);
     let zstd_level = ctx.settings.zstd_level;
-    type Encoded = (Option<EncodedNode>, Vec<u8>, u64);
+    // a leaf that is not the root gets its half (its share of its parent) here, on its worker
+    let halves = ctx.settings.resolution > voxlod_geom::CHUNK;
     let voxelize_one = |i: usize| -> Result<Encoded, StageError> {
         let r = vz.voxelize(&BinChunk { bins, index: i })?;
+        if r.voxels.is_empty() {
+            return Ok(Encoded {
+                skipped: r.skipped,
+                ..Encoded::default()
+            });
+        }
         let what = || format!("encoding leaf chunk {:?}", chunks[i].coord);
-        let enc = if r.voxels.is_empty() {
-            None
-        } else {
-            Some(encode_node(&r.voxels, zstd_level).with_context(what)?)
-        };
+        let node = Some(encode_node(&r.voxels, zstd_level).with_context(what)?);
         // the material channel's payload goes after the voxels' in the leaf log record
-        let mats = match &r.materials {
-            Some(m) if !m.is_empty() => encode_materials(m, zstd_level).with_context(what)?.payload,
-            _ => Vec::new(),
+        let materials = match &r.materials {
+            Some(m) => encode_materials(m, zstd_level).with_context(what)?.payload,
+            None => Vec::new(),
         };
-        Ok((enc, mats, r.skipped))
+        let mut half = Vec::new();
+        let mut half_materials = Vec::new();
+        if halves {
+            let c = chunks[i].coord;
+            let octant = (c[0] & 1 | (c[1] & 1) << 1 | (c[2] & 1) << 2) as usize;
+            HALVE.with(|s| s.borrow_mut().halve(&r.voxels, octant, &mut half));
+            if let Some(m) = &r.materials {
+                half_materials = voxlod_lod::halve_materials(&r.voxels, m);
+            }
+        }
+        Ok(Encoded {
+            node,
+            materials,
+            half,
+            half_materials,
+            skipped: r.skipped,
+        })
     };
     let interrupt_after = ctx.settings.interrupt_after_chunks;
     crate::window::ordered(
@@ -160,8 +194,14 @@ fn append_chunks(
         &voxelize_one,
         &mut |i, r| {
             ctx.check_interrupt()?;
-            let (enc, mats, skipped) = r?;
-            log.append_with(i as u64, chunks[i].coord, enc.as_ref(), &mats, skipped)?;
+            let e = r?;
+            let leaf = e.node.as_ref().map(|node| LeafRecord {
+                node,
+                materials: &e.materials,
+                half: &e.half,
+                half_materials: &e.half_materials,
+            });
+            log.append(i as u64, chunks[i].coord, leaf.as_ref(), e.skipped)?;
             log.flush()?;
             bar.set(i as u64 + 1, chunks.len() as u64);
             if interrupt_after.is_some_and(|n| i as u64 + 1 >= n) {
