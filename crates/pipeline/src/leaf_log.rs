@@ -125,13 +125,6 @@ impl LeafLog {
         extra: &[u8],
         skipped: u64,
     ) -> Result<()> {
-        if chunk != self.records {
-            bail!(
-                "leaf log {}: chunk {chunk} appended after {} records",
-                self.path.display(),
-                self.records
-            );
-        }
         let joined;
         let payload = match node {
             Some(n) if !extra.is_empty() => {
@@ -140,11 +133,31 @@ impl LeafLog {
             }
             _ => node.map_or(&[][..], |n| n.payload()),
         };
+        let count = node.map_or(0, |n| n.voxel_count());
+        self.append_record(chunk, coord, count, payload, skipped)
+    }
+
+    /// Appends a record of `count` items (voxels; triangles in the source log) with `payload`.
+    pub fn append_record(
+        &mut self,
+        chunk: u64,
+        coord: [u32; 3],
+        count: u32,
+        payload: &[u8],
+        skipped: u64,
+    ) -> Result<()> {
+        if chunk != self.records {
+            bail!(
+                "log {}: chunk {chunk} appended after {} records",
+                self.path.display(),
+                self.records
+            );
+        }
         let mut h = RecordHeader {
             magic: MAGIC,
             chunk: chunk as u32,
             coord,
-            voxel_count: node.map_or(0, |n| n.voxel_count()),
+            voxel_count: count,
             payload_len: payload.len() as u32,
             payload_crc32: crc32fast::hash(payload),
             skipped: skipped.min(u32::MAX as u64) as u32,
@@ -180,33 +193,59 @@ impl LeafLog {
     }
 }
 
-/// Reads a finished log in order, handing each record and its payload to `f`.
-pub fn read_log(
-    path: &Path,
-    f: &mut dyn FnMut(&RecordHeader, Vec<u8>) -> Result<()>,
-) -> Result<()> {
-    let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let mut r = BufReader::with_capacity(4 << 20, file);
-    let mut expect = 0u64;
-    loop {
+/// Reads a finished log record by record, checking each (the source log is read beside the
+/// leaf log this way).
+pub struct LogReader {
+    path: PathBuf,
+    r: BufReader<File>,
+    expect: u64,
+}
+
+impl LogReader {
+    /// Opens the log at `path` for reading from its first record.
+    pub fn open(path: &Path) -> Result<LogReader> {
+        let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
+        Ok(LogReader {
+            path: path.to_path_buf(),
+            r: BufReader::with_capacity(4 << 20, file),
+            expect: 0,
+        })
+    }
+
+    /// The next record and its payload, checksums checked; `None` at the end.
+    pub fn next_record(&mut self) -> Result<Option<(RecordHeader, Vec<u8>)>> {
+        let (path, expect) = (&self.path, self.expect);
         let mut h = RecordHeader::zeroed();
-        match r.read_exact(bytemuck::bytes_of_mut(&mut h)) {
+        match self.r.read_exact(bytemuck::bytes_of_mut(&mut h)) {
             Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(None),
             Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
         }
         if h.magic != MAGIC || h.crc() != h.header_crc32 || h.chunk as u64 != expect {
             bail!("{}: record {expect} is corrupt", path.display());
         }
         let mut payload = vec![0u8; h.payload_len as usize];
-        r.read_exact(&mut payload)
+        self.r
+            .read_exact(&mut payload)
             .with_context(|| format!("{}: record {expect} is truncated", path.display()))?;
         if crc32fast::hash(&payload) != h.payload_crc32 {
             bail!("{}: record {expect}'s payload is corrupt", path.display());
         }
-        f(&h, payload)?;
-        expect += 1;
+        self.expect += 1;
+        Ok(Some((h, payload)))
     }
+}
+
+/// Reads a finished log in order, handing each record and its payload to `f`.
+pub fn read_log(
+    path: &Path,
+    f: &mut dyn FnMut(&RecordHeader, Vec<u8>) -> Result<()>,
+) -> Result<()> {
+    let mut r = LogReader::open(path)?;
+    while let Some((h, payload)) = r.next_record()? {
+        f(&h, payload)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

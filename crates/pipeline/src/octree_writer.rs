@@ -70,6 +70,9 @@ struct Queued {
     payload: Payload,
     /// Voxel bytes the merge and encode hold (0 for ready payloads).
     bytes: u64,
+    /// A leaf's source-triangle payload (`--source-geometry`), written after its other
+    /// channels.
+    source: Option<EncodedChannel>,
 }
 
 /// Receives leaf chunks in Morton order and writes leaves and parents in post-order.
@@ -116,13 +119,15 @@ impl<'p> OctreeWriter<'p> {
     /// schedules it for its parent. Leaves must come in strictly increasing Morton order.
     /// `encoded` is `None` exactly when the chunk has no voxels (then nothing is stored).
     /// In a build with the material channel, `materials` holds the leaf's per-voxel materials
-    /// and their encoded payload (and the writer was made with that channel).
+    /// and their encoded payload (and the writer was made with that channel); in a build with
+    /// source geometry, `source` the leaf's source-triangle payload (the writer's last channel).
     pub fn push_leaf(
         &mut self,
         coord: [u32; 3],
         voxels: Vec<Voxel>,
         encoded: Option<EncodedNode>,
         materials: Option<(Vec<u32>, EncodedChannel)>,
+        source: Option<EncodedChannel>,
     ) -> Result<()> {
         let m = voxlod_geom::morton3(coord[0], coord[1], coord[2]);
         anyhow::ensure!(
@@ -134,7 +139,15 @@ impl<'p> OctreeWriter<'p> {
             Some(enc) if !voxels.is_empty() => {
                 let (mats, menc) = materials.unzip();
                 let voxels = Child::Done(Arc::new((voxels, mats)));
-                self.emit(0, coord, 0, voxels, Payload::Ready((enc, menc)), 0)
+                let node = Queued {
+                    level: 0,
+                    coord,
+                    child_mask: 0,
+                    payload: Payload::Ready((enc, menc)),
+                    bytes: 0,
+                    source,
+                };
+                self.emit(node, voxels)
             }
             None if voxels.is_empty() => Ok(()),
             _ => anyhow::bail!("leaf {coord:?}: voxels and encoded payload disagree"),
@@ -143,15 +156,8 @@ impl<'p> OctreeWriter<'p> {
 
     /// Post-order: before node (level, coord) is written, every pending parent of an earlier
     /// subtree is completed and written; then the node itself; then it waits for its parent.
-    fn emit(
-        &mut self,
-        level: u32,
-        coord: [u32; 3],
-        child_mask: u8,
-        voxels: Child,
-        payload: Payload,
-        bytes: u64,
-    ) -> Result<()> {
+    fn emit(&mut self, node: Queued, voxels: Child) -> Result<()> {
+        let (level, coord) = (node.level, node.coord);
         for l in level..self.levels.saturating_sub(1) {
             let shift = l + 1 - level;
             let ancestor = [coord[0] >> shift, coord[1] >> shift, coord[2] >> shift];
@@ -162,13 +168,7 @@ impl<'p> OctreeWriter<'p> {
                 self.flush(l)?;
             }
         }
-        self.enqueue(Queued {
-            level,
-            coord,
-            child_mask,
-            bytes,
-            payload,
-        })?;
+        self.enqueue(node)?;
         if level + 1 < self.levels {
             let parent = [coord[0] >> 1, coord[1] >> 1, coord[2] >> 1];
             let octant = (coord[0] & 1 | (coord[1] & 1) << 1 | (coord[2] & 1) << 2) as usize;
@@ -235,7 +235,15 @@ impl<'p> OctreeWriter<'p> {
             let _ = etx.send(enc);
         });
         let (voxels, payload) = (Child::Merging(vrx), Payload::Encoding(erx));
-        self.emit(level + 1, p.parent, p.mask, voxels, payload, bytes as u64)
+        let node = Queued {
+            level: level + 1,
+            coord: p.parent,
+            child_mask: p.mask,
+            payload,
+            bytes: bytes as u64,
+            source: None,
+        };
+        self.emit(node, voxels)
     }
 
     /// Appends a node to the write queue, then writes what is ready at its head (waiting for
@@ -286,10 +294,12 @@ impl<'p> OctreeWriter<'p> {
             };
             self.stats[q.level as usize].nodes += 1;
             self.stats[q.level as usize].voxels += enc.voxel_count() as u64;
-            let channels = match mat {
-                Some(m) => vec![Some(m)],
-                None => Vec::new(),
-            };
+            // the file's channels in id order: material (1) if the build has it, then the
+            // source triangles (2), which only leaves carry
+            let mut channels: Vec<Option<&EncodedChannel>> = mat.iter().map(Some).collect();
+            if q.source.is_some() {
+                channels.push(q.source.as_ref());
+            }
             self.writer
                 .write_node_with(q.level, q.coord, q.child_mask, enc, &channels)
                 .with_context(|| format!("writing node level {} {:?}", q.level, q.coord))?;
@@ -447,7 +457,8 @@ mod tests {
             );
             for (coord, v) in leaves.values() {
                 let enc = encode_node(v, 3).unwrap();
-                ow.push_leaf(*coord, v.clone(), Some(enc), None).unwrap();
+                ow.push_leaf(*coord, v.clone(), Some(enc), None, None)
+                    .unwrap();
             }
             ow.finish(|_| serde_json::json!({})).unwrap();
             assert!(

@@ -10,7 +10,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use voxlod_format::channel::{decode_materials, first_frame_len};
-use voxlod_format::{EncodedChannel, EncodedNode, FileSpec, Voxel, Writer, CHANNEL_MATERIAL};
+use voxlod_format::{
+    EncodedChannel, EncodedNode, FileSpec, Voxel, Writer, CHANNEL_MATERIAL, CHANNEL_TRIANGLES,
+};
 
 use super::ingest::Ingested;
 use super::voxelize::Voxelized;
@@ -49,8 +51,15 @@ pub(crate) fn run(
     };
     // the material channel: its records follow each leaf's payload in the leaf log
     let materials = crate::textures::has_material_channel(ctx.source.info());
-    let channels: &[u32] = if materials { &[CHANNEL_MATERIAL] } else { &[] };
-    let writer = Writer::create_with_channels(ctx.output.staged(), spec, channels)?;
+    let mut channels = Vec::new();
+    if materials {
+        channels.push(CHANNEL_MATERIAL);
+    }
+    // the source triangles (`--source-geometry`): the source log's records, beside the leaves
+    if s.source_geometry {
+        channels.push(CHANNEL_TRIANGLES);
+    }
+    let writer = Writer::create_with_channels(ctx.output.staged(), spec, &channels)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &ctx.pool);
     write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
     let manifest = manifest_fields(ctx, ingested);
@@ -99,13 +108,15 @@ fn check_output_space(ctx: &mut BuildContext, records: u64) -> Result<(), StageE
     Ok(())
 }
 
-/// A decoded leaf: chunk coordinates, voxels, encoded payload (None when empty), and in a
-/// build with the material channel the voxels' materials and their payload.
+/// A decoded leaf: chunk coordinates, voxels, encoded payload (None when empty), in a
+/// build with the material channel the voxels' materials and their payload, and in a build
+/// with source geometry the leaf's source-triangle payload (None when no triangle touches it).
 type Leaf = (
     [u32; 3],
     Vec<Voxel>,
     Option<EncodedNode>,
     Option<(Vec<u32>, EncodedChannel)>,
+    Option<EncodedChannel>,
 );
 
 /// Feeds the leaf log to `octree`. The log is read and decoded on a second thread, one leaf
@@ -117,6 +128,11 @@ fn write_leaves(
     materials: bool,
 ) -> Result<(), StageError> {
     let leaves = ctx.work.file(WorkFile::Leaves);
+    let mut sources = ctx
+        .settings
+        .source_geometry
+        .then(|| leaf_log::LogReader::open(&ctx.work.file(WorkFile::Source)))
+        .transpose()?;
     let bar = Stage::items(ctx.progress, "lod+write", records);
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Leaf, StageError>>(1);
     std::thread::scope(|scope| -> Result<(), StageError> {
@@ -125,7 +141,10 @@ fn write_leaves(
                 if let Err(e) = ctx.check_interrupt() {
                     return Err(anyhow::anyhow!(ctx.stop.set(e)));
                 }
-                let leaf = decode_leaf(h, payload, materials)?;
+                let mut leaf = decode_leaf(h, payload, materials)?;
+                if let Some(log) = &mut sources {
+                    leaf.4 = crate::stages::source::leaf_channel(log, h)?;
+                }
                 // a closed channel means the writer failed: stop reading
                 tx.send(Ok(leaf))
                     .map_err(|_| anyhow::anyhow!("the octree writer stopped"))
@@ -139,8 +158,8 @@ fn write_leaves(
         let rx = rx;
         let mut n = 0u64;
         for leaf in rx.iter() {
-            let (coord, voxels, enc, mats) = leaf?;
-            octree.push_leaf(coord, voxels, enc, mats)?;
+            let (coord, voxels, enc, mats, source) = leaf?;
+            octree.push_leaf(coord, voxels, enc, mats, source)?;
             n += 1;
             bar.set(n, records);
         }
@@ -158,7 +177,7 @@ fn decode_leaf(
     materials: bool,
 ) -> anyhow::Result<Leaf> {
     if h.voxel_count == 0 {
-        return Ok((h.coord, Vec::new(), None, None));
+        return Ok((h.coord, Vec::new(), None, None, None));
     }
     let what = || format!("leaf log record {}", h.chunk);
     let (mats, crc) = if materials {
@@ -176,7 +195,7 @@ fn decode_leaf(
     let mut voxels: Vec<Voxel> = Vec::new();
     let enc =
         EncodedNode::from_payload(payload, h.voxel_count, crc, &mut voxels).with_context(what)?;
-    Ok((h.coord, voxels, Some(enc), mats))
+    Ok((h.coord, voxels, Some(enc), mats, None))
 }
 
 /// The manifest without its `levels` (known once the file is written).
