@@ -21,6 +21,8 @@ Usage:
                                              # and every material payload, 14.3)
     voxlod_read.py FILE --node L X Y Z --materials OUT
         # write the node's per-voxel material ids (u32 LE, voxel order; section 14.3)
+    voxlod_read.py FILE --node 0 X Y Z --source OUT
+        # write the leaf's source triangles as JSON (codes as stored; section 14.4)
 
 As a library:
     f = VoxlodFile("bunny.voxlod")
@@ -28,6 +30,7 @@ As a library:
     v = f.decode(f.nodes[-1])                # the root: dict of numpy arrays
     v["pos"], v["mask"], v["normal"], v["color"]
     f.materials(f.nodes[-1])                 # per-voxel material ids, or None (section 14)
+    f.source(f.nodes[0])                     # a leaf's source triangles, or None (14.4)
 """
 
 import argparse
@@ -50,6 +53,8 @@ ZSTD_MAGIC = 0xFD2FB528
 SKIPPABLE_MAGIC = 0x184D2A50  # ..0x184D2A5F
 # Section 14: optional channels (version 2).
 CHANNEL_MATERIAL = 1
+CHANNEL_TRIANGLES = 2
+MAX_SOURCE_TRIANGLES = 1 << 26
 MAX_CHANNELS = 16
 MAX_MATERIAL_TABLE = 65536
 
@@ -391,6 +396,8 @@ class VoxlodFile:
                     raise FormatError(f"{name}: channel {cid} payload not contiguous/inside")
                 if cid == CHANNEL_MATERIAL and not 1 <= ccount <= min(n, MAX_MATERIAL_TABLE):
                     raise FormatError(f"{name}: material table of {ccount} entries")
+                if cid == CHANNEL_TRIANGLES and (lvl or not 1 <= ccount <= MAX_SOURCE_TRIANGLES):
+                    raise FormatError(f"{name}: source triangles ({ccount}) at level {lvl}")
                 expected_offset = coff + csz
             bmin, bmax = e["bounds_min"], e["bounds_max"]
             if bmin[3] or bmax[3] or any(bmin[a] > bmax[a] for a in range(3)):
@@ -447,14 +454,8 @@ class VoxlodFile:
             if crc32(payload) != int(entry["payload_crc32"]):
                 raise FormatError("payload CRC mismatch")
             check_frame(payload, n)
-            try:
-                # check_frame bounded the output to 12·n bytes (the frame's content size)
-                dobj = self._dctx.decompressobj()
-                block = dobj.decompress(payload)
-                if not dobj.eof or dobj.unused_data:
-                    raise FormatError("the zstd frame is cut short or followed by more bytes")
-            except zstandard.ZstdError as e:
-                raise FormatError(f"zstd: {e}") from None
+            # check_frame bounded the output to 12·n bytes (the frame's content size)
+            block = self._decompress(payload)
         except FormatError as e:
             raise FormatError(f"{self.path}: {name}: {e}") from None
         name = f"{self.path}: {name}"
@@ -500,6 +501,17 @@ class VoxlodFile:
         records = np.stack([pos_mask, nw, words[2]], axis=1)
         return {"pos": pos, "mask": mask, "normal": normal, "color": color, "records": records}
 
+    def _decompress(self, payload):
+        """One zstd frame, checked by check_frame before: the whole payload, nothing after it."""
+        try:
+            dobj = self._dctx.decompressobj()
+            block = dobj.decompress(payload)
+            if not dobj.eof or dobj.unused_data:
+                raise FormatError("the zstd frame is cut short or followed by more bytes")
+        except zstandard.ZstdError as e:
+            raise FormatError(f"zstd: {e}") from None
+        return block
+
     def materials(self, entry):
         """Section 14.3: the per-voxel material ids of a node (n,) u32 in voxel order, or
         None if the file has no material channel."""
@@ -515,13 +527,7 @@ class VoxlodFile:
                 raise FormatError("payload CRC mismatch")
             want = 4 * t + 2 * n
             check_frame(payload, n, want, f"4·{t} + 2·{n}")
-            try:
-                dobj = self._dctx.decompressobj()
-                block = dobj.decompress(payload)
-                if not dobj.eof or dobj.unused_data:
-                    raise FormatError("the zstd frame is cut short or followed by more bytes")
-            except zstandard.ZstdError as e:
-                raise FormatError(f"zstd: {e}") from None
+            block = self._decompress(payload)
             if len(block) != want:
                 raise FormatError(f"block is {len(block)} bytes, expected {want}")
         except FormatError as e:
@@ -537,12 +543,103 @@ class VoxlodFile:
             raise FormatError(f"{name}: a table entry is used by no voxel")
         return table[idx].astype(np.uint32)
 
+    def source(self, entry):
+        """Section 14.4: a leaf's source triangles as a dict of numpy arrays ("codes" (V,3)
+        u16, "positions" (V,3) f64 voxels in the chunk's frame, "normal_codes" (V,2) u16 and
+        "normals" (V,3) f64 or None, "colors" (V,4) u8 or None, "triangles" (T,3) u32,
+        "materials" (T,) u16 or None), or None if the node has no payload in the channel."""
+        if CHANNEL_TRIANGLES not in self.channels:
+            return None
+        i = self.find(int(entry["level"]), int(entry["x"]), int(entry["y"]), int(entry["z"]))
+        off, sz, crc, t = self.channels[CHANNEL_TRIANGLES][i]
+        if sz == 0:
+            return None
+        name = (f"{self.path}: node (level {int(entry['level'])}, {int(entry['x'])},"
+                f"{int(entry['y'])},{int(entry['z'])}): source triangles")
+        try:
+            return self._source_block(self._read(off, sz, "source payload"), crc, t)
+        except FormatError as e:
+            raise FormatError(f"{name}: {e}") from None
+
+    def _source_block(self, payload, crc, t):
+        if crc32(payload) != crc:
+            raise FormatError("payload CRC mismatch")
+        if not 1 <= t <= MAX_SOURCE_TRIANGLES:
+            raise FormatError(f"entry count {t} outside [1, 2^26]")
+        bound = 16 + 3 * t * 14 + 14 * t
+        try:
+            size = zstandard.get_frame_parameters(payload).content_size
+        except zstandard.ZstdError:
+            size = None
+        if size is not None and size <= bound:
+            check_frame(payload, 0, size, f"at most {bound}")
+        else:
+            check_frame(payload, 0, bound, f"at most {bound}")
+        block = self._decompress(payload)
+        if len(block) < 16:
+            raise FormatError("block shorter than its 16-byte head")
+        v, bt, attrs, res = struct.unpack_from("<IIII", block, 0)
+        if bt != t or attrs & ~7 or res:
+            raise FormatError(f"head says {bt} triangles, attributes {attrs:#x}, reserved {res:#x}")
+        if not 1 <= v <= 3 * t:
+            raise FormatError(f"{v} vertices for {t} triangles")
+        normals, colors, mats = attrs & 1, attrs & 2, attrs & 4
+        want = 16 + v * (6 + 4 * bool(normals) + 4 * bool(colors)) + t * (12 + 2 * bool(mats))
+        if len(block) != want:
+            raise FormatError(f"block is {len(block)} bytes, expected {want}")
+        at = [16]
+
+        def planes(count, width):
+            raw = np.frombuffer(block, dtype=np.uint8, count=count * width, offset=at[0])
+            at[0] += count * width
+            raw = raw.reshape(width, count).astype(np.uint32)
+            return sum(raw[b] << np.uint32(8 * b) for b in range(width)).astype(np.uint32)
+
+        out = {}
+        codes = np.stack([planes(v, 2) for _ in range(3)], axis=1).astype(np.uint16)
+        out["codes"] = codes
+        out["positions"] = codes.astype(np.float64) / 128.0 - 128.0
+        out["normal_codes"] = out["normals"] = out["colors"] = out["materials"] = None
+        if normals:
+            nc = np.stack([planes(v, 2), planes(v, 2)], axis=1).astype(np.uint16)
+            out["normal_codes"] = nc
+            out["normals"] = oct_decode(nc)
+        if colors:
+            out["colors"] = np.stack([planes(v, 1) for _ in range(4)], axis=1).astype(np.uint8)
+        idx_codes = planes(3 * t, 4)
+        if mats:
+            out["materials"] = planes(t, 2).astype(np.uint16)
+        tris = np.empty(3 * t, dtype=np.uint32)
+        nxt = 0
+        for k, c in enumerate(idx_codes.tolist()):
+            if c > nxt:
+                raise FormatError(f"index code {c} at {k} reaches before the first vertex")
+            tris[k] = nxt - c
+            nxt += c == 0
+        if nxt != v:
+            raise FormatError(f"{v} vertices but the triangles use {nxt}")
+        out["triangles"] = tris.reshape(t, 3)
+        return out
+
     def world_min_corner(self, entry, pos):
         """Section 7: world coordinates of the voxels' minimum corners (n,3) f64."""
         lvl = int(entry["level"])
         edge = self.header["voxel_size"] * (1 << lvl)
         p = np.array([int(entry["x"]), int(entry["y"]), int(entry["z"])], dtype=np.float64)
         return np.asarray(self.header["origin"]) + edge * (256.0 * p + pos.astype(np.float64))
+
+
+def oct_decode(codes):
+    """Section 14.4: unit normals (n,3) f64 of octahedral codes (n,2) u16."""
+    u = codes[:, 0].astype(np.float64) / 65535.0 * 2.0 - 1.0
+    v = codes[:, 1].astype(np.float64) / 65535.0 * 2.0 - 1.0
+    w = 1.0 - np.abs(u) - np.abs(v)
+    su, sv = np.where(u < 0, -1.0, 1.0), np.where(v < 0, -1.0, 1.0)
+    fold = w < 0
+    u2 = np.where(fold, (1.0 - np.abs(v)) * su, u)
+    v2 = np.where(fold, (1.0 - np.abs(u)) * sv, v)
+    n = np.stack([u2, v2, w], axis=1)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
 def node_dict(e):
@@ -568,6 +665,8 @@ def main(argv=None):
     ap.add_argument("--raw", metavar="OUT", help="with --node: write the 12-byte records here")
     ap.add_argument("--materials", metavar="OUT",
                     help="with --node: write the per-voxel material ids (u32 LE) here")
+    ap.add_argument("--source", metavar="OUT",
+                    help="with --node 0 X Y Z: write the leaf's source triangles as JSON here")
     ap.add_argument("--check", action="store_true", help="decode every node")
     args = ap.parse_args(argv)
     try:
@@ -588,6 +687,15 @@ def main(argv=None):
                     return 1
                 with open(args.materials, "wb") as out:
                     out.write(mats.astype("<u4").tobytes())
+            if args.source:
+                src = f.source(f.nodes[i])
+                if src is None:
+                    print("the node has no source triangles", file=sys.stderr)
+                    return 1
+                doc = {k: (None if a is None else a.tolist()) for k, a in src.items()
+                       if k not in ("positions", "normals")}
+                with open(args.source, "w") as out:
+                    json.dump(doc, out)
             if args.json:
                 print(json.dumps({
                     "node": node_dict(f.nodes[i]),
@@ -596,7 +704,7 @@ def main(argv=None):
                     "normal": v["normal"].tolist(),
                     "color": v["color"].tolist(),
                 }))
-            elif not args.raw and not args.materials:
+            elif not args.raw and not args.materials and not args.source:
                 print(f"node {tuple(args.node)}: {len(v['pos'])} voxels")
                 for j in range(min(10, len(v["pos"]))):
                     print(f"  pos {tuple(v['pos'][j].tolist())} mask {int(v['mask'][j]):#04x} "
@@ -607,6 +715,7 @@ def main(argv=None):
             for e in f.nodes:
                 f.decode(e)
                 f.materials(e)
+                f.source(e)
         h = f.header
         if args.json:
             out = {k: h[k] for k in ("version", "resolution", "levels", "mode", "mode_name",

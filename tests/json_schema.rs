@@ -261,6 +261,34 @@ fn json_output_of_each_command_matches_its_schema() {
     check("verify", &v);
     assert!(!v["problems"].as_array().unwrap().is_empty());
 
+    // a build with source geometry: its summary object, the channel in inspect, verify's count
+    let o = run(
+        &[
+            "build",
+            bunny,
+            "-o",
+            "s.voxlod",
+            "-r",
+            "256",
+            "--backend",
+            "cpu",
+            "-q",
+            "--json",
+            "--source-geometry",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    check("build", &v);
+    assert!(v["source_geometry"]["triangles_stored"].as_u64().unwrap() > 0);
+    let v = json_of(&run(&["inspect", "s.voxlod", "--json"], d));
+    check("inspect", &v);
+    assert_eq!(v["channels"][0]["name"], "source triangles");
+    let v = json_of(&run(&["verify", "s.voxlod", "--json"], d));
+    check("verify", &v);
+    assert!(v["source_triangles_checked"].as_u64().unwrap() > 0);
+
     // conservative against thin: changed nodes with all their fields
     let o = run(&["diff", "c.voxlod", "t.voxlod", "--json"], d);
     let v = json_of(&o);

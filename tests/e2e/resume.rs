@@ -69,6 +69,43 @@ fn interrupted_build_resumes_to_identical_bytes() {
     }
 }
 
+/// A `--source-geometry` build interrupted inside the source stage (after 10 chunks, then
+/// after 40 of the resumed run) resumes from its source log to the same bytes as an
+/// uninterrupted build.
+#[test]
+fn interrupted_source_geometry_build_resumes_to_identical_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (fresh, out) = (d.join("fresh.voxlod"), d.join("resumed.voxlod"));
+    let s = sample();
+    let args = |o: &Path| build_args(&s, o, &["-r", "2048", "--source-geometry"]);
+    let run = |a: Vec<String>| Command::new(BIN).args(&a).current_dir(d).output().unwrap();
+    ok(&run(args(&fresh)));
+    for stop in ["10", "40"] {
+        let mut a = args(&out);
+        a.extend([
+            "--debug-interrupt-after-chunks".to_string(),
+            stop.to_string(),
+        ]);
+        let o = run(a);
+        assert!(!o.status.success(), "an interrupted build must fail");
+        assert!(!out.exists(), "an interrupted build left an output file");
+    }
+    let mut a = args(&out);
+    a.push("--json".into());
+    let o = run(a);
+    ok(&o);
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let source = summary["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|st| st["stage"] == "source")
+        .expect("a source stage");
+    assert_eq!(source["resumed"], true);
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&fresh).unwrap());
+}
+
 /// A build killed with SIGKILL at several points resumes to the same bytes.
 #[test]
 fn killed_build_resumes_to_identical_bytes() {

@@ -39,6 +39,7 @@
 //! ```
 
 mod diff;
+mod source;
 mod verify;
 
 pub use diff::{diff, ChangedNode, DiffError, DiffReport, FieldDiff, NodeId, Tolerance};

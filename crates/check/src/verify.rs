@@ -3,7 +3,8 @@
 //! sort-and-compact merge of its stored children (Chajdas, Reitinger & Westermann 2014,
 //! section 4), computed here by `voxlod_lod::MergeScratch`; in a file with the material
 //! channel (FORMAT.md 14.3) every node's materials are decoded with their checks and each
-//! parent's compared with `voxlod_lod::merge_materials` of its children's.
+//! parent's compared with `voxlod_lod::merge_materials` of its children's; in a file with
+//! source geometry (FORMAT.md 14.4) every leaf's triangles are checked by `source.rs`.
 //!
 //! Nodes are visited in index order, which is a post-order, so a parent comes after all its
 //! children; decoded children wait in a map until their parent is checked, which bounds
@@ -60,6 +61,9 @@ pub struct VerifyReport {
     /// Parents whose materials were compared with the material LOD rule (0 without the
     /// material channel).
     pub materials_checked: usize,
+    /// Source triangles checked (FORMAT.md 14.4: decoded, each touching its chunk's box; 0
+    /// without the source-geometry channel).
+    pub source_triangles_checked: u64,
     /// Every failed check.
     pub problems: Vec<Problem>,
 }
@@ -94,6 +98,12 @@ pub fn verify(path: &Path) -> VerifyReport {
     // the material channel: decoded materials of nodes waiting for their parent
     let materials = reader.has_materials();
     let mut pending_mats: HashMap<usize, Vec<u32>> = HashMap::new();
+    // the source-geometry channel: the manifest's material count bounds the triangles' ids
+    let source = reader.has_source_triangles();
+    let material_names = reader
+        .manifest()
+        .ok()
+        .and_then(|m| m["materials"].as_array().map(Vec::len));
     for (i, e) in reader.nodes().iter().enumerate() {
         let node_problem = |what: String| Problem {
             index: Some(i),
@@ -101,6 +111,12 @@ pub fn verify(path: &Path) -> VerifyReport {
             pos: Some(e.pos()),
             what,
         };
+        if source && e.level == 0 {
+            match crate::source::check_leaf(&reader, i, material_names) {
+                Ok(n) => report.source_triangles_checked += n,
+                Err(whats) => report.problems.extend(whats.into_iter().map(&node_problem)),
+            }
+        }
         let voxels = match reader.read_node(i) {
             Ok(v) => {
                 report.nodes_decoded += 1;

@@ -8,7 +8,7 @@
 //! node), and each node's channel payloads follow its voxel payload in the payload region.
 //! Channels are identified by number; a reader skips the payloads of a channel it does not
 //! know (their placement and checksums are still checked), so a new channel (the source
-//! triangles of issue 15) needs no new version. A file without channels is version 1, byte
+//! triangles, [`CHANNEL_TRIANGLES`], `triangles.rs`) needs no new version. A file without channels is version 1, byte
 //! for byte as before.
 //!
 //! The **material channel** ([`CHANNEL_MATERIAL`]) stores per node a table of the distinct
@@ -21,7 +21,7 @@ use crate::FormatError;
 
 /// Channel id of the per-voxel material index (section 14.3).
 pub const CHANNEL_MATERIAL: u32 = 1;
-/// Channel id reserved for a leaf chunk's source triangles (issue 15; not written yet).
+/// Channel id of a leaf chunk's source triangles (section 14.4, `triangles.rs`).
 pub const CHANNEL_TRIANGLES: u32 = 2;
 /// Bytes of a [`ChannelEntry`] as this version writes it (a descriptor may say more; readers
 /// read the first 24 bytes of each entry).

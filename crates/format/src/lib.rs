@@ -54,11 +54,12 @@ mod reader;
 pub mod rules;
 mod select;
 mod spec;
+pub mod triangles;
 pub mod voxel;
 mod writer;
 
 pub use block::{encode_node, EncodedNode};
-pub use channel::{encode_materials, EncodedChannel, CHANNEL_MATERIAL};
+pub use channel::{encode_materials, EncodedChannel, CHANNEL_MATERIAL, CHANNEL_TRIANGLES};
 pub use error::FormatError;
 pub use layout::{
     child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, NODE_ENTRY_SIZE, VERSION,
@@ -69,6 +70,7 @@ pub use select::{Aabb, Camera, DepthFirst};
 pub use spec::{
     levels_for_resolution, FileSpec, CHUNK, MAX_NODE_VOXELS, MODE_CONSERVATIVE, MODE_THIN,
 };
+pub use triangles::{encode_source, SourceMesh};
 pub use voxel::Voxel;
 pub use writer::{temp_path, Writer};
 

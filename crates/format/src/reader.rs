@@ -17,13 +17,14 @@ use std::path::{Path, PathBuf};
 use crate::block::unshuffle;
 use crate::channel::{
     decode_material_block, material_block_size, ChannelDirectory, CHANNEL_MATERIAL,
-    MAX_MATERIAL_TABLE,
+    CHANNEL_TRIANGLES, MAX_MATERIAL_TABLE,
 };
 use crate::layout::{
     child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, NODE_ENTRY_SIZE, VERSION,
     VERSION_CHANNELS,
 };
 use crate::rules::{check_frame, check_frame_of, check_manifest};
+use crate::triangles::{decode_source, SourceMesh, MAX_TRIANGLES};
 use crate::voxel::Voxel;
 use crate::{FileSpec, FormatError, MAX_NODE_VOXELS};
 
@@ -248,6 +249,14 @@ impl Reader {
                         ))
                     }
                 }
+                if d.id == CHANNEL_TRIANGLES
+                    && (e.level != 0 || c.count == 0 || c.count > MAX_TRIANGLES)
+                {
+                    return bad(format!(
+                        "source triangles ({} of them) at level {} (leaf chunks only, 1..={MAX_TRIANGLES} triangles)",
+                        c.count, e.level
+                    ));
+                }
                 if d.id == CHANNEL_MATERIAL
                     && (c.count == 0 || c.count > MAX_MATERIAL_TABLE || c.count > e.voxel_count)
                 {
@@ -462,6 +471,40 @@ impl Reader {
         let block = zstd::bulk::decompress(&payload, want as usize)
             .map_err(|e| bad(format!("zstd decompression failed: {e}")))?;
         decode_material_block(&block, t, n).map(Some).map_err(bad)
+    }
+
+    /// True if the file has the source-geometry channel (FORMAT.md 14.4).
+    pub fn has_source_triangles(&self) -> bool {
+        self.channels.position(CHANNEL_TRIANGLES).is_some()
+    }
+
+    /// The source triangles stored beside leaf node `index` (FORMAT.md 14.4), checked: the
+    /// payload's CRC, the frame rules, the block's size and every index. `None` if the file has
+    /// no source-geometry channel or the node has no triangles in it. Positions are in the
+    /// chunk's frame ([`SourceMesh::position`]); the node's chunk origin in leaf voxels is
+    /// `256·(x, y, z)`.
+    pub fn source_triangles(&self, index: usize) -> Result<Option<SourceMesh>, FormatError> {
+        let Some(payload) = self.read_channel_payload(index, CHANNEL_TRIANGLES)? else {
+            return Ok(None);
+        };
+        let k = self
+            .channels
+            .position(CHANNEL_TRIANGLES)
+            .expect("has the channel");
+        let t = self.channels.entries[k][index].count;
+        decode_source(&payload, t)
+            .map(Some)
+            .map_err(|what| self.node_error(index, format!("source triangles: {what}")))
+    }
+
+    /// Triangles stored in the source-geometry channel over all nodes (0 without it).
+    pub fn source_triangle_count(&self) -> u64 {
+        self.channels.position(CHANNEL_TRIANGLES).map_or(0, |k| {
+            self.channels.entries[k]
+                .iter()
+                .map(|e| e.count as u64)
+                .sum()
+        })
     }
 
     /// The raw manifest bytes (UTF-8 JSON).

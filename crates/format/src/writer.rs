@@ -12,7 +12,7 @@ use bytemuck::Zeroable;
 
 use crate::channel::{
     ChannelDescriptor, ChannelDirectory, ChannelEntry, EncodedChannel, CHANNEL_ENTRY_SIZE,
-    CHANNEL_MATERIAL, MAX_CHANNELS,
+    CHANNEL_MATERIAL, CHANNEL_TRIANGLES, MAX_CHANNELS,
 };
 use crate::layout::{
     child_pos, order_key, Header, NodeEntry, HEADER_SIZE, MAGIC, VERSION, VERSION_CHANNELS,
@@ -171,6 +171,11 @@ impl Writer {
                         "channel {id}'s payload was encoded for {} voxels, the node has {}",
                         c.voxel_count, node.voxel_count
                     )))
+                }
+                Some(_) if id == CHANNEL_TRIANGLES && level != 0 => {
+                    return Err(bad(
+                        "source triangles are stored for leaf chunks (level 0) only".into(),
+                    ))
                 }
                 None if id == CHANNEL_MATERIAL => {
                     return Err(bad(

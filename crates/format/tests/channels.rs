@@ -9,7 +9,10 @@ mod common;
 use common::{post_order, random_voxels, Rng};
 use serde_json::json;
 use voxlod_format::channel::{CHANNEL_MATERIAL, CHANNEL_TRIANGLES};
-use voxlod_format::{encode_materials, encode_node, FileSpec, Reader, Writer, MODE_CONSERVATIVE};
+use voxlod_format::triangles::{oct_encode, SourceMesh};
+use voxlod_format::{
+    encode_materials, encode_node, encode_source, FileSpec, Reader, Writer, MODE_CONSERVATIVE,
+};
 
 type Node = (u32, [u32; 3], u8, Vec<voxlod_format::Voxel>, Vec<u32>);
 
@@ -46,10 +49,12 @@ fn write(path: &std::path::Path, nodes: &[Node], channels: &[u32]) -> Vec<u8> {
         let mat = encode_materials(mats, 3).unwrap();
         // some bytes for the other channels, on leaves only
         let extra = encode_materials(&[9], 3).unwrap();
+        let src = encode_source(&source_mesh(p[0] + 7 * p[1]), 3).unwrap();
         let cs: Vec<_> = channels
             .iter()
             .map(|&id| match id {
                 CHANNEL_MATERIAL => Some(&mat),
+                CHANNEL_TRIANGLES if *l == 0 => Some(&src),
                 _ if *l == 0 => Some(&extra),
                 _ => None,
             })
@@ -58,6 +63,26 @@ fn write(path: &std::path::Path, nodes: &[Node], channels: &[u32]) -> Vec<u8> {
     }
     w.finish(&json!({"materials": ["", "a"]})).unwrap();
     std::fs::read(path).unwrap()
+}
+
+/// A small source mesh (FORMAT.md 14.4) that differs with `seed`: a strip of triangles.
+fn source_mesh(seed: u32) -> SourceMesh {
+    let n = 3 + seed as usize % 17;
+    let positions: Vec<[u16; 3]> = (0..n as u16 + 2)
+        .map(|k| [16384 + 100 * k, 16384 + (k % 2) * 128 + seed as u16, 20000])
+        .collect();
+    SourceMesh {
+        normals: Some(
+            positions
+                .iter()
+                .map(|_| oct_encode([0.0, 0.6, 0.8]))
+                .collect(),
+        ),
+        colors: None,
+        triangles: (0..n as u32).map(|k| [k, k + 1, k + 2]).collect(),
+        materials: Some((0..n as u16).map(|k| k % 2).collect()),
+        positions,
+    }
 }
 
 fn u32_at(b: &[u8], at: usize) -> u32 {
@@ -238,4 +263,80 @@ fn writer_refuses_missing_or_mismatched_material_payloads() {
     assert!(
         Writer::create_with_channels(&path, FileSpec::new(256, 0, [0.0; 3], 1.0), &[2, 1]).is_err()
     );
+}
+
+#[test]
+fn source_channel_roundtrip_and_corruption() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("s.voxlod");
+    let nodes = tree(5);
+    let bytes = write(&path, &nodes, &[CHANNEL_TRIANGLES]);
+    let r = Reader::open(&path).unwrap();
+    assert!(r.has_source_triangles() && !r.has_materials());
+    let mut total = 0;
+    for (i, n) in nodes.iter().enumerate() {
+        let got = r.source_triangles(i).unwrap();
+        if n.0 == 0 {
+            let want = source_mesh(n.1[0] + 7 * n.1[1]);
+            total += want.triangles.len() as u64;
+            assert_eq!(got.unwrap(), want);
+        } else {
+            assert!(got.is_none());
+        }
+    }
+    assert_eq!(r.source_triangle_count(), total);
+    // the first leaf's source payload: right after its voxel payload
+    let dir_at = (u64_at(&bytes, 72) + u64_at(&bytes, 80)) as usize;
+    let entry = dir_at + 8 + 16;
+    let (off, size) = (
+        u64_at(&bytes, entry) as usize,
+        u64_at(&bytes, entry + 8) as usize,
+    );
+    let index = u64_at(&bytes, 72) as usize;
+    assert_eq!(
+        off as u64,
+        u64_at(&bytes, index + 24) + u64_at(&bytes, index + 32)
+    );
+    // a flipped payload byte: the checksum names the channel and the node
+    let mut b = bytes.clone();
+    b[off + size / 2] ^= 0x40;
+    std::fs::write(&path, &b).unwrap();
+    let e = Reader::open(&path)
+        .unwrap()
+        .source_triangles(0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("node 0") && e.contains("channel 2 payload checksum mismatch"),
+        "{e}"
+    );
+    // a valid frame and CRC around a bad block (an index code past the vertices used): the
+    // decoder's check, named
+    let mesh = source_mesh(0);
+    let mut block = mesh.to_block();
+    let codes = 16 + mesh.positions.len() * 10;
+    block[codes + 3] = 200;
+    let frame = zstd::bulk::compress(&block, 3).unwrap();
+    let e = voxlod_format::triangles::decode_source(&frame, 3).unwrap_err();
+    assert!(e.contains("reaches before the first vertex"), "{e}");
+    // a source payload on a parent is refused by the writer
+    let mut w =
+        Writer::create_with_channels(&dir.path().join("p.voxlod"), spec(), &[CHANNEL_TRIANGLES])
+            .unwrap();
+    let (l, p, m, v, _) = &nodes[0];
+    let enc = encode_node(v, 3).unwrap();
+    let src = encode_source(&source_mesh(1), 3).unwrap();
+    w.write_node_with(*l, *p, *m, &enc, &[Some(&src)]).unwrap();
+    let parent = nodes.iter().find(|n| n.0 == 1).unwrap();
+    let e = w
+        .write_node_with(
+            parent.0,
+            parent.1,
+            parent.2,
+            &encode_node(&parent.3, 3).unwrap(),
+            &[Some(&src)],
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("leaf chunks (level 0) only"), "{e}");
 }

@@ -395,7 +395,7 @@ pub(crate) struct GpuStats {
 
 /// Triangles per read of a chunk's bins (the CPU voxelizer's batch; the GPU voxelizer
 /// re-batches to its own size).
-const READ_BATCH: usize = 64 * 1024;
+pub(crate) const READ_BATCH: usize = 64 * 1024;
 
 /// The voxelizer of one build for `s.backend`, with a description for the summary.
 /// `cpu_workers` CPU voxelizers run on `threads` threads; `bins` is for the cutoff search.

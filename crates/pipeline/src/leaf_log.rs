@@ -167,15 +167,8 @@ impl LeafLog {
         leaf: Option<&LeafRecord>,
         skipped: u64,
     ) -> Result<()> {
-        if chunk != self.records {
-            bail!(
-                "leaf log {}: chunk {chunk} appended after {} records",
-                self.path.display(),
-                self.records
-            );
-        }
         let mut parts: [&[u8]; 4] = [&[]; 4];
-        let (mut node_crc32, mut block_crc32, mut bounds) = (0, 0, [0u8; 8]);
+        let mut h = RecordHeader::zeroed();
         if let Some(r) = leaf {
             assert!(
                 r.half_materials.is_empty() || r.half_materials.len() == r.half.len(),
@@ -188,37 +181,65 @@ impl LeafLog {
                 bytemuck::cast_slice(r.half_materials),
             ];
             let (min, max) = r.node.bounds();
-            bounds = [min[0], min[1], min[2], max[0], max[1], max[2], 0, 0];
-            (node_crc32, block_crc32) = (r.node.payload_crc32(), r.node.block_crc32());
+            h.bounds = [min[0], min[1], min[2], max[0], max[1], max[2], 0, 0];
+            (h.node_crc32, h.block_crc32) = (r.node.payload_crc32(), r.node.block_crc32());
+            h.voxel_count = r.node.voxel_count();
+            h.half_count = r.half.len() as u32;
+        }
+        h.frames_len = (parts[0].len() + parts[1].len()) as u32;
+        self.write_record(chunk, coord, h, &parts, skipped)
+    }
+
+    /// Appends a record of `count` items (triangles in the source log) whose payload is one
+    /// frame, `payload` (no half, no node fields).
+    pub fn append_record(
+        &mut self,
+        chunk: u64,
+        coord: [u32; 3],
+        count: u32,
+        payload: &[u8],
+        skipped: u64,
+    ) -> Result<()> {
+        let mut h = RecordHeader::zeroed();
+        h.voxel_count = count;
+        h.frames_len = payload.len() as u32;
+        self.write_record(chunk, coord, h, &[payload], skipped)
+    }
+
+    /// Completes `h` (position, lengths, checksums) and writes it and `parts`, the payload.
+    fn write_record(
+        &mut self,
+        chunk: u64,
+        coord: [u32; 3],
+        mut h: RecordHeader,
+        parts: &[&[u8]],
+        skipped: u64,
+    ) -> Result<()> {
+        if chunk != self.records {
+            bail!(
+                "log {}: chunk {chunk} appended after {} records",
+                self.path.display(),
+                self.records
+            );
         }
         let mut crc = crc32fast::Hasher::new();
         parts.iter().for_each(|p| crc.update(p));
-        let frames_len = parts[0].len() + parts[1].len();
-        let mut h = RecordHeader {
-            magic: MAGIC,
-            chunk: chunk as u32,
-            coord,
-            voxel_count: leaf.map_or(0, |l| l.node.voxel_count()),
-            payload_len: parts.iter().map(|p| p.len()).sum::<usize>() as u32,
-            payload_crc32: crc.finalize(),
-            skipped: skipped.min(u32::MAX as u64) as u32,
-            frames_len: frames_len as u32,
-            half_count: leaf.map_or(0, |l| l.half.len() as u32),
-            node_crc32,
-            block_crc32,
-            bounds,
-            header_crc32: 0,
-        };
+        h.magic = MAGIC;
+        h.chunk = chunk as u32;
+        h.coord = coord;
+        h.payload_len = parts.iter().map(|p| p.len()).sum::<usize>() as u32;
+        h.payload_crc32 = crc.finalize();
+        h.skipped = skipped.min(u32::MAX as u64) as u32;
         h.header_crc32 = h.crc();
         let path = &self.path;
-        for bytes in [bytemuck::bytes_of(&h)].into_iter().chain(parts) {
+        for bytes in [bytemuck::bytes_of(&h)].into_iter().chain(parts.iter().copied()) {
             self.out
                 .write_all(bytes)
                 .with_context(|| format!("writing {}", path.display()))?;
         }
         self.records += 1;
         self.skipped += h.skipped as u64;
-        self.frame_bytes += frames_len as u64;
+        self.frame_bytes += h.frames_len as u64;
         Ok(())
     }
 
@@ -237,35 +258,6 @@ impl LeafLog {
             .get_ref()
             .sync_all()
             .with_context(|| format!("syncing {}", self.path.display()))
-    }
-}
-
-/// Reads a finished log in order, handing each record and its payload to `f`.
-pub fn read_log(
-    path: &Path,
-    f: &mut dyn FnMut(&RecordHeader, Vec<u8>) -> Result<()>,
-) -> Result<()> {
-    let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let mut r = BufReader::with_capacity(4 << 20, file);
-    let mut expect = 0u64;
-    loop {
-        let mut h = RecordHeader::zeroed();
-        match r.read_exact(bytemuck::bytes_of_mut(&mut h)) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(()),
-            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
-        }
-        if h.magic != MAGIC || h.crc() != h.header_crc32 || h.chunk as u64 != expect {
-            bail!("{}: record {expect} is corrupt", path.display());
-        }
-        let mut payload = vec![0u8; h.payload_len as usize];
-        r.read_exact(&mut payload)
-            .with_context(|| format!("{}: record {expect} is truncated", path.display()))?;
-        if crc32fast::hash(&payload) != h.payload_crc32 {
-            bail!("{}: record {expect}'s payload is corrupt", path.display());
-        }
-        f(&h, payload)?;
-        expect += 1;
     }
 }
 

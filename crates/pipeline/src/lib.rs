@@ -22,6 +22,8 @@ mod output;
 mod passes;
 mod progress;
 mod size;
+mod source_clip;
+mod source_mesh;
 mod stages;
 mod system;
 mod textures;
@@ -50,7 +52,8 @@ use stages::{BuildContext, Built};
 use work::WorkDir;
 
 /// Everything a build depends on. Only `resolution`, `mode` and `zstd_level` affect the output
-/// bytes (and `voxelizer` when it is the approximate `scanline-ilv`); `threads`, `memory`,
+/// bytes (and `voxelizer` when it is the approximate `scanline-ilv`, `source_geometry` when it
+/// adds the source-triangle channel); `threads`, `memory`,
 /// `tmp_dir` and `progress` do not.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -77,6 +80,8 @@ pub struct BuildSettings {
     pub gpu_method: GpuMethod,
     /// GPU hybrid cutoff in voxels², or auto.
     pub cutoff: Cutoff,
+    /// Store each leaf chunk's source triangles beside its voxels (FORMAT.md 14.4).
+    pub source_geometry: bool,
     /// Show progress bars on stderr.
     #[serde(skip)]
     pub progress: bool,
@@ -102,6 +107,7 @@ impl Default for BuildSettings {
             backend: Backend::Auto,
             gpu_method: GpuMethod::default(),
             cutoff: Cutoff::default(),
+            source_geometry: false,
             progress: false,
             force: false,
             interrupt_after_chunks: None,
@@ -162,6 +168,21 @@ pub struct StageTime {
     pub peak_rss: u64,
     /// True if the stage's result was taken from an interrupted earlier run.
     pub resumed: bool,
+}
+
+/// The source triangles a build stored (`--source-geometry`, docs/FORMAT.md 14.4).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct SourceSummary {
+    /// Triangle/chunk pairs of the bins whose triangle touches its chunk.
+    pub triangles_kept: u64,
+    /// Of those, the pairs whose triangle reached past the quantization box and was clipped.
+    pub triangles_clipped: u64,
+    /// Triangles built for the leaf chunks (whole ones and clipped pieces).
+    pub triangles_stored: u64,
+    /// Their compressed payload bytes.
+    pub payload_bytes: u64,
+    /// `payload_bytes / triangles_stored` (0 without triangles).
+    pub bytes_per_triangle: f64,
 }
 
 /// What a build did.
@@ -227,6 +248,8 @@ pub struct BuildSummary {
     /// Bytes of one triangle record in the spool and bins (40–112: only the attributes the
     /// mesh has).
     pub record_bytes: usize,
+    /// `--source-geometry`: the leaves' source triangles; `None` without it.
+    pub source_geometry: Option<SourceSummary>,
     /// True if the build continued an interrupted one.
     pub resumed: bool,
     /// Time and peak memory of each stage, in the order they ran.
@@ -391,7 +414,19 @@ fn summarize(ctx: BuildContext, built: Built, resumed: bool, t0: Instant) -> Bui
         ingested,
         voxelized,
         written,
+        source,
     } = built;
+    let source_geometry = source.map(|m| SourceSummary {
+        triangles_kept: m.counts.kept,
+        triangles_clipped: m.counts.clipped,
+        triangles_stored: m.counts.stored,
+        payload_bytes: m.payload_bytes,
+        bytes_per_triangle: if m.counts.stored > 0 {
+            m.payload_bytes as f64 / m.counts.stored as f64
+        } else {
+            0.0
+        },
+    });
     let s = ctx.settings;
     let total_voxels: u64 = written.levels.iter().map(|l| l.voxels).sum();
     let gpu = voxelized.gpu_stats;
@@ -430,6 +465,7 @@ fn summarize(ctx: BuildContext, built: Built, resumed: bool, t0: Instant) -> Bui
         },
         counted_during_ingest: ingested.counted_during_ingest,
         record_bytes: ingested.layout.bytes(),
+        source_geometry,
         resumed,
         stages: ctx.times,
         seconds: t0.elapsed().as_secs_f64(),

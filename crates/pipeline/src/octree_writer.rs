@@ -71,6 +71,9 @@ struct Queued {
     payload: Payload,
     /// Voxel bytes the merge and encode hold (0 for ready payloads).
     bytes: u64,
+    /// A leaf's source-triangle payload (`--source-geometry`), written after its other
+    /// channels.
+    source: Option<EncodedChannel>,
 }
 
 /// Receives leaf chunks in Morton order and writes leaves and parents in post-order.
@@ -138,14 +141,15 @@ impl<'p> OctreeWriter<'p> {
             SCRATCH.with(|s| s.borrow_mut().halve(&voxels, octant, &mut half));
         }
         let half_mats = mats.map(|m| halve_materials(&voxels, &m));
-        self.push_halved(coord, half, half_mats, encoded, menc)
+        self.push_halved(coord, half, half_mats, encoded, menc, None)
     }
 
     /// [`push_leaf`](Self::push_leaf) with the leaf's half instead of its voxels: its voxels
     /// merged alone into its parent (`voxlod_lod::MergeScratch::halve` for the leaf's octant;
     /// empty when the leaf is the root) and, with the material channel, the half's materials
     /// (`voxlod_lod::halve_materials`) and the leaf's encoded material payload. The level-1
-    /// parents are then the concatenations of their children's halves.
+    /// parents are then the concatenations of their children's halves. In a build with source
+    /// geometry, `source` is the leaf's source-triangle payload (the writer's last channel).
     pub fn push_halved(
         &mut self,
         coord: [u32; 3],
@@ -153,6 +157,7 @@ impl<'p> OctreeWriter<'p> {
         half_materials: Option<Vec<u32>>,
         encoded: Option<EncodedNode>,
         materials: Option<EncodedChannel>,
+        source: Option<EncodedChannel>,
     ) -> Result<()> {
         let m = voxlod_geom::morton3(coord[0], coord[1], coord[2]);
         anyhow::ensure!(
@@ -174,20 +179,21 @@ impl<'p> OctreeWriter<'p> {
             self.levels
         );
         let half = Child::Done(Arc::new((half, half_materials)));
-        self.emit(0, coord, 0, half, Payload::Ready((enc, materials)), 0)
+        let node = Queued {
+            level: 0,
+            coord,
+            child_mask: 0,
+            payload: Payload::Ready((enc, materials)),
+            bytes: 0,
+            source,
+        };
+        self.emit(node, half)
     }
 
     /// Post-order: before node (level, coord) is written, every pending parent of an earlier
     /// subtree is completed and written; then the node itself; then it waits for its parent.
-    fn emit(
-        &mut self,
-        level: u32,
-        coord: [u32; 3],
-        child_mask: u8,
-        voxels: Child,
-        payload: Payload,
-        bytes: u64,
-    ) -> Result<()> {
+    fn emit(&mut self, node: Queued, voxels: Child) -> Result<()> {
+        let (level, coord) = (node.level, node.coord);
         for l in level..self.levels.saturating_sub(1) {
             let shift = l + 1 - level;
             let ancestor = [coord[0] >> shift, coord[1] >> shift, coord[2] >> shift];
@@ -198,13 +204,7 @@ impl<'p> OctreeWriter<'p> {
                 self.flush(l)?;
             }
         }
-        self.enqueue(Queued {
-            level,
-            coord,
-            child_mask,
-            bytes,
-            payload,
-        })?;
+        self.enqueue(node)?;
         if level + 1 < self.levels {
             let parent = [coord[0] >> 1, coord[1] >> 1, coord[2] >> 1];
             let octant = (coord[0] & 1 | (coord[1] & 1) << 1 | (coord[2] & 1) << 2) as usize;
@@ -276,7 +276,15 @@ impl<'p> OctreeWriter<'p> {
             let _ = etx.send(enc);
         });
         let (voxels, payload) = (Child::Merging(vrx), Payload::Encoding(erx));
-        self.emit(level + 1, p.parent, p.mask, voxels, payload, bytes as u64)
+        let node = Queued {
+            level: level + 1,
+            coord: p.parent,
+            child_mask: p.mask,
+            payload,
+            bytes: bytes as u64,
+            source: None,
+        };
+        self.emit(node, voxels)
     }
 
     /// Appends a node to the write queue, then writes what is ready at its head (waiting for
@@ -327,10 +335,12 @@ impl<'p> OctreeWriter<'p> {
             };
             self.stats[q.level as usize].nodes += 1;
             self.stats[q.level as usize].voxels += enc.voxel_count() as u64;
-            let channels = match mat {
-                Some(m) => vec![Some(m)],
-                None => Vec::new(),
-            };
+            // the file's channels in id order: material (1) if the build has it, then the
+            // source triangles (2), which only leaves carry
+            let mut channels: Vec<Option<&EncodedChannel>> = mat.iter().map(Some).collect();
+            if q.source.is_some() {
+                channels.push(q.source.as_ref());
+            }
             self.writer
                 .write_node_with(q.level, q.coord, q.child_mask, enc, &channels)
                 .with_context(|| format!("writing node level {} {:?}", q.level, q.coord))?;

@@ -36,6 +36,10 @@ pub(crate) enum WorkFile {
     Leaves,
     /// The voxelize stage's marker (its totals).
     LeavesMarker,
+    /// The source-geometry stage's log (`--source-geometry`): one record per leaf chunk.
+    Source,
+    /// The source-geometry stage's marker (its totals).
+    SourceMarker,
 }
 
 impl WorkFile {
@@ -48,6 +52,8 @@ impl WorkFile {
             WorkFile::BinsMarker => "bins.json",
             WorkFile::Leaves => "leaves.bin",
             WorkFile::LeavesMarker => "leaves.json",
+            WorkFile::Source => "source.bin",
+            WorkFile::SourceMarker => "source.json",
         }
     }
 }
@@ -105,6 +111,12 @@ impl WorkDir {
             env!("CARGO_PKG_VERSION"),
             WORK_FORMAT
         );
+        // a build with source geometry has a source log; one without never resumes from it
+        let text = if s.source_geometry {
+            text + "\nsource_geometry"
+        } else {
+            text
+        };
         Ok(format!(
             "{:016x}",
             fnv1a(text.as_bytes(), 0xcbf2_9ce4_8422_2325)

@@ -40,6 +40,7 @@ pub mod cut;
 mod draw;
 mod error;
 mod export;
+mod export_source;
 mod faces;
 mod picture;
 pub mod view;
@@ -48,6 +49,7 @@ pub use camera::{model_bounds, robust_bounds, up_from_shape, Shot, View};
 pub use draw::{Renderer, BACKGROUND};
 pub use error::RenderError;
 pub use export::{export_ply, export_ply_with, shading_normal, ExportSummary};
+pub use export_source::{export_source_ply, source_world_position, SourceExportSummary};
 pub use faces::{
     face_direction, material_color, node_faces, node_faces_by, unit_face_corners, ColorBy, Face,
 };

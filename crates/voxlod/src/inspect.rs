@@ -4,7 +4,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use serde::Serialize;
-use voxlod_format::{Reader, CHANNEL_MATERIAL};
+use voxlod_format::{Reader, CHANNEL_MATERIAL, CHANNEL_TRIANGLES};
 use voxlod_pipeline::format_size;
 
 #[derive(Serialize)]
@@ -20,13 +20,16 @@ struct ChannelInfo {
     id: u32,
     name: &'static str,
     payload_bytes: u64,
+    /// Source triangles stored (the triangle channel's entry counts summed; 0 for others).
+    triangles: u64,
 }
 
-/// The name of an optional channel (FORMAT.md 14); ids this version does not read (id 2 is
-/// reserved for issue 15's source triangles, not written yet) are listed as "unknown".
+/// The name of an optional channel (FORMAT.md 14); ids this version does not read are listed
+/// as "unknown".
 fn channel_name(id: u32) -> &'static str {
     match id {
         CHANNEL_MATERIAL => "materials",
+        CHANNEL_TRIANGLES => "source triangles",
         _ => "unknown",
     }
 }
@@ -98,6 +101,11 @@ fn gather(path: &Path) -> Result<FileInfo> {
                 id,
                 name: channel_name(id),
                 payload_bytes: r.channel_payload_bytes(id),
+                triangles: if id == CHANNEL_TRIANGLES {
+                    r.source_triangle_count()
+                } else {
+                    0
+                },
             })
             .collect(),
         manifest: r.manifest()?,
@@ -142,6 +150,7 @@ pub fn run(path: &Path, json: bool) -> Result<()> {
             (CHANNEL_MATERIAL, Some(serde_json::Value::Array(names))) => {
                 format!(", {} materials", names.len())
             }
+            (CHANNEL_TRIANGLES, _) => format!(", {} triangles", c.triangles),
             _ => String::new(),
         };
         println!(

@@ -87,6 +87,7 @@ Examples:
   voxlod build scan.ply.gz -o /data/scan.voxlod -r 8192 --memory 8GiB
   voxlod build city.obj -m thin -j 4 --backend cpu
   voxlod build scan.ply --config configs/preview.toml --json > summary.json
+  voxlod build dragon.ply -r 4096 --source-geometry   # leaf chunks keep their source triangles
 The output's folder must exist. A build that stops (Ctrl-C, kill) resumes when the same
 command is run again.";
 
@@ -121,6 +122,8 @@ const EXAMPLES_EXPORT: &str = "\
 Examples:
   voxlod export bunny.voxlod -o bunny.ply         # the finest level
   voxlod export bunny.voxlod --level 2 -o coarse.ply
+  voxlod export dragon.voxlod --source -o dragon-source.ply              # every leaf's source triangles
+  voxlod export dragon.voxlod --source --node 0 9 12 4 -o leaf.ply       # one leaf's (--source-geometry builds)
 The size of the PLY is printed before it is written.";
 
 const EXAMPLES_CLEAN: &str = "\
@@ -212,6 +215,11 @@ struct BuildArgs {
     /// fragment pass, or `auto` to search per mesh [default: 8].
     #[arg(long)]
     cutoff: Option<voxlod_pipeline::Cutoff>,
+    /// Store each leaf chunk's source triangles beside its voxels (quantized to 1/128 voxel,
+    /// indexed, compressed; docs/FORMAT.md 14.4), for close-ups in `render`, `view` and
+    /// `export --source` [config: source_geometry = true].
+    #[arg(long)]
+    source_geometry: bool,
     /// Folder for temporary files [default: the output's folder].
     #[arg(long)]
     tmp: Option<PathBuf>,
@@ -301,6 +309,9 @@ fn run_build(a: BuildArgs) -> Result<()> {
     }
     if a.tmp.is_some() {
         s.tmp_dir = a.tmp.clone();
+    }
+    if a.source_geometry {
+        s.source_geometry = true;
     }
     // a bad value is blamed on where it came from: the flag, or the settings file
     if let Err(e) = s.validate() {

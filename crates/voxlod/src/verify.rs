@@ -32,6 +32,12 @@ pub fn run(a: VerifyArgs) -> Result<()> {
                     r.materials_checked
                 );
             }
+            if r.source_triangles_checked > 0 {
+                println!(
+                    "  source       {} triangles decoded, each touching its chunk's box",
+                    r.source_triangles_checked
+                );
+            }
         }
         for p in &r.problems {
             println!("  FAILED       {p}");

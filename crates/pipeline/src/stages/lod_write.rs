@@ -11,7 +11,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use voxlod_format::channel::decode_materials;
-use voxlod_format::{EncodedChannel, EncodedNode, FileSpec, Voxel, Writer, CHANNEL_MATERIAL};
+use voxlod_format::{
+    EncodedChannel, EncodedNode, FileSpec, Voxel, Writer, CHANNEL_MATERIAL, CHANNEL_TRIANGLES,
+};
 
 use super::ingest::Ingested;
 use super::voxelize::Voxelized;
@@ -50,8 +52,15 @@ pub(crate) fn run(
     };
     // the material channel: its records follow each leaf's payload in the leaf log
     let materials = crate::textures::has_material_channel(ctx.source.info());
-    let channels: &[u32] = if materials { &[CHANNEL_MATERIAL] } else { &[] };
-    let writer = Writer::create_with_channels(ctx.output.staged(), spec, channels)?;
+    let mut channels = Vec::new();
+    if materials {
+        channels.push(CHANNEL_MATERIAL);
+    }
+    // the source triangles (`--source-geometry`): the source log's records, beside the leaves
+    if s.source_geometry {
+        channels.push(CHANNEL_TRIANGLES);
+    }
+    let writer = Writer::create_with_channels(ctx.output.staged(), spec, &channels)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &ctx.pool);
     write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
     let manifest = manifest_fields(ctx, ingested);
@@ -97,12 +106,14 @@ fn check_output_space(ctx: &mut BuildContext, leaf_payloads: u64) -> Result<(), 
 }
 
 /// A leaf from the log: chunk coordinates, its half, the half's materials, its encoded payload
-/// (None when empty) and its encoded material payload (with the material channel).
+/// (None when empty), its encoded material payload (with the material channel) and its
+/// source-triangle payload (with source geometry; None when no triangle touches it).
 type Leaf = (
     [u32; 3],
     Vec<Voxel>,
     Option<Vec<u32>>,
     Option<EncodedNode>,
+    Option<EncodedChannel>,
     Option<EncodedChannel>,
 );
 
@@ -117,6 +128,11 @@ fn write_leaves(
     materials: bool,
 ) -> Result<(), StageError> {
     let leaves = ctx.work.file(WorkFile::Leaves);
+    let mut sources = ctx
+        .settings
+        .source_geometry
+        .then(|| leaf_log::LogReader::open(&ctx.work.file(WorkFile::Source)))
+        .transpose()?;
     let bar = Stage::items(ctx.progress, "lod+write", records);
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Leaf, StageError>>(1);
     std::thread::scope(|scope| -> Result<(), StageError> {
@@ -125,7 +141,10 @@ fn write_leaves(
                 if let Err(e) = ctx.check_interrupt() {
                     return Err(anyhow::anyhow!(ctx.stop.set(e)));
                 }
-                let leaf = split_leaf(h, payload, materials)?;
+                let mut leaf = split_leaf(h, payload, materials)?;
+                if let Some(log) = &mut sources {
+                    leaf.5 = crate::stages::source::leaf_channel(log, h)?;
+                }
                 // a closed channel means the writer failed: stop reading
                 tx.send(Ok(leaf))
                     .map_err(|_| anyhow::anyhow!("the octree writer stopped"))
@@ -139,8 +158,8 @@ fn write_leaves(
         let rx = rx;
         let mut n = 0u64;
         for leaf in rx.iter() {
-            let (coord, half, half_mats, enc, menc) = leaf?;
-            octree.push_halved(coord, half, half_mats, enc, menc)?;
+            let (coord, half, half_mats, enc, menc, source) = leaf?;
+            octree.push_halved(coord, half, half_mats, enc, menc, source)?;
             n += 1;
             bar.set(n, records);
         }
@@ -158,7 +177,7 @@ fn split_leaf(
     materials: bool,
 ) -> anyhow::Result<Leaf> {
     if h.voxel_count == 0 {
-        return Ok((h.coord, Vec::new(), None, None, None));
+        return Ok((h.coord, Vec::new(), None, None, None, None));
     }
     let leaf = leaf_log::StoredLeaf::split(h, payload, materials)?;
     let menc = if materials {
@@ -175,6 +194,7 @@ fn split_leaf(
         leaf.half_materials,
         Some(leaf.node),
         menc,
+        None,
     ))
 }
 

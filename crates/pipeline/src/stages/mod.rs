@@ -8,6 +8,7 @@
 
 pub(crate) mod ingest;
 pub(crate) mod lod_write;
+pub(crate) mod source;
 pub(crate) mod tile;
 pub(crate) mod voxelize;
 
@@ -84,6 +85,8 @@ pub(crate) struct Built {
     pub ingested: ingest::Ingested,
     pub voxelized: voxelize::Voxelized,
     pub written: lod_write::Written,
+    /// The source-geometry stage's totals (`--source-geometry`).
+    pub source: Option<source::SourceMarker>,
 }
 
 /// Runs the stages in order, each from the previous one's artifact; a stage whose marker is
@@ -94,6 +97,10 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Built, StageError> {
         Some(v) => v,
         None => {
             let tiled = tile::run(ctx, &mut ingested)?;
+            // source geometry (its own stage, from the same bins) before the voxelizers exist
+            if ctx.settings.source_geometry {
+                source::run(ctx, &tiled)?;
+            }
             voxelize::run(ctx, tiled)?
         }
     };
@@ -103,11 +110,23 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Built, StageError> {
             voxelized.marker.skipped
         ));
     }
+    // after a resume from the leaf log, the source stage's marker holds its totals
+    let source = if ctx.settings.source_geometry {
+        let m = ctx.work.marker::<source::SourceMarker>();
+        Some(m.ok_or_else(|| {
+            anyhow::anyhow!(
+                "the work folder has a leaf log but no complete source log (source.json)"
+            )
+        })?)
+    } else {
+        None
+    };
     let written = lod_write::run(ctx, &ingested, &voxelized)?;
     Ok(Built {
         ingested,
         voxelized,
         written,
+        source,
     })
 }
 
