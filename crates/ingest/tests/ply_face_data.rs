@@ -347,3 +347,51 @@ fn munich_materials_match_its_bytes() {
         );
     }
 }
+
+#[test]
+fn texnumber_chooses_among_several_textures() {
+    let d = TempDir::new("texnumber");
+    texture(&d);
+    std::fs::write(d.path("b.jpg"), b"x").unwrap();
+    // OpenMVS: one TextureFile per texture, a per-face texnumber; face 1 names texture 1
+    let faces = El {
+        name: "face",
+        props: vec![
+            "list uchar int vertex_indices",
+            "list uchar float texcoord",
+            "int texnumber",
+        ],
+        rows: vec![
+            vec![V::L(vec![0., 1., 2.]), V::L(vec![0.; 6]), V::S(1.)],
+            vec![V::L(vec![0., 2., 3.]), V::L(vec![0.5; 6]), V::S(0.)],
+            vec![V::L(vec![0., 3., 4.]), V::L(vec![0.25; 6]), V::S(1.)],
+        ],
+    };
+    let p = d.write(
+        "t.ply",
+        ply_commented(
+            "binary_little_endian",
+            &["TextureFile Maps/Tex.PNG", "TextureFile B.JPG"],
+            &[five(false), faces],
+        ),
+    );
+    let src = MeshSource::open(&p).unwrap();
+    let info = src.info();
+    assert!(info.warnings.is_empty(), "{:?}", info.warnings);
+    let m: Vec<(&str, Option<std::path::PathBuf>)> = info
+        .materials
+        .iter()
+        .map(|m| (m.name.as_str(), m.texture.clone()))
+        .collect();
+    assert_eq!(
+        m,
+        [
+            ("", None),
+            ("Maps/Tex.PNG", Some(d.path("Maps/Tex.PNG"))),
+            ("B.JPG", Some(d.path("b.jpg")))
+        ]
+    );
+    let (tris, _) = read(&p).unwrap();
+    let got: Vec<(u32, f32)> = tris.iter().map(|t| (t.material(), t.uv[0][0])).collect();
+    assert_eq!(got, [(2, 0.0), (1, 0.5), (2, 0.25)]);
+}
