@@ -53,6 +53,7 @@
 mod batch;
 mod bounds;
 mod error;
+mod gltf;
 mod map_guard;
 mod obj;
 mod ply;
@@ -101,6 +102,9 @@ pub struct MeshInfo {
     /// Things that did not stop reading but the user should know (missing MTL file,
     /// ignored partial normals, trailing bytes, no faces).
     pub warnings: Vec<String>,
+    /// The up axis the format defines, if it defines one (glTF: `+Y`); the build's manifest
+    /// gives it to `render` as `input.up`.
+    pub up: Option<[f32; 3]>,
 }
 
 /// Counts of one [`MeshSource::stream`] run.
@@ -118,6 +122,7 @@ pub struct IngestStats {
 }
 
 enum Reader {
+    Gltf(Box<gltf::GltfSource>),
     Ply(ply::PlySource),
     Obj(obj::ObjSource),
     Stl(stl::StlSource),
@@ -132,6 +137,7 @@ pub struct MeshSource {
 
 #[derive(Clone, Copy, PartialEq, Debug)]
 enum Format {
+    Gltf,
     Ply { gz: bool },
     Obj,
     Stl,
@@ -153,6 +159,9 @@ fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
     if name.ends_with(".ply") || name.ends_with(".ply.gz") {
         // the header parser reports a file that is neither gzip nor starts with "ply"
         return Ok(Format::Ply { gz });
+    }
+    if name.ends_with(".gltf") || name.ends_with(".glb") || head.starts_with(b"glTF") {
+        return Ok(Format::Gltf);
     }
     if name.ends_with(".obj.gz") || name.ends_with(".stl.gz") {
         return unknown("gzip-compressed OBJ/STL is not supported; decompress it first".into());
@@ -227,6 +236,10 @@ impl MeshSource {
                 let (s, i) = obj::ObjSource::open(path)?;
                 (Reader::Obj(s), i)
             }
+            Format::Gltf => {
+                let (s, i) = gltf::GltfSource::open(path)?;
+                (Reader::Gltf(Box::new(s)), i)
+            }
             Format::Stl => {
                 let (s, i) = stl::StlSource::open(path, &head, file_len)?;
                 (Reader::Stl(s), i)
@@ -252,7 +265,7 @@ impl MeshSource {
         match &self.reader {
             Reader::Ply(p) => p.is_mapped(),
             Reader::Stl(s) => s.is_mapped(),
-            Reader::Obj(_) => false,
+            Reader::Obj(_) | Reader::Gltf(_) => false,
         }
     }
 
@@ -266,7 +279,7 @@ impl MeshSource {
         match &self.reader {
             Reader::Ply(p) => p.vertex_bounds(),
             Reader::Stl(s) => s.vertex_bounds(),
-            Reader::Obj(_) => None,
+            Reader::Obj(_) | Reader::Gltf(_) => None,
         }
     }
 
@@ -319,7 +332,7 @@ impl MeshSource {
         let release = || match &self.reader {
             Reader::Ply(p) => p.release_pages(),
             Reader::Stl(s) => s.release_pages(),
-            Reader::Obj(_) => {}
+            Reader::Obj(_) | Reader::Gltf(_) => {}
         };
         let erased = |tris: &mut [Triangle]| -> batch::Prepared { Box::new(prepare(tris)) };
         let mut g = |tris: &[Triangle], p: batch::Prepared| {
@@ -333,6 +346,7 @@ impl MeshSource {
         match &self.reader {
             Reader::Ply(p) => p.stream(&mut em)?,
             Reader::Obj(o) => o.stream(&mut em)?,
+            Reader::Gltf(g) => g.stream(&mut em)?,
             Reader::Stl(s) => s.stream(&mut em)?,
         }
         em.finish()

@@ -115,6 +115,7 @@ impl PlySource {
             has_texcoords: table.flags & TRI_HAS_UV != 0,
             materials: table.materials,
             warnings,
+            up: None,
         };
         Ok((src, info))
     }
