@@ -317,3 +317,106 @@ fn munich_gets_the_material_channel() {
     seen.sort();
     assert_eq!(seen, [1, 2, 3, 4, 5]);
 }
+
+/// The gradient-textured quad as GLB (an embedded image in a buffer view) and as `.gltf` (the
+/// PNG beside it): the OBJ build's voxels and colours, byte for byte; the manifest says +Y up.
+#[test]
+fn textured_quad_as_gltf_equals_obj() {
+    use voxlod_testkit::gltf::{write, Image, Mat, Node, Prim};
+    let d = tempfile::tempdir().unwrap();
+    let obj = checker_obj(d.path(), "grad.png");
+    gradient_png(&d.path().join("grad.png"));
+    let want = {
+        let out = d.path().join("obj.voxlod");
+        build(&obj, &out, &["-r", "256"]);
+        level0_voxels(&out)
+    };
+    let quad = Prim {
+        positions: vec![
+            [0., 0., 0.5],
+            [256., 0., 0.5],
+            [256., 256., 0.5],
+            [0., 256., 0.5],
+        ],
+        indices: Some(vec![0, 1, 2, 0, 2, 3]),
+        uv: Some(vec![[0., 0.], [1., 0.], [1., 1.], [0., 1.]]),
+        mode: 4,
+        material: Some(0),
+        ..Prim::default()
+    };
+    let png = std::fs::read(d.path().join("grad.png")).unwrap();
+    for (name, img) in [
+        ("q.glb", Image::View(png)),
+        ("q.gltf", Image::Uri("grad.png".into())),
+    ] {
+        let mat = Mat {
+            name: "checker".into(),
+            base_color: [1.0; 4],
+            texture: Some(img),
+            wrap: [10497; 2],
+        };
+        let p = d.path().join(name);
+        let node = Node {
+            mesh: Some(0),
+            ..Node::default()
+        };
+        write(&p, &[vec![quad.clone()]], &[node], &[0], &[mat]);
+        let out = d.path().join(format!("{name}.voxlod"));
+        let s = build(&p, &out, &["-r", "256"]);
+        assert!(warnings(&s).is_empty(), "{name}: {:?}", warnings(&s));
+        assert!(
+            level0_voxels(&out) == want,
+            "{name}: voxels differ from the OBJ build"
+        );
+        let r = Reader::open(&out).unwrap();
+        assert_eq!(
+            r.manifest().unwrap()["input"]["up"],
+            serde_json::json!([0.0, 1.0, 0.0])
+        );
+    }
+}
+
+/// The shared bunny written as GLB by the test kit: the same voxels as the PLY build (colours
+/// and normals aside: the same positions and triangles).
+#[test]
+fn bunny_glb_has_the_voxels_of_the_ply() {
+    use voxlod_testkit::gltf::{write, Node, Prim};
+    let Some(dir) = shared_meshes("bunny_glb_has_the_voxels_of_the_ply") else {
+        return;
+    };
+    let ply = dir.join("stanford-bunny/bun_zipper.ply");
+    let (v, f) = voxlod_testkit::mesh::read_ply(&ply);
+    let d = tempfile::tempdir().unwrap();
+    let glb = d.path().join("bunny.glb");
+    let prim = Prim {
+        positions: v.iter().map(|p| p.map(|x| x as f32)).collect(),
+        indices: Some(f.iter().flatten().copied().collect()),
+        mode: 4,
+        ..Prim::default()
+    };
+    write(
+        &glb,
+        &[vec![prim]],
+        &[Node {
+            mesh: Some(0),
+            ..Node::default()
+        }],
+        &[0],
+        &[],
+    );
+    let (a, b) = (d.path().join("ply.voxlod"), d.path().join("glb.voxlod"));
+    build(&ply, &a, &["-r", "512"]);
+    build(&glb, &b, &["-r", "512"]);
+    let pos = |p: &Path| {
+        level0_voxels(p)
+            .into_iter()
+            .map(|v| (v.0, v.1))
+            .collect::<Vec<_>>()
+    };
+    let (pa, pb) = (pos(&a), pos(&b));
+    assert!(pa.len() > 100_000, "{}", pa.len());
+    assert!(
+        pa == pb,
+        "the GLB build's voxel set differs from the PLY build's"
+    );
+}

@@ -371,7 +371,9 @@ impl GltfSource {
         let origin = [world[3][0], world[3][1], world[3][2]];
         let pos: Vec<[f32; 3]> = r
             .read_positions()
-            .ok_or_else(|| err("no POSITION attribute".into()))?
+            .ok_or_else(|| {
+                err("no POSITION attribute, or its accessor lies outside its buffer".into())
+            })?
             .map(|v| apply(&lin, v, origin))
             .collect();
         if let Some((i, _)) = pos
@@ -392,10 +394,27 @@ impl GltfSource {
             .and_then(|s| r.read_tex_coords(s))
             .map(|t| t.into_f32().collect());
         let n = pos.len();
-        let idx: Vec<u32> = match r.read_indices() {
-            Some(i) => i.into_u32().collect(),
-            None => (0..n as u32).collect(),
+        let idx: Vec<u32> = match (r.read_indices(), p.indices()) {
+            (Some(i), _) => i.into_u32().collect(),
+            (None, None) => (0..n as u32).collect(),
+            (None, Some(_)) => {
+                return Err(err("the indices' accessor lies outside its buffer".into()))
+            }
         };
+        // an attribute that is declared but cannot be read (its accessor outside its buffer)
+        for (sem, ok) in [
+            (gltf::Semantic::Normals, nrm.is_some()),
+            (gltf::Semantic::Colors(0), col.is_some()),
+        ] {
+            if p.get(&sem).is_some() && !ok {
+                return Err(err(format!("the {sem:?} accessor lies outside its buffer")));
+            }
+        }
+        if uv_set.is_some() && uv.is_none() {
+            return Err(err(
+                "the texture coordinates' accessor lies outside its buffer".into(),
+            ));
+        }
         if let Some(i) = idx.iter().find(|&&i| i as usize >= n) {
             return Err(err(format!("index {i} is out of range ({n} vertices)")));
         }

@@ -14,6 +14,9 @@
 //!   file, case-insensitively if the exact path does not exist) into [`MeshInfo::materials`]
 //!   (docs/TEXTURES.md).
 //! * **STL** (`.stl`): binary and ASCII; the facet normal is ignored.
+//! * **glTF 2.0** (`.gltf` with external or data-URI buffers and images, `.glb`) through the
+//!   `gltf` crate: the default scene's triangle primitives with their node transforms,
+//!   `COLOR_0` times `baseColorFactor`, `baseColorTexture` and the materials by name.
 //!
 //! Memory: binary PLY and binary STL are memory-mapped and vertices are read in place —
 //! memory use does not grow with the mesh. An input truncated while it is mapped ends the
@@ -186,7 +189,7 @@ fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
         return Ok(Format::Stl);
     }
     unknown(format!(
-        "the extension of {} is not .ply, .ply.gz, .obj or .stl, and the content is not PLY or STL",
+        "the extension of {} is not .ply, .ply.gz, .obj, .stl, .gltf or .glb, and the content is not PLY, STL or GLB",
         crate::error::quoted(&name)
     ))
 }
