@@ -436,19 +436,25 @@ impl GltfSource {
             flags |= TRI_HAS_UV;
         }
         let material = p.material().index().map_or(0, |i| i as u32 + 1);
+        // the colour bytes once per vertex (or once for the primitive), not per corner
+        let bytes = |c: [f32; 4]| {
+            let lc = [0, 1, 2, 3].map(|ch| c[ch] * factor[ch]);
+            [
+                srgb8(lc[0]),
+                srgb8(lc[1]),
+                srgb8(lc[2]),
+                (lc[3].clamp(0.0, 1.0) * 255.0).round() as u8,
+            ]
+        };
+        let vertex_bytes: Option<Vec<[u8; 4]>> =
+            col.as_ref().map(|c| c.iter().map(|&c| bytes(c)).collect());
+        let uniform = bytes([1.0; 4]);
         let corner = |t: &mut Triangle, k: usize, i: usize| {
             t.v[k] = pos[i];
             if let Some(nv) = &nrm {
                 t.n[k] = nv[i];
             }
-            let c = col.as_ref().map_or([1.0; 4], |c| c[i]);
-            let lc = [0, 1, 2, 3].map(|ch| c[ch] * factor[ch]);
-            t.c[k] = [
-                srgb8(lc[0]),
-                srgb8(lc[1]),
-                srgb8(lc[2]),
-                (lc[3].clamp(0.0, 1.0) * 255.0).round() as u8,
-            ];
+            t.c[k] = vertex_bytes.as_ref().map_or(uniform, |b| b[i]);
             if let Some(u) = &uv {
                 t.uv[k] = u[i];
             }
