@@ -331,19 +331,7 @@ fn textured_quad_as_gltf_equals_obj() {
         build(&obj, &out, &["-r", "256"]);
         level0_voxels(&out)
     };
-    let quad = Prim {
-        positions: vec![
-            [0., 0., 0.5],
-            [256., 0., 0.5],
-            [256., 256., 0.5],
-            [0., 256., 0.5],
-        ],
-        indices: Some(vec![0, 1, 2, 0, 2, 3]),
-        uv: Some(vec![[0., 0.], [1., 0.], [1., 1.], [0., 1.]]),
-        mode: 4,
-        material: Some(0),
-        ..Prim::default()
-    };
+    let quad = Prim::textured_quad();
     let png = std::fs::read(d.path().join("grad.png")).unwrap();
     for (name, img) in [
         ("q.glb", Image::View(png)),

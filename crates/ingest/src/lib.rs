@@ -7,7 +7,10 @@
 //!   gzip-compressed. Elements in any order, unknown elements and properties skipped, faces
 //!   (polygons, fan-triangulated) and `tristrips` (restart at -1). Vertex normals `nx ny nz`;
 //!   vertex colours `red green blue [alpha]` (or `diffuse_*`, `r g b a`), uchar 0–255 or
-//!   float 0–1.
+//!   float 0–1. Per-face `material` / `material_index` (named by `comment material N = NAME`)
+//!   into [`MeshInfo::materials`], face colours, texture coordinates per vertex (`u v`, `s t`,
+//!   `texture_u texture_v`, `texture_s texture_t`) or per face (`texcoord` lists) with
+//!   `comment TextureFile NAME` (`ply_materials.rs`, `ply_face_data.rs`).
 //! * **OBJ** (`.obj`) through `tobj`: polygons fan-triangulated, MTL `Kd` (times `d` as alpha)
 //!   as the colour of the triangle, `vn` normals when every face corner has one; `vt`
 //!   texture coordinates and the material's `map_Kd` texture (resolved relative to the MTL

@@ -12,19 +12,7 @@ use voxlod_ingest::MeshSource;
 use voxlod_testkit::gltf::{write, Image, Mat, Node, Prim};
 
 fn quad() -> Prim {
-    Prim {
-        positions: vec![
-            [0., 0., 0.5],
-            [256., 0., 0.5],
-            [256., 256., 0.5],
-            [0., 256., 0.5],
-        ],
-        indices: Some(vec![0, 1, 2, 0, 2, 3]),
-        uv: Some(vec![[0., 0.], [1., 0.], [1., 1.], [0., 1.]]),
-        mode: 4,
-        material: Some(0),
-        ..Prim::default()
-    }
+    Prim::textured_quad()
 }
 
 fn mat(texture: Option<Image>) -> Mat {

@@ -23,6 +23,27 @@ pub struct Prim {
     pub material: Option<usize>,
 }
 
+impl Prim {
+    /// The textured quad the texture tests share (a 256-unit square in z = 0.5, texture
+    /// coordinates 0–1 across it, material 0), as two indexed triangles fanned from corner 0 as
+    /// an OBJ `f 1/1 2/2 3/3 4/4` is.
+    pub fn textured_quad() -> Prim {
+        Prim {
+            positions: vec![
+                [0., 0., 0.5],
+                [256., 0., 0.5],
+                [256., 256., 0.5],
+                [0., 256., 0.5],
+            ],
+            indices: Some(vec![0, 1, 2, 0, 2, 3]),
+            uv: Some(vec![[0., 0.], [1., 0.], [1., 1.], [0., 1.]]),
+            mode: 4,
+            material: Some(0),
+            ..Prim::default()
+        }
+    }
+}
+
 /// Where a material's base colour texture is.
 #[derive(Clone, Debug)]
 pub enum Image {
