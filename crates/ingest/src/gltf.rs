@@ -241,7 +241,7 @@ impl GltfSource {
         };
         let (mut vertices, mut faces, mut has_normals, mut has_colors, mut has_uv) =
             (0, 0, false, false, false);
-        let mut skipped = 0;
+        let (mut skipped, mut no_uv) = (0, 0u64);
         for (node, _) in scene_nodes(&src.doc) {
             for p in node.mesh().iter().flat_map(|m| m.primitives()) {
                 if !matches!(
@@ -260,7 +260,23 @@ impl GltfSource {
                 has_colors |=
                     p.get(&gltf::Semantic::Colors(0)).is_some() || p.material().index().is_some();
                 has_uv |= src.uv_of(&p).is_some();
+                let textured = p.material().index().and_then(|i| src.uv_set[i]).is_some();
+                no_uv += u64::from(textured && src.uv_of(&p).is_none());
             }
+        }
+        if no_uv > 0 {
+            warnings.push(format!(
+                "{}: {no_uv} primitives of textured materials lack the texture coordinate set the texture reads; their baseColorFactor is used",
+                path.display()
+            ));
+        }
+        let used: Vec<&str> = src.doc.extensions_used().collect();
+        if !used.is_empty() {
+            warnings.push(format!(
+                "{}: extensions used by the file are not read: {}",
+                path.display(),
+                used.join(", ")
+            ));
         }
         if skipped > 0 {
             warnings.push(format!(

@@ -266,6 +266,25 @@ fn embedded_images() {
         "{w:?}"
     );
     assert!(!src.info().has_texcoords);
+    // a textured material on a primitive without TEXCOORD_0: a warning, the factor used
+    let mut q = quad();
+    q.uv = None;
+    let p = d.path("nouv.glb");
+    std::fs::write(d.path("t.png"), b"x").unwrap();
+    write(
+        &p,
+        &[vec![q]],
+        &one_node(),
+        &[0],
+        &[mat(Some(Image::Uri("t.png".into())))],
+    );
+    let src = MeshSource::open(&p).unwrap();
+    let w = &src.info().warnings;
+    assert!(
+        w.len() == 1 && w[0].contains("texture coordinate set") && w[0].contains("nouv.glb"),
+        "{w:?}"
+    );
+    assert!(!src.info().has_texcoords && src.info().materials.is_empty());
 }
 
 #[test]
