@@ -191,3 +191,220 @@ fn shared_textured_meshes() {
         );
     }
 }
+
+/// Every level-0 voxel as (node position, voxel position, colour), in file order.
+fn level0_voxels(path: &Path) -> Vec<([u32; 3], [u8; 3], [u8; 4])> {
+    let r = Reader::open(path).unwrap();
+    let mut out = Vec::new();
+    for i in r.level_nodes(0).collect::<Vec<_>>() {
+        let e = r.nodes()[i];
+        let p = e.pos();
+        out.extend(
+            r.read_node(i)
+                .unwrap()
+                .iter()
+                .map(|v| ([p[0], p[1], p[2]], v.pos(), v.rgba())),
+        );
+    }
+    out
+}
+
+/// A 64² texture whose colour tells u from v and each from its mirror image (red grows with
+/// the column, green with the row from the top, blue with both), so that a swapped or flipped
+/// coordinate would change the voxels.
+fn gradient_png(path: &Path) {
+    image::RgbImage::from_fn(64, 64, |x, y| {
+        image::Rgb([(4 * x) as u8, (4 * y) as u8, (2 * x + y) as u8])
+    })
+    .save(path)
+    .unwrap();
+}
+
+/// The textured quad of `checker_obj` with a gradient texture, as OBJ and as PLY in both
+/// texture coordinate conventions (vertex `s t`, face `texcoord` lists; converted by the test
+/// kit): the same voxels with the same colours, byte for byte.
+#[test]
+fn textured_quad_as_ply_equals_obj() {
+    use voxlod_testkit::textured::{obj_to_textured_ply, Convention};
+    let d = tempfile::tempdir().unwrap();
+    let obj = checker_obj(d.path(), "grad.png");
+    gradient_png(&d.path().join("grad.png"));
+    let want = {
+        let out = d.path().join("obj.voxlod");
+        assert!(warnings(&build(&obj, &out, &["-r", "256"])).is_empty());
+        level0_voxels(&out)
+    };
+    let colours: HashSet<[u8; 4]> = want.iter().map(|v| v.2).collect();
+    assert!(colours.len() > 1000, "{} colours", colours.len());
+    for conv in [Convention::VertexST, Convention::FaceTexcoord] {
+        let ply = d.path().join(format!("{conv:?}.ply"));
+        // Kd 1 1 1: white vertices; the texture named in another letter case
+        obj_to_textured_ply(&obj, &ply, "GRAD.png", conv, [255; 4]);
+        let out = d.path().join(format!("{conv:?}.voxlod"));
+        let s = build(&ply, &out, &["-r", "256"]);
+        assert!(warnings(&s).is_empty(), "{conv:?}: {:?}", warnings(&s));
+        let desc = s["backend"]["description"].as_str().unwrap();
+        assert!(desc.contains("colours from textures"), "{desc}");
+        assert!(
+            level0_voxels(&out) == want,
+            "{conv:?}: voxels differ from the OBJ build"
+        );
+    }
+}
+
+/// The YCB banana converted to PLY (face texcoord lists, as MeshLab writes it): the voxels and
+/// colours of the OBJ build.
+#[test]
+fn banana_as_ply_equals_obj() {
+    use voxlod_testkit::textured::{obj_to_textured_ply, Convention};
+    let Some(dir) = shared_meshes("banana_as_ply_equals_obj") else {
+        return;
+    };
+    let d = tempfile::tempdir().unwrap();
+    let obj = dir.join("ycb-banana-textured/textured_simple_reoriented.obj");
+    // the shared folder is read-only: the PLY names the texture by its path from the temporary
+    // folder
+    let ply = d.path().join("banana.ply");
+    let tex = dir.join("ycb-banana-textured/texture_map.png");
+    // Kd 0.639216 (= 163/255), d 1
+    let tex = tex.canonicalize().unwrap();
+    let tex = tex.to_str().unwrap();
+    obj_to_textured_ply(
+        &obj,
+        &ply,
+        tex,
+        Convention::FaceTexcoord,
+        [163, 163, 163, 255],
+    );
+    let (a, b) = (d.path().join("obj.voxlod"), d.path().join("ply.voxlod"));
+    build(&obj, &a, &["-r", "256"]);
+    let s = build(&ply, &b, &["-r", "256"]);
+    assert!(warnings(&s).is_empty(), "{:?}", warnings(&s));
+    let (va, vb) = (level0_voxels(&a), level0_voxels(&b));
+    assert!(va.len() > 10_000, "{}", va.len());
+    assert!(
+        va == vb,
+        "the PLY build's voxels differ from the OBJ build's"
+    );
+}
+
+/// The shared Munich city (`uchar material` per face, names in header comments): the build has
+/// the material channel with the five names, every leaf voxel one of them.
+#[test]
+fn munich_gets_the_material_channel() {
+    let Some(dir) = shared_meshes("munich_gets_the_material_channel") else {
+        return;
+    };
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("m.voxlod");
+    let s = build(
+        &dir.join("sionna-rt-munich/munich_merged.ply"),
+        &out,
+        &["-r", "512"],
+    );
+    assert!(warnings(&s).is_empty(), "{:?}", warnings(&s));
+    let r = Reader::open(&out).unwrap();
+    assert!(r.has_materials());
+    assert_eq!(
+        r.manifest().unwrap()["materials"],
+        serde_json::json!(["", "marble", "metal", "brick", "wood", "concrete"])
+    );
+    let mut seen = HashSet::new();
+    for i in r.level_nodes(0).collect::<Vec<_>>() {
+        seen.extend(r.read_materials(i).unwrap().unwrap());
+    }
+    let mut seen: Vec<u32> = seen.into_iter().collect();
+    seen.sort();
+    assert_eq!(seen, [1, 2, 3, 4, 5]);
+}
+
+/// The gradient-textured quad as GLB (an embedded image in a buffer view) and as `.gltf` (the
+/// PNG beside it): the OBJ build's voxels and colours, byte for byte; the manifest says +Y up.
+#[test]
+fn textured_quad_as_gltf_equals_obj() {
+    use voxlod_testkit::gltf::{write, Image, Mat, Node, Prim};
+    let d = tempfile::tempdir().unwrap();
+    let obj = checker_obj(d.path(), "grad.png");
+    gradient_png(&d.path().join("grad.png"));
+    let want = {
+        let out = d.path().join("obj.voxlod");
+        build(&obj, &out, &["-r", "256"]);
+        level0_voxels(&out)
+    };
+    let quad = Prim::textured_quad();
+    let png = std::fs::read(d.path().join("grad.png")).unwrap();
+    for (name, img) in [
+        ("q.glb", Image::View(png)),
+        ("q.gltf", Image::Uri("grad.png".into())),
+    ] {
+        let mat = Mat {
+            name: "checker".into(),
+            base_color: [1.0; 4],
+            texture: Some(img),
+            wrap: [10497; 2],
+        };
+        let p = d.path().join(name);
+        let node = Node {
+            mesh: Some(0),
+            ..Node::default()
+        };
+        write(&p, &[vec![quad.clone()]], &[node], &[0], &[mat]);
+        let out = d.path().join(format!("{name}.voxlod"));
+        let s = build(&p, &out, &["-r", "256"]);
+        assert!(warnings(&s).is_empty(), "{name}: {:?}", warnings(&s));
+        assert!(
+            level0_voxels(&out) == want,
+            "{name}: voxels differ from the OBJ build"
+        );
+        let r = Reader::open(&out).unwrap();
+        assert_eq!(
+            r.manifest().unwrap()["input"]["up"],
+            serde_json::json!([0.0, 1.0, 0.0])
+        );
+    }
+}
+
+/// The shared bunny written as GLB by the test kit: the same voxels as the PLY build (colours
+/// and normals aside: the same positions and triangles).
+#[test]
+fn bunny_glb_has_the_voxels_of_the_ply() {
+    use voxlod_testkit::gltf::{write, Node, Prim};
+    let Some(dir) = shared_meshes("bunny_glb_has_the_voxels_of_the_ply") else {
+        return;
+    };
+    let ply = dir.join("stanford-bunny/bun_zipper.ply");
+    let (v, f) = voxlod_testkit::mesh::read_ply(&ply);
+    let d = tempfile::tempdir().unwrap();
+    let glb = d.path().join("bunny.glb");
+    let prim = Prim {
+        positions: v.iter().map(|p| p.map(|x| x as f32)).collect(),
+        indices: Some(f.iter().flatten().copied().collect()),
+        mode: 4,
+        ..Prim::default()
+    };
+    write(
+        &glb,
+        &[vec![prim]],
+        &[Node {
+            mesh: Some(0),
+            ..Node::default()
+        }],
+        &[0],
+        &[],
+    );
+    let (a, b) = (d.path().join("ply.voxlod"), d.path().join("glb.voxlod"));
+    build(&ply, &a, &["-r", "512"]);
+    build(&glb, &b, &["-r", "512"]);
+    let pos = |p: &Path| {
+        level0_voxels(p)
+            .into_iter()
+            .map(|v| (v.0, v.1))
+            .collect::<Vec<_>>()
+    };
+    let (pa, pb) = (pos(&a), pos(&b));
+    assert!(pa.len() > 100_000, "{}", pa.len());
+    assert!(
+        pa == pb,
+        "the GLB build's voxel set differs from the PLY build's"
+    );
+}

@@ -137,6 +137,20 @@ pub struct Material {
     pub texture: Option<std::path::PathBuf>,
     /// How the texture wraps in `u` and `v`.
     pub wrap: [Wrap; 2],
+    /// The texture's encoded bytes (PNG or JPEG) when the mesh file holds them (a glTF data URI
+    /// or buffer view); `texture` then names it for messages (`FILE#image N`).
+    #[serde(skip)]
+    pub embedded: Option<Embedded>,
+}
+
+/// Encoded image bytes carried by a [`Material`] (shared, cheap to clone).
+#[derive(Clone, PartialEq)]
+pub struct Embedded(pub std::sync::Arc<[u8]>);
+
+impl std::fmt::Debug for Embedded {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Embedded({} bytes)", self.0.len())
+    }
 }
 
 fn sub64(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {

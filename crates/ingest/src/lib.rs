@@ -7,13 +7,19 @@
 //!   gzip-compressed. Elements in any order, unknown elements and properties skipped, faces
 //!   (polygons, fan-triangulated) and `tristrips` (restart at -1). Vertex normals `nx ny nz`;
 //!   vertex colours `red green blue [alpha]` (or `diffuse_*`, `r g b a`), uchar 0–255 or
-//!   float 0–1.
+//!   float 0–1. Per-face `material` / `material_index` (named by `comment material N = NAME`)
+//!   into [`MeshInfo::materials`], face colours, texture coordinates per vertex (`u v`, `s t`,
+//!   `texture_u texture_v`, `texture_s texture_t`) or per face (`texcoord` lists) with
+//!   `comment TextureFile NAME` (`ply_materials.rs`, `ply_face_data.rs`).
 //! * **OBJ** (`.obj`) through `tobj`: polygons fan-triangulated, MTL `Kd` (times `d` as alpha)
 //!   as the colour of the triangle, `vn` normals when every face corner has one; `vt`
 //!   texture coordinates and the material's `map_Kd` texture (resolved relative to the MTL
 //!   file, case-insensitively if the exact path does not exist) into [`MeshInfo::materials`]
 //!   (docs/TEXTURES.md).
 //! * **STL** (`.stl`): binary and ASCII; the facet normal is ignored.
+//! * **glTF 2.0** (`.gltf` with external or data-URI buffers and images, `.glb`) through the
+//!   `gltf` crate: the default scene's triangle primitives with their node transforms,
+//!   `COLOR_0` times `baseColorFactor`, `baseColorTexture` and the materials by name.
 //!
 //! Memory: binary PLY and binary STL are memory-mapped and vertices are read in place —
 //! memory use does not grow with the mesh. An input truncated while it is mapped ends the
@@ -53,11 +59,14 @@
 mod batch;
 mod bounds;
 mod error;
+mod gltf;
 mod map_guard;
 mod obj;
 mod ply;
+mod ply_face_data;
 mod ply_faces;
 mod ply_header;
+mod ply_materials;
 mod ply_records;
 mod ply_vertices;
 mod stl;
@@ -99,6 +108,9 @@ pub struct MeshInfo {
     /// Things that did not stop reading but the user should know (missing MTL file,
     /// ignored partial normals, trailing bytes, no faces).
     pub warnings: Vec<String>,
+    /// The up axis the format defines, if it defines one (glTF: `+Y`); the build's manifest
+    /// gives it to `render` as `input.up`.
+    pub up: Option<[f32; 3]>,
 }
 
 /// Counts of one [`MeshSource::stream`] run.
@@ -116,6 +128,7 @@ pub struct IngestStats {
 }
 
 enum Reader {
+    Gltf(Box<gltf::GltfSource>),
     Ply(ply::PlySource),
     Obj(obj::ObjSource),
     Stl(stl::StlSource),
@@ -130,6 +143,7 @@ pub struct MeshSource {
 
 #[derive(Clone, Copy, PartialEq, Debug)]
 enum Format {
+    Gltf,
     Ply { gz: bool },
     Obj,
     Stl,
@@ -151,6 +165,9 @@ fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
     if name.ends_with(".ply") || name.ends_with(".ply.gz") {
         // the header parser reports a file that is neither gzip nor starts with "ply"
         return Ok(Format::Ply { gz });
+    }
+    if name.ends_with(".gltf") || name.ends_with(".glb") || head.starts_with(b"glTF") {
+        return Ok(Format::Gltf);
     }
     if name.ends_with(".obj.gz") || name.ends_with(".stl.gz") {
         return unknown("gzip-compressed OBJ/STL is not supported; decompress it first".into());
@@ -175,7 +192,7 @@ fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
         return Ok(Format::Stl);
     }
     unknown(format!(
-        "the extension of {} is not .ply, .ply.gz, .obj or .stl, and the content is not PLY or STL",
+        "the extension of {} is not .ply, .ply.gz, .obj, .stl, .gltf or .glb, and the content is not PLY, STL or GLB",
         crate::error::quoted(&name)
     ))
 }
@@ -225,6 +242,10 @@ impl MeshSource {
                 let (s, i) = obj::ObjSource::open(path)?;
                 (Reader::Obj(s), i)
             }
+            Format::Gltf => {
+                let (s, i) = gltf::GltfSource::open(path)?;
+                (Reader::Gltf(Box::new(s)), i)
+            }
             Format::Stl => {
                 let (s, i) = stl::StlSource::open(path, &head, file_len)?;
                 (Reader::Stl(s), i)
@@ -250,7 +271,7 @@ impl MeshSource {
         match &self.reader {
             Reader::Ply(p) => p.is_mapped(),
             Reader::Stl(s) => s.is_mapped(),
-            Reader::Obj(_) => false,
+            Reader::Obj(_) | Reader::Gltf(_) => false,
         }
     }
 
@@ -264,7 +285,7 @@ impl MeshSource {
         match &self.reader {
             Reader::Ply(p) => p.vertex_bounds(),
             Reader::Stl(s) => s.vertex_bounds(),
-            Reader::Obj(_) => None,
+            Reader::Obj(_) | Reader::Gltf(_) => None,
         }
     }
 
@@ -317,7 +338,7 @@ impl MeshSource {
         let release = || match &self.reader {
             Reader::Ply(p) => p.release_pages(),
             Reader::Stl(s) => s.release_pages(),
-            Reader::Obj(_) => {}
+            Reader::Obj(_) | Reader::Gltf(_) => {}
         };
         let erased = |tris: &mut [Triangle]| -> batch::Prepared { Box::new(prepare(tris)) };
         let mut g = |tris: &[Triangle], p: batch::Prepared| {
@@ -331,6 +352,7 @@ impl MeshSource {
         match &self.reader {
             Reader::Ply(p) => p.stream(&mut em)?,
             Reader::Obj(o) => o.stream(&mut em)?,
+            Reader::Gltf(g) => g.stream(&mut em)?,
             Reader::Stl(s) => s.stream(&mut em)?,
         }
         em.finish()

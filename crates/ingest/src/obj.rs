@@ -375,6 +375,7 @@ impl ObjSource {
             has_texcoords,
             materials,
             warnings,
+            up: None,
         };
         Ok((
             ObjSource {

@@ -7,7 +7,8 @@ use crate::batch::Emitter;
 use crate::bounds::parallel_bounds;
 use crate::map_guard::MappedFile;
 use crate::ply_faces::{stream_faces, stream_triangles_parallel};
-use crate::ply_header::{parse_header, Element, Encoding, Header};
+use crate::ply_header::{parse_header, Element, Encoding, Header, Scalar};
+use crate::ply_materials::material_table;
 use crate::ply_records::{
     AsciiRecords, Counter, CountingReader, Records, SliceRecords, StreamRecords,
 };
@@ -15,11 +16,12 @@ use crate::ply_vertices::{CompactVertices, MappedVertices, VertexSource};
 use crate::{IngestError, Location, MeshInfo};
 use flate2::read::MultiGzDecoder;
 use std::cell::Cell;
+use std::collections::BTreeSet;
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
-use voxlod_geom::{Bounds, TRI_HAS_COLORS, TRI_HAS_NORMALS};
+use voxlod_geom::{Bounds, TRI_HAS_COLORS, TRI_HAS_NORMALS, TRI_HAS_UV};
 
 pub(crate) struct PlySource {
     path: PathBuf,
@@ -32,6 +34,8 @@ pub(crate) struct PlySource {
     offsets: Vec<Option<usize>>,
     /// Passes over the file that front-to-back reading needs (2 if faces precede vertices).
     passes: u64,
+    /// Flags from the material table (`TRI_HAS_UV`, the one texture's material).
+    table_flags: u32,
 }
 
 impl PlySource {
@@ -73,6 +77,25 @@ impl PlySource {
         } else {
             1
         };
+        let mut src = PlySource {
+            path: path.to_path_buf(),
+            header,
+            gz,
+            file_len,
+            map,
+            offsets,
+            passes,
+            table_flags: 0,
+        };
+        let mut header = src.header.clone();
+        let table = material_table(path, &mut header, &mut |h, ei, pi, ty| {
+            src.scan_values(h, ei, pi, ty)
+        })?;
+        src.header = header;
+        src.table_flags = table.flags;
+        warnings.extend(table.warnings);
+        let header = &src.header;
+        let layout = &header.layout;
         let info = MeshInfo {
             path: path.to_path_buf(),
             format: format!(
@@ -88,23 +111,86 @@ impl PlySource {
                 .map(|s| header.elements[s.0].count)
                 .sum(),
             has_normals: layout.has_normals,
-            has_colors: layout.has_colors,
-            has_texcoords: false,
-            materials: Vec::new(),
+            has_colors: layout.has_colors || table.face_colors,
+            has_texcoords: table.flags & TRI_HAS_UV != 0,
+            materials: table.materials,
             warnings,
+            up: None,
         };
-        Ok((
-            PlySource {
-                path: path.to_path_buf(),
-                header,
-                gz,
-                file_len,
-                map,
-                offsets,
-                passes,
-            },
-            info,
-        ))
+        Ok((src, info))
+    }
+
+    /// The distinct values of integer property `pi` (type `ty`) of element `ei`, read in one
+    /// pass over the element (from the map, or front to back), for the material table.
+    fn scan_values(
+        &self,
+        h: &Header,
+        ei: usize,
+        pi: usize,
+        ty: Scalar,
+    ) -> Result<BTreeSet<i64>, IngestError> {
+        // skips the elements `before`, then reads the values from element `el`
+        fn values<R: Records>(
+            src: &mut R,
+            before: &[Element],
+            el: &Element,
+            pi: usize,
+            ty: Scalar,
+        ) -> Result<BTreeSet<i64>, IngestError> {
+            for b in before {
+                skip_element(src, b)?;
+            }
+            let mut set = BTreeSet::new();
+            src.element(&el.name, el.count);
+            for r in 0..el.count {
+                src.begin(r)?;
+                for (k, p) in el.props.iter().enumerate() {
+                    if k == pi {
+                        set.insert(src.int(ty)?);
+                    } else {
+                        src.skip(p.kind)?;
+                    }
+                }
+                src.end()?;
+            }
+            Ok(set)
+        }
+        let el = &h.elements[ei];
+        if let (Some(m), Some(off)) = (&self.map, self.offsets[ei]) {
+            // from the element's own offset: the elements before it are not walked
+            return match h.encoding {
+                Encoding::BinaryBe => values(
+                    &mut SliceRecords::<true>::new(&self.path, m, off),
+                    &[],
+                    el,
+                    pi,
+                    ty,
+                ),
+                _ => values(
+                    &mut SliceRecords::<false>::new(&self.path, m, off),
+                    &[],
+                    el,
+                    pi,
+                    ty,
+                ),
+            };
+        }
+        let (r, counter) = self.open_body(0)?;
+        let before = &h.elements[..ei];
+        match h.encoding {
+            Encoding::Ascii => {
+                let mut src = AsciiRecords::new(&self.path, r, counter, h.lines);
+                values(&mut src, before, el, pi, ty)
+            }
+            Encoding::BinaryLe => {
+                let mut src = StreamRecords::<_, false>::new(&self.path, r, counter, h.bytes);
+                values(&mut src, before, el, pi, ty)
+            }
+            Encoding::BinaryBe => {
+                let mut src = StreamRecords::<_, true>::new(&self.path, r, counter, h.bytes);
+                values(&mut src, before, el, pi, ty)
+            }
+        }
     }
 
     /// True for binary (not gzip) input, read through the memory map.
@@ -125,6 +211,7 @@ impl PlySource {
         let l = &self.header.layout;
         (if l.has_normals { TRI_HAS_NORMALS } else { 0 })
             | (if l.has_colors { TRI_HAS_COLORS } else { 0 })
+            | self.table_flags
     }
 
     /// Drops this process's resident pages of the memory-mapped input (they stay in the page

@@ -4,12 +4,13 @@
 //! of any length needs no buffer.
 
 use crate::batch::{Emitter, Prepared};
+use crate::ply_face_data::FaceRecords;
 use crate::ply_header::{Element, Kind, Scalar};
 use crate::ply_records::{Records, SliceRecords};
 use crate::ply_vertices::{non_finite, VertexSource};
 use crate::IngestError;
 use std::path::Path;
-use voxlod_geom::{Triangle, DEFAULT_COLOR, TRI_HAS_COLORS, TRI_HAS_NORMALS};
+use voxlod_geom::{Triangle, DEFAULT_COLOR, TRI_HAS_COLORS, TRI_HAS_NORMALS, TRI_HAS_UV};
 
 /// Where decoded triangles go: the [`Emitter`] (sequential reading) or a [`LocalBatch`] (one
 /// worker's share of a parallel read).
@@ -309,7 +310,18 @@ pub(crate) fn stream_faces<R: Records, V: VertexSource, S: Sink>(
     range: std::ops::Range<u64>,
     only_triangles: bool,
 ) -> Result<Option<u64>, IngestError> {
-    debug_assert!(flags & !(TRI_HAS_COLORS | TRI_HAS_NORMALS) == 0);
+    debug_assert!(flags & (TRI_HAS_UV - 1) & !(TRI_HAS_COLORS | TRI_HAS_NORMALS) == 0);
+    if el.data.any() && !strips {
+        // per-face material, colour or texture coordinates: whole records (ply_face_data.rs)
+        let faces = FaceRecords {
+            path,
+            el,
+            list,
+            verts,
+            flags,
+        };
+        return faces.stream(src, em, range, only_triangles);
+    }
     let nv = verts.count();
     src.element(&el.name, el.count);
     for rec in range {
@@ -392,13 +404,13 @@ fn emit<R: Records, V: VertexSource, S: Sink>(
 
 /// A corner index repeated: the triangle has zero area.
 #[inline]
-fn repeats(tri: [usize; 3]) -> bool {
+pub(crate) fn repeats(tri: [usize; 3]) -> bool {
     tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]
 }
 
 /// The triangle of vertices `tri`, or the first vertex with a non-finite position.
 #[inline]
-fn gather<V: VertexSource>(
+pub(crate) fn gather<V: VertexSource>(
     verts: &V,
     tri: [usize; 3],
     flags: u32,
@@ -419,6 +431,9 @@ fn gather<V: VertexSource>(
         t.v[k] = c.p;
         t.n[k] = c.n;
         t.c[k] = c.c;
+        if flags & TRI_HAS_UV != 0 {
+            t.uv[k] = c.uv;
+        }
     }
     Ok(t)
 }

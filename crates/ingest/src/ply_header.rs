@@ -110,6 +110,8 @@ pub(crate) struct Element {
     pub name: String,
     pub count: u64,
     pub props: Vec<Property>,
+    /// What a `face` element's records carry besides the vertex indices (empty otherwise).
+    pub data: FaceData,
 }
 
 impl Element {
@@ -143,9 +145,40 @@ impl Element {
 /// What each vertex property means to us.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Role {
-    /// Position (0..3), normal (3..6), colour (6..10: r, g, b, a).
+    /// Position (0..3), normal (3..6), colour (6..10: r, g, b, a), texture coordinates
+    /// (10..12: u, v).
     Attr(usize),
     Skip,
+}
+
+/// Per-face data of a `face` element (docs/INGEST.md "Per-face data"): property indices of
+/// the material key, the colour channels and the texture coordinate list, and the material
+/// table's lookup once the file's values are known (`ply_materials.rs`).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct FaceData {
+    /// The property whose value selects the material (`material`, `material_index`, or
+    /// `texnumber` with `comment TextureFile`), and its type.
+    pub key: Option<(usize, Scalar)>,
+    /// `red green blue [alpha]` of the face (used only without vertex colours).
+    pub color: [Option<(usize, Scalar)>; 4],
+    /// The `texcoord` list: two floats per corner.
+    pub texcoord: Option<usize>,
+    /// The key values in the material table, sorted: value `keys[i]` is material `i + 1`;
+    /// other values are material 0.
+    pub keys: Vec<i64>,
+}
+
+impl FaceData {
+    /// True if the records carry anything the face reader must decode besides the indices.
+    pub fn any(&self) -> bool {
+        self.key.is_some() || self.color[0].is_some() || self.texcoord.is_some()
+    }
+
+    /// The material of key value `v`.
+    #[inline]
+    pub fn material(&self, v: i64) -> u32 {
+        self.keys.binary_search(&v).map_or(0, |i| i as u32 + 1)
+    }
 }
 
 /// Which elements and properties carry the mesh.
@@ -157,6 +190,8 @@ pub(crate) struct Layout {
     pub roles: Vec<Role>,
     pub has_normals: bool,
     pub has_colors: bool,
+    /// The vertices have texture coordinates (u and v under one of their names).
+    pub has_texcoords: bool,
     /// Elements that yield triangles, in file order: (element index, index of the vertex
     /// index list property, true for triangle strips).
     pub sources: Vec<(usize, usize, bool)>,
@@ -171,6 +206,8 @@ pub(crate) struct Header {
     /// Lines up to and including `end_header`.
     pub lines: u64,
     pub layout: Layout,
+    /// The text of each `comment` line, after the keyword (material names, `TextureFile`).
+    pub comments: Vec<String>,
 }
 
 /// Reads the header from `r`, leaving `r` at the first body byte.
@@ -185,6 +222,7 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
     let mut line_no = 0u64;
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
+    let mut comments = Vec::new();
     loop {
         buf.clear();
         let n = (&mut *r)
@@ -214,7 +252,12 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
         }
         match toks.first().copied() {
             None => continue,
-            Some("comment") | Some("obj_info") => continue,
+            Some("comment") => {
+                let rest = text.trim_start().strip_prefix("comment").unwrap_or("");
+                comments.push(rest.trim().to_string());
+                continue;
+            }
+            Some("obj_info") => continue,
             Some("format") => {
                 if toks.len() != 3 {
                     return Err(herr(line_no, "expected \"format <encoding> 1.0\"".into()));
@@ -251,6 +294,7 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
                     name: toks[1].to_string(),
                     count,
                     props: Vec::new(),
+                    data: FaceData::default(),
                 });
             }
             Some("property") => {
@@ -295,25 +339,26 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
     let Some(encoding) = encoding else {
         return Err(herr(line_no, "no format line before end_header".into()));
     };
-    let layout = layout(&elements).map_err(|m| herr(line_no, m))?;
+    let layout = layout(&mut elements).map_err(|m| herr(line_no, m))?;
     Ok(Header {
         encoding,
         elements,
         bytes,
         lines: line_no,
         layout,
+        comments,
     })
 }
 
 /// Finds the vertex attributes and the triangle-bearing elements.
-fn layout(elements: &[Element]) -> Result<Layout, String> {
+fn layout(elements: &mut [Element]) -> Result<Layout, String> {
     let vertex = elements
         .iter()
         .position(|e| e.name == "vertex")
         .ok_or_else(|| "no \"vertex\" element".to_string())?;
     let vel = &elements[vertex];
     let mut roles = Vec::with_capacity(vel.props.len());
-    let mut found = [false; 10];
+    let mut found = [false; 12];
     for p in &vel.props {
         let slot = match p.name.as_str() {
             "x" => Some(0),
@@ -326,6 +371,8 @@ fn layout(elements: &[Element]) -> Result<Layout, String> {
             "green" | "diffuse_green" | "g" => Some(7),
             "blue" | "diffuse_blue" | "b" => Some(8),
             "alpha" | "diffuse_alpha" | "a" => Some(9),
+            "u" | "s" | "texture_u" | "texture_s" => Some(10),
+            "v" | "t" | "texture_v" | "texture_t" => Some(11),
             _ => None,
         };
         match (slot, p.kind) {
@@ -347,16 +394,20 @@ fn layout(elements: &[Element]) -> Result<Layout, String> {
     }
     let has_normals = found[3] && found[4] && found[5];
     let has_colors = found[6] && found[7] && found[8];
-    // Partial normals or colours are ignored rather than half-used.
+    let has_texcoords = found[10] && found[11];
+    // Partial normals, colours or texture coordinates are ignored rather than half-used.
     for r in roles.iter_mut() {
         if let Role::Attr(s) = *r {
-            if (3..6).contains(&s) && !has_normals || (6..10).contains(&s) && !has_colors {
+            if (3..6).contains(&s) && !has_normals
+                || (6..10).contains(&s) && !has_colors
+                || (10..12).contains(&s) && !has_texcoords
+            {
                 *r = Role::Skip;
             }
         }
     }
     let mut sources = Vec::new();
-    for (i, e) in elements.iter().enumerate() {
+    for (i, e) in elements.iter_mut().enumerate() {
         let strips = match e.name.as_str() {
             "face" => false,
             "tristrips" => true,
@@ -382,6 +433,9 @@ fn layout(elements: &[Element]) -> Result<Layout, String> {
                 ));
             }
         }
+        if !strips {
+            e.data = face_data(&e.props);
+        }
         sources.push((i, list, strips));
     }
     Ok(Layout {
@@ -389,6 +443,42 @@ fn layout(elements: &[Element]) -> Result<Layout, String> {
         roles,
         has_normals,
         has_colors,
+        has_texcoords,
         sources,
     })
+}
+
+/// The per-face properties of a `face` element's records: `material` or `material_index`
+/// (an integer), `red green blue [alpha]` (or `diffuse_*`, `r g b a`; all of r, g, b or none
+/// are used), the `texcoord` list (floats). `texnumber` is recorded as the key only later,
+/// if the header has `TextureFile` comments and no material property (`ply_materials.rs`).
+fn face_data(props: &[Property]) -> FaceData {
+    let mut d = FaceData::default();
+    for (pi, p) in props.iter().enumerate() {
+        match (p.name.as_str(), p.kind) {
+            ("material" | "material_index", Kind::Scalar(t))
+                if !t.is_float() && d.key.is_none() =>
+            {
+                d.key = Some((pi, t))
+            }
+            ("texcoord", Kind::List { item, .. }) if item.is_float() && d.texcoord.is_none() => {
+                d.texcoord = Some(pi)
+            }
+            (name, Kind::Scalar(t)) => {
+                let ch = match name {
+                    "red" | "diffuse_red" | "r" => 0,
+                    "green" | "diffuse_green" | "g" => 1,
+                    "blue" | "diffuse_blue" | "b" => 2,
+                    "alpha" | "diffuse_alpha" | "a" => 3,
+                    _ => continue,
+                };
+                d.color[ch].get_or_insert((pi, t));
+            }
+            _ => {}
+        }
+    }
+    if d.color[..3].iter().any(|c| c.is_none()) {
+        d.color = [None; 4];
+    }
+    d
 }

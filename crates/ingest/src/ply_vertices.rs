@@ -15,6 +15,8 @@ pub(crate) struct Corner {
     pub p: [f32; 3],
     pub n: [f32; 3],
     pub c: [u8; 4],
+    /// Texture coordinates (zero without them).
+    pub uv: [f32; 2],
 }
 
 pub(crate) trait VertexSource {
@@ -25,7 +27,7 @@ pub(crate) trait VertexSource {
 
 /// A colour channel to 8 bits: floats are 0–1, 16-bit unsigned 0–65535, other integers 0–255.
 #[inline]
-fn color_byte(v: f64, ty: Scalar) -> u8 {
+pub(crate) fn color_byte(v: f64, ty: Scalar) -> u8 {
     let v = match ty {
         Scalar::F32 | Scalar::F64 => v * 255.0,
         Scalar::U16 => v / 257.0,
@@ -35,11 +37,13 @@ fn color_byte(v: f64, ty: Scalar) -> u8 {
     v.round().clamp(0.0, 255.0) as u8
 }
 
-/// Vertices parsed into compact arrays. Normals and colours are empty when absent.
+/// Vertices parsed into compact arrays. Normals, colours and texture coordinates are empty
+/// when absent.
 pub(crate) struct CompactVertices {
     pos: Vec<[f32; 3]>,
     nrm: Vec<[f32; 3]>,
     col: Vec<[u8; 4]>,
+    uv: Vec<[f32; 2]>,
 }
 
 impl CompactVertices {
@@ -56,15 +60,18 @@ impl CompactVertices {
         let mut pos = Vec::with_capacity(cap);
         let mut nrm = Vec::with_capacity(if layout.has_normals { cap } else { 0 });
         let mut col = Vec::with_capacity(if layout.has_colors { cap } else { 0 });
+        let mut uv = Vec::with_capacity(if layout.has_texcoords { cap } else { 0 });
         src.element(&el.name, el.count);
         for i in 0..el.count {
             src.begin(i)?;
-            let mut a = [0f32; 6];
+            let mut a = [0f32; 12];
             let mut c = DEFAULT_COLOR;
             let at = src.location();
             for (p, role) in el.props.iter().zip(&layout.roles) {
                 match (*role, p.kind) {
-                    (Role::Attr(s), Kind::Scalar(ty)) if s < 6 => a[s] = src.f32(ty)?,
+                    (Role::Attr(s), Kind::Scalar(ty)) if !(6..10).contains(&s) => {
+                        a[s] = src.f32(ty)?
+                    }
                     (Role::Attr(s), Kind::Scalar(ty)) => c[s - 6] = color_byte(src.f64(ty)?, ty),
                     (_, kind) => src.skip(kind)?,
                 }
@@ -86,11 +93,14 @@ impl CompactVertices {
             if layout.has_colors {
                 col.push(c);
             }
+            if layout.has_texcoords {
+                uv.push([a[10], a[11]]);
+            }
             if i & 0xffff == 0 {
                 progress(src.bytes_done());
             }
         }
-        Ok(CompactVertices { pos, nrm, col })
+        Ok(CompactVertices { pos, nrm, col, uv })
     }
 }
 
@@ -112,6 +122,11 @@ impl VertexSource for CompactVertices {
             } else {
                 self.col[i]
             },
+            uv: if self.uv.is_empty() {
+                [0.0; 2]
+            } else {
+                self.uv[i]
+            },
         }
     }
 }
@@ -122,8 +137,8 @@ pub(crate) struct MappedVertices<'a, const BE: bool> {
     data: &'a [u8],
     stride: usize,
     count: u64,
-    /// (byte offset in the record, type) of x, y, z, nx, ny, nz, r, g, b, a.
-    attr: [Option<(usize, Scalar)>; 10],
+    /// (byte offset in the record, type) of x, y, z, nx, ny, nz, r, g, b, a, u, v.
+    attr: [Option<(usize, Scalar)>; 12],
     has_normals: bool,
     has_colors: bool,
     /// The usual record, decoded without per-property dispatch, if this is one.
@@ -144,7 +159,7 @@ struct Packed {
 impl Packed {
     /// The packed form of `attr`, if it has one.
     fn of(
-        attr: &[Option<(usize, Scalar)>; 10],
+        attr: &[Option<(usize, Scalar)>; 12],
         has_normals: bool,
         has_colors: bool,
     ) -> Option<Self> {
@@ -181,7 +196,7 @@ impl<'a, const BE: bool> MappedVertices<'a, BE> {
     pub fn new(data: &'a [u8], el: &Element, layout: &Layout) -> Self {
         let stride = el.fixed_size().unwrap_or(0);
         debug_assert!(stride > 0 && data.len() as u64 == el.count * stride as u64);
-        let mut attr = [None; 10];
+        let mut attr = [None; 12];
         let mut off = 0;
         for (p, role) in el.props.iter().zip(&layout.roles) {
             if let Kind::Scalar(ty) = p.kind {
@@ -198,7 +213,9 @@ impl<'a, const BE: bool> MappedVertices<'a, BE> {
             attr,
             has_normals: layout.has_normals,
             has_colors: layout.has_colors,
-            packed: Packed::of(&attr, layout.has_normals, layout.has_colors),
+            // texture coordinates only through the general decoding
+            packed: Packed::of(&attr, layout.has_normals, layout.has_colors)
+                .filter(|_| !layout.has_texcoords),
         }
     }
 }
@@ -252,6 +269,7 @@ impl<const BE: bool> VertexSource for MappedVertices<'_, BE> {
                 [0.0; 3]
             },
             c,
+            uv: [f(10), f(11)],
         }
     }
 }
@@ -271,6 +289,7 @@ fn packed_corner<const BE: bool>(rec: &[u8], pk: Packed) -> Corner {
         p: f32s(pk.p),
         n: pk.n.map_or([0.0; 3], f32s),
         c,
+        uv: [0.0; 2],
     }
 }
 
@@ -327,7 +346,14 @@ mod tests {
         general.packed = None;
         for i in 0..300 {
             let (a, b) = (packed.corner(i), general.corner(i));
-            let bits = |c: super::Corner| (c.p.map(f32::to_bits), c.n.map(f32::to_bits), c.c);
+            let bits = |c: super::Corner| {
+                (
+                    c.p.map(f32::to_bits),
+                    c.n.map(f32::to_bits),
+                    c.c,
+                    c.uv.map(f32::to_bits),
+                )
+            };
             assert_eq!(bits(a), bits(b), "{props} vertex {i}");
             assert_eq!(
                 packed.position(i).map(f32::to_bits),

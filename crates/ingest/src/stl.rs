@@ -67,6 +67,7 @@ impl StlSource {
             has_texcoords: false,
             materials: Vec::new(),
             warnings: Vec::new(),
+            up: None,
         };
         if is_ascii_stl(head, len) {
             return Ok((

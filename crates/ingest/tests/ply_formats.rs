@@ -165,7 +165,8 @@ fn variant_a() -> Vec<El> {
             "list uchar int vertex_indices",
             "int flags",
             "float quality",
-            "uchar material",
+            // not `material`, which is per-face data now (tests/ply_face_data.rs)
+            "uchar label",
         ],
         rows: face_rows(true),
     };

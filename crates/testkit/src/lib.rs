@@ -7,6 +7,8 @@
 //!   runs, with the same rule: missing is a skip elsewhere, a failure under `CI=true`.
 //! * [`Rng`]: a deterministic SplitMix64 generator (no dependency, same numbers on every
 //!   platform), with the draws the tests need (floats, ranges, integers, points, rotations).
+//! * [`gltf`]: a minimal glTF 2.0 writer (`.gltf` + `.bin`, `.glb`).
+//! * [`textured`]: a textured OBJ converted to textured PLY (both texture coordinate conventions).
 //! * [`mesh`]: made-up meshes (icosphere, cube, transforms) and a minimal PLY/OBJ reader
 //!   written independently of `voxlod-ingest`, so tests can check the real reader against it.
 //!
@@ -25,8 +27,10 @@
 //! }
 //! ```
 
+pub mod gltf;
 pub mod mesh;
 mod rng;
+pub mod textured;
 
 pub use rng::Rng;
 

@@ -157,8 +157,22 @@ impl Texture {
             .with_guessed_format()
             .map_err(|e| e.to_string())?
             .decode()
+            .map_err(|e| e.to_string())?;
+        Self::from_image(img, wrap)
+    }
+
+    /// Decodes PNG or JPEG bytes held in memory (a glTF embedded image) into a texture.
+    pub fn decode(bytes: &[u8], wrap: [Wrap; 2]) -> Result<Texture, String> {
+        let img = image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
             .map_err(|e| e.to_string())?
-            .into_rgba8();
+            .decode()
+            .map_err(|e| e.to_string())?;
+        Self::from_image(img, wrap)
+    }
+
+    fn from_image(img: image::DynamicImage, wrap: [Wrap; 2]) -> Result<Texture, String> {
+        let img = img.into_rgba8();
         let (w, h) = img.dimensions();
         let texels: Vec<[u8; 4]> = img
             .into_raw()
@@ -285,7 +299,11 @@ impl TextureSet {
                 set.by_material.push(t.clone());
                 continue;
             }
-            let t = match Texture::load(path, m.wrap) {
+            let loaded = match &m.embedded {
+                Some(bytes) => Texture::decode(&bytes.0, m.wrap),
+                None => Texture::load(path, m.wrap),
+            };
+            let t = match loaded {
                 Ok(t) => Some(Arc::new(t)),
                 Err(e) => {
                     set.warnings.push(format!(
@@ -442,10 +460,43 @@ mod tests {
                 name: "m".into(),
                 texture: Some(p.clone()),
                 wrap: [Wrap::Repeat; 2],
+                embedded: None,
             },
         ]);
         assert!(set.get(1).is_none() && set.is_empty());
         assert_eq!(set.warnings.len(), 1);
         assert!(set.warnings[0].contains("bad.png"), "{:?}", set.warnings);
+    }
+
+    #[test]
+    fn embedded_bytes_decode_as_the_file() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("g.png");
+        image::RgbaImage::from_fn(5, 3, |x, y| {
+            image::Rgba([(40 * x) as u8, (80 * y) as u8, 7, 200])
+        })
+        .save(&p)
+        .unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        let m = Material {
+            name: "e".into(),
+            texture: Some(std::path::PathBuf::from("scene.glb#image 0")),
+            wrap: [Wrap::Clamp; 2],
+            embedded: Some(voxlod_geom::Embedded(bytes.into())),
+        };
+        let set = TextureSet::load(&[Material::default(), m]);
+        assert!(set.warnings.is_empty(), "{:?}", set.warnings);
+        let file = Texture::load(&p, [Wrap::Clamp; 2]).unwrap();
+        let t = set.get(1).unwrap();
+        assert_eq!(t.size(), (5, 3));
+        for k in 0..t.levels() {
+            let (w, h) = (t.levels[k].w, t.levels[k].h);
+            for y in 0..h {
+                for x in 0..w {
+                    assert_eq!(t.texel(k, x, y), file.texel(k, x, y));
+                }
+            }
+        }
+        assert_eq!(t.texel(0, 4, 2), [160, 160, 7, 200]);
     }
 }

@@ -40,7 +40,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Voxelize a mesh (PLY, PLY.GZ, OBJ, STL) into an LOD octree file.
+    /// Voxelize a mesh (PLY, PLY.GZ, OBJ, STL, glTF/GLB) into an LOD octree file.
     #[command(after_help = EXAMPLES_BUILD)]
     Build(BuildArgs),
     /// Print the levels, nodes, voxel counts, size and settings of an octree file.

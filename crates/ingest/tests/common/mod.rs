@@ -49,12 +49,20 @@ fn text(ty: &str, v: f64) -> String {
 
 /// Encodes a PLY file; `enc` is "ascii", "binary_little_endian" or "binary_big_endian".
 pub fn ply(enc: &str, els: &[El]) -> Vec<u8> {
+    ply_commented(enc, &[], els)
+}
+
+/// [`ply`] with the header comment lines `comments` (each written after "comment ").
+pub fn ply_commented(enc: &str, comments: &[&str], els: &[El]) -> Vec<u8> {
     let mut out = Vec::new();
     write!(
         out,
         "ply\nformat {enc} 1.0\ncomment written by the voxlod-ingest tests\n"
     )
     .unwrap();
+    for c in comments {
+        writeln!(out, "comment {c}").unwrap();
+    }
     for e in els {
         writeln!(out, "element {} {}", e.name, e.rows.len()).unwrap();
         for p in &e.props {

@@ -237,5 +237,9 @@ fn manifest_fields(ctx: &BuildContext, ingested: &Ingested) -> serde_json::Value
         let names: Vec<&str> = info.materials.iter().map(|m| m.name.as_str()).collect();
         manifest["materials"] = serde_json::json!(names);
     }
+    // the up axis the input format defines (glTF: +Y), for `render` (issue 14)
+    if let Some(up) = info.up {
+        manifest["input"]["up"] = serde_json::json!(up);
+    }
     manifest
 }

@@ -1,0 +1,510 @@
+//! glTF 2.0 (Khronos, "glTF 2.0 Specification", 2021): `.gltf` with external or data-URI
+//! buffers and images, and `.glb` with its binary chunk, read by the `gltf` crate (its JSON
+//! and accessor readers); buffers and images are loaded here.
+//!
+//! Every mesh primitive of the default scene (else the first scene) is streamed in world
+//! coordinates: node transforms (matrix or TRS, nested) composed in f64; a transform whose
+//! determinant is negative flips the winding back (spec 3.7.4). Triangles, strips and fans
+//! become triangles; points and lines are a warning. Colour: `baseColorFactor` times `COLOR_0`
+//! (both linear in glTF), stored sRGB-encoded as every voxlod colour is; the texture
+//! `baseColorTexture` with its sampler's wrap modes and its `texCoord` set. Each glTF material
+//! is an entry of the material table, by name. glTF is Y-up (`MeshInfo::up`).
+
+use crate::batch::Emitter;
+use crate::{IngestError, Location, MeshInfo};
+use gltf::mesh::Mode;
+use std::path::{Path, PathBuf};
+use voxlod_geom::{
+    Embedded, Material, Triangle, Wrap, MAX_MATERIAL, TRI_HAS_COLORS, TRI_HAS_NORMALS, TRI_HAS_UV,
+};
+
+pub(crate) struct GltfSource {
+    path: PathBuf,
+    doc: gltf::Document,
+    buffers: Vec<Vec<u8>>,
+    /// Per glTF material: the texture coordinate set of its base colour texture, if usable.
+    uv_set: Vec<Option<u32>>,
+    /// The material table is kept (two or more materials, or a texture): triangles carry their
+    /// material index.
+    keep_materials: bool,
+}
+
+fn bad(path: &Path, message: impl Into<String>) -> IngestError {
+    IngestError::malformed(path, Location::File, message)
+}
+
+/// The bytes of a `data:` URI (base64 only), or `None` if `uri` is not one.
+fn data_uri(path: &Path, uri: &str) -> Option<Result<Vec<u8>, IngestError>> {
+    use base64::Engine;
+    let rest = uri.strip_prefix("data:")?;
+    Some(match rest.split_once(";base64,") {
+        Some((_, b64)) => base64::engine::general_purpose::STANDARD
+            .decode(b64)
+            .map_err(|e| bad(path, format!("a data URI is not valid base64 ({e})"))),
+        None => Err(bad(path, "a data URI is not base64-encoded")),
+    })
+}
+
+/// `%XX` escapes of a relative URI decoded (glTF URIs are RFC 3986).
+fn unescape(uri: &str) -> String {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        match (
+            b[i],
+            b.get(i + 1).and_then(|&c| hex(c)),
+            b.get(i + 2).and_then(|&c| hex(c)),
+        ) {
+            (b'%', Some(h), Some(l)) => {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+            }
+            (c, _, _) => {
+                out.push(c);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+fn load_buffers(path: &Path, g: &gltf::Gltf) -> Result<Vec<Vec<u8>>, IngestError> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    for b in g.document.buffers() {
+        let data = match b.source() {
+            gltf::buffer::Source::Bin => g.blob.clone().ok_or_else(|| {
+                bad(
+                    path,
+                    format!(
+                        "buffer {} refers to the binary chunk, which the file does not have",
+                        b.index()
+                    ),
+                )
+            })?,
+            gltf::buffer::Source::Uri(uri) => match data_uri(path, uri) {
+                Some(d) => d?,
+                None => {
+                    let f = crate::texpath::resolve(dir, &unescape(uri)).map_err(|e| {
+                        bad(
+                            path,
+                            format!("buffer {} ({uri:?}) cannot be read: {e}", b.index()),
+                        )
+                    })?;
+                    std::fs::read(&f).map_err(|e| IngestError::io(&f, e))?
+                }
+            },
+        };
+        if data.len() < b.length() {
+            return Err(bad(
+                path,
+                format!(
+                    "buffer {} holds {} bytes, but the file declares {} (truncated?)",
+                    b.index(),
+                    data.len(),
+                    b.length()
+                ),
+            ));
+        }
+        out.push(data);
+    }
+    Ok(out)
+}
+
+fn wrap(m: gltf::texture::WrappingMode) -> Wrap {
+    match m {
+        gltf::texture::WrappingMode::ClampToEdge => Wrap::Clamp,
+        gltf::texture::WrappingMode::MirroredRepeat => Wrap::Mirror,
+        gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+    }
+}
+
+/// The material table entry of glTF material `m` and its texture coordinate set.
+fn material(
+    path: &Path,
+    m: &gltf::Material,
+    buffers: &[Vec<u8>],
+    warnings: &mut Vec<String>,
+) -> (Material, Option<u32>) {
+    let name = m.name().map_or(
+        format!("material {}", m.index().unwrap_or(0)),
+        str::to_string,
+    );
+    let mut e = Material {
+        name,
+        ..Material::default()
+    };
+    let Some(info) = m.pbr_metallic_roughness().base_color_texture() else {
+        return (e, None);
+    };
+    let tex = info.texture();
+    let s = tex.sampler();
+    e.wrap = [wrap(s.wrap_s()), wrap(s.wrap_t())];
+    let img = tex.source();
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let label = PathBuf::from(format!("{}#image {}", path.display(), img.index()));
+    let found: Result<(PathBuf, Option<Embedded>), String> = match img.source() {
+        gltf::image::Source::View { view, .. } => {
+            let b = &buffers[view.buffer().index()];
+            b.get(view.offset()..view.offset() + view.length())
+                .map(|s| (label, Some(Embedded(s.into()))))
+                .ok_or_else(|| "its buffer view lies outside the buffer".to_string())
+        }
+        gltf::image::Source::Uri { uri, .. } => match data_uri(path, uri) {
+            Some(Ok(d)) => Ok((label, Some(Embedded(d.into())))),
+            Some(Err(err)) => Err(err.to_string()),
+            None => crate::texpath::resolve(dir, &unescape(uri)).map(|f| (f, None)),
+        },
+    };
+    match found {
+        Ok((file, embedded)) => {
+            e.texture = Some(file);
+            e.embedded = embedded;
+            (e, Some(info.tex_coord()))
+        }
+        Err(err) => {
+            warnings.push(format!(
+                "{}: the base colour texture of material {:?} cannot be used ({err}); its baseColorFactor is used",
+                path.display(),
+                e.name
+            ));
+            (e, None)
+        }
+    }
+}
+
+/// The nodes of the scene to read, each with its world transform (column-major, f64).
+fn scene_nodes(doc: &gltf::Document) -> Vec<(gltf::Node<'_>, [[f64; 4]; 4])> {
+    let Some(scene) = doc.default_scene().or_else(|| doc.scenes().next()) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    let mut stack: Vec<(gltf::Node, [[f64; 4]; 4])> =
+        scene.nodes().map(|n| (n, IDENTITY)).collect();
+    stack.reverse();
+    while let Some((n, parent)) = stack.pop() {
+        let local = n.transform().matrix().map(|c| c.map(f64::from));
+        let world = mul(&parent, &local);
+        let children: Vec<_> = n.children().map(|c| (c, world)).collect();
+        out.push((n, world));
+        stack.extend(children.into_iter().rev());
+    }
+    out
+}
+
+const IDENTITY: [[f64; 4]; 4] = [
+    [1., 0., 0., 0.],
+    [0., 1., 0., 0.],
+    [0., 0., 1., 0.],
+    [0., 0., 0., 1.],
+];
+
+/// `a · b` of column-major 4×4 matrices.
+fn mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
+    let mut m = [[0.0; 4]; 4];
+    for c in 0..4 {
+        for r in 0..4 {
+            m[c][r] = (0..4).map(|k| a[k][r] * b[c][k]).sum();
+        }
+    }
+    m
+}
+
+impl GltfSource {
+    pub fn open(path: &Path) -> Result<(GltfSource, MeshInfo), IngestError> {
+        let bytes = std::fs::read(path).map_err(|e| IngestError::io(path, e))?;
+        let g = gltf::Gltf::from_slice(&bytes)
+            .map_err(|e| bad(path, format!("not a valid glTF 2.0 file: {e}")))?;
+        if let Some(ext) = g.document.extensions_required().next() {
+            return Err(bad(
+                path,
+                format!("the file requires the extension {ext:?}, which voxlod does not read"),
+            ));
+        }
+        let buffers = load_buffers(path, &g)?;
+        let mut warnings = Vec::new();
+        let mut materials = vec![Material::default()];
+        let mut uv_set = Vec::new();
+        for m in g.document.materials() {
+            let (e, set) = material(path, &m, &buffers, &mut warnings);
+            materials.push(e);
+            uv_set.push(set);
+        }
+        let mut src = GltfSource {
+            path: path.to_path_buf(),
+            doc: g.document,
+            buffers,
+            uv_set,
+            keep_materials: true,
+        };
+        let (mut vertices, mut faces, mut has_normals, mut has_colors, mut has_uv) =
+            (0, 0, false, false, false);
+        let (mut skipped, mut no_uv) = (0, 0u64);
+        for (node, _) in scene_nodes(&src.doc) {
+            for p in node.mesh().iter().flat_map(|m| m.primitives()) {
+                if !matches!(
+                    p.mode(),
+                    Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+                ) {
+                    skipped += 1;
+                    continue;
+                }
+                let n = p
+                    .get(&gltf::Semantic::Positions)
+                    .map_or(0, |a| a.count() as u64);
+                vertices += n;
+                faces += p.indices().map_or(n, |a| a.count() as u64) / 3;
+                has_normals |= p.get(&gltf::Semantic::Normals).is_some();
+                has_colors |=
+                    p.get(&gltf::Semantic::Colors(0)).is_some() || p.material().index().is_some();
+                has_uv |= src.uv_of(&p).is_some();
+                let textured = p.material().index().and_then(|i| src.uv_set[i]).is_some();
+                no_uv += u64::from(textured && src.uv_of(&p).is_none());
+            }
+        }
+        if no_uv > 0 {
+            warnings.push(format!(
+                "{}: {no_uv} primitives of textured materials lack the texture coordinate set the texture reads; their baseColorFactor is used",
+                path.display()
+            ));
+        }
+        let used: Vec<&str> = src.doc.extensions_used().collect();
+        if !used.is_empty() {
+            warnings.push(format!(
+                "{}: extensions used by the file are not read: {}",
+                path.display(),
+                used.join(", ")
+            ));
+        }
+        if skipped > 0 {
+            warnings.push(format!(
+                "{}: {skipped} primitives of points or lines are not triangles and are skipped",
+                path.display()
+            ));
+        }
+        if !has_uv {
+            materials
+                .iter_mut()
+                .for_each(|m| (m.texture, m.embedded) = (None, None));
+        }
+        if !has_uv && materials.len() <= 2 {
+            materials.clear();
+            src.keep_materials = false;
+        }
+        if materials.len() > MAX_MATERIAL as usize + 1 {
+            warnings.push(format!(
+                "{}: more than {MAX_MATERIAL} materials: the others count as no material (id 0)",
+                path.display()
+            ));
+            materials.truncate(MAX_MATERIAL as usize + 1);
+        }
+        let binary = bytes.starts_with(b"glTF");
+        let info = MeshInfo {
+            path: path.to_path_buf(),
+            format: if binary { "glb" } else { "gltf" }.into(),
+            vertices,
+            faces,
+            has_normals,
+            has_colors,
+            has_texcoords: has_uv,
+            materials,
+            warnings,
+            up: Some([0.0, 1.0, 0.0]),
+        };
+        Ok((src, info))
+    }
+
+    /// The texture coordinate set primitive `p` reads, if its material has a usable texture
+    /// and the primitive has that set.
+    fn uv_of(&self, p: &gltf::Primitive) -> Option<u32> {
+        let set = (*self.uv_set.get(p.material().index()?)?)?;
+        p.get(&gltf::Semantic::TexCoords(set)).map(|_| set)
+    }
+
+    pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
+        for (node, world) in scene_nodes(&self.doc) {
+            for p in node.mesh().iter().flat_map(|m| m.primitives()) {
+                self.primitive(&p, &world, em)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The upper 3×3 of `m` (column-major) and the matrix normals are transformed by: its
+/// cofactor matrix (the inverse transpose times the determinant) times the determinant's sign.
+fn linear_parts(m: &[[f64; 4]; 4]) -> ([[f64; 3]; 3], [[f64; 3]; 3], f64) {
+    let a = |c: usize, r: usize| m[c][r];
+    let det = a(0, 0) * (a(1, 1) * a(2, 2) - a(2, 1) * a(1, 2))
+        - a(1, 0) * (a(0, 1) * a(2, 2) - a(2, 1) * a(0, 2))
+        + a(2, 0) * (a(0, 1) * a(1, 2) - a(1, 1) * a(0, 2));
+    let mut cof = [[0.0; 3]; 3];
+    for c in 0..3 {
+        for r in 0..3 {
+            let (c1, c2, r1, r2) = ((c + 1) % 3, (c + 2) % 3, (r + 1) % 3, (r + 2) % 3);
+            cof[c][r] = (a(c1, r1) * a(c2, r2) - a(c2, r1) * a(c1, r2)) * det.signum();
+        }
+    }
+    let lin = [0, 1, 2].map(|c| [m[c][0], m[c][1], m[c][2]]);
+    (lin, cof, det)
+}
+
+/// A linear-light channel 0–1 to an sRGB-encoded byte.
+fn srgb8(x: f32) -> u8 {
+    let x = x.clamp(0.0, 1.0) as f64;
+    let s = if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0).round() as u8
+}
+
+impl GltfSource {
+    /// Streams one primitive's triangles, transformed by `world`.
+    fn primitive(
+        &self,
+        p: &gltf::Primitive,
+        world: &[[f64; 4]; 4],
+        em: &mut Emitter,
+    ) -> Result<(), IngestError> {
+        let mode = p.mode();
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            return Ok(()); // warned at open
+        }
+        let err = |m: String| bad(&self.path, format!("mesh primitive {}: {m}", p.index()));
+        let r = p.reader(|b| self.buffers.get(b.index()).map(|v| &v[..]));
+        let (lin, cof, det) = linear_parts(world);
+        let apply = |m: &[[f64; 3]; 3], v: [f32; 3], t: [f64; 3]| -> [f32; 3] {
+            [0, 1, 2]
+                .map(|row| ((0..3).map(|c| m[c][row] * v[c] as f64).sum::<f64>() + t[row]) as f32)
+        };
+        let origin = [world[3][0], world[3][1], world[3][2]];
+        let pos: Vec<[f32; 3]> = r
+            .read_positions()
+            .ok_or_else(|| {
+                err("no POSITION attribute, or its accessor lies outside its buffer".into())
+            })?
+            .map(|v| apply(&lin, v, origin))
+            .collect();
+        if let Some((i, _)) = pos
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !v.iter().all(|c| c.is_finite()))
+        {
+            return Err(err(format!("vertex {i} has a position that is not finite")));
+        }
+        let nrm: Option<Vec<[f32; 3]>> = r
+            .read_normals()
+            .map(|n| n.map(|v| apply(&cof, v, [0.0; 3])).collect());
+        let factor = p.material().pbr_metallic_roughness().base_color_factor();
+        let colored = p.material().index().is_some() || p.get(&gltf::Semantic::Colors(0)).is_some();
+        let col: Option<Vec<[f32; 4]>> = r.read_colors(0).map(|c| c.into_rgba_f32().collect());
+        let uv_set = self.uv_of(p);
+        let uv: Option<Vec<[f32; 2]>> = uv_set
+            .and_then(|s| r.read_tex_coords(s))
+            .map(|t| t.into_f32().collect());
+        let n = pos.len();
+        let idx: Vec<u32> = match (r.read_indices(), p.indices()) {
+            (Some(i), _) => i.into_u32().collect(),
+            (None, None) => (0..n as u32).collect(),
+            (None, Some(_)) => {
+                return Err(err("the indices' accessor lies outside its buffer".into()))
+            }
+        };
+        // an attribute that is declared but cannot be read (its accessor outside its buffer)
+        for (sem, ok) in [
+            (gltf::Semantic::Normals, nrm.is_some()),
+            (gltf::Semantic::Colors(0), col.is_some()),
+        ] {
+            if p.get(&sem).is_some() && !ok {
+                return Err(err(format!("the {sem:?} accessor lies outside its buffer")));
+            }
+        }
+        if uv_set.is_some() && uv.is_none() {
+            return Err(err(
+                "the texture coordinates' accessor lies outside its buffer".into(),
+            ));
+        }
+        if let Some(i) = idx.iter().find(|&&i| i as usize >= n) {
+            return Err(err(format!("index {i} is out of range ({n} vertices)")));
+        }
+        for a in [
+            nrm.as_ref().map(Vec::len),
+            col.as_ref().map(Vec::len),
+            uv.as_ref().map(Vec::len),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            if a != n {
+                return Err(err(format!("an attribute has {a} values for {n} vertices")));
+            }
+        }
+        let mut flags = if nrm.is_some() { TRI_HAS_NORMALS } else { 0 }
+            | if colored { TRI_HAS_COLORS } else { 0 };
+        if uv.is_some() {
+            flags |= TRI_HAS_UV;
+        }
+        let material = p.material().index().map_or(0, |i| i as u32 + 1);
+        // the colour bytes once per vertex (or once for the primitive), not per corner
+        let bytes = |c: [f32; 4]| {
+            let lc = [0, 1, 2, 3].map(|ch| c[ch] * factor[ch]);
+            [
+                srgb8(lc[0]),
+                srgb8(lc[1]),
+                srgb8(lc[2]),
+                (lc[3].clamp(0.0, 1.0) * 255.0).round() as u8,
+            ]
+        };
+        let vertex_bytes: Option<Vec<[u8; 4]>> =
+            col.as_ref().map(|c| c.iter().map(|&c| bytes(c)).collect());
+        let uniform = bytes([1.0; 4]);
+        let corner = |t: &mut Triangle, k: usize, i: usize| {
+            t.v[k] = pos[i];
+            if let Some(nv) = &nrm {
+                t.n[k] = nv[i];
+            }
+            t.c[k] = vertex_bytes.as_ref().map_or(uniform, |b| b[i]);
+            if let Some(u) = &uv {
+                t.uv[k] = u[i];
+            }
+        };
+        let tris: Box<dyn Iterator<Item = [u32; 3]>> = match mode {
+            Mode::Triangles => Box::new(idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]])),
+            Mode::TriangleStrip => Box::new((2..idx.len()).map(|j| {
+                if j % 2 == 0 {
+                    [idx[j - 2], idx[j - 1], idx[j]]
+                } else {
+                    [idx[j - 2], idx[j], idx[j - 1]]
+                }
+            })),
+            _ => Box::new((2..idx.len()).map(|j| [idx[j - 1], idx[j], idx[0]])),
+        };
+        for mut tri in tris {
+            em.stats.polygons += 1;
+            if det < 0.0 {
+                tri.swap(1, 2);
+            }
+            if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+                em.repeated_index();
+                continue;
+            }
+            let mut t = Triangle::new([[0.0; 3]; 3]);
+            t.flags = flags;
+            for (k, &i) in tri.iter().enumerate() {
+                corner(&mut t, k, i as usize);
+            }
+            if self.keep_materials && material <= MAX_MATERIAL {
+                t.set_material(material);
+            }
+            em.push(t)?;
+        }
+        Ok(())
+    }
+}
