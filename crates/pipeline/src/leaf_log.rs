@@ -232,7 +232,10 @@ impl LeafLog {
         h.skipped = skipped.min(u32::MAX as u64) as u32;
         h.header_crc32 = h.crc();
         let path = &self.path;
-        for bytes in [bytemuck::bytes_of(&h)].into_iter().chain(parts.iter().copied()) {
+        for bytes in [bytemuck::bytes_of(&h)]
+            .into_iter()
+            .chain(parts.iter().copied())
+        {
             self.out
                 .write_all(bytes)
                 .with_context(|| format!("writing {}", path.display()))?;
@@ -259,6 +262,61 @@ impl LeafLog {
             .sync_all()
             .with_context(|| format!("syncing {}", self.path.display()))
     }
+}
+
+/// Reads a finished log record by record, checking each (the source log is read beside the
+/// leaf log this way).
+pub struct LogReader {
+    path: PathBuf,
+    r: BufReader<File>,
+    expect: u64,
+}
+
+impl LogReader {
+    /// Opens the log at `path` for reading from its first record.
+    pub fn open(path: &Path) -> Result<LogReader> {
+        let file = File::open(path).with_context(|| format!("opening {}", path.display()))?;
+        Ok(LogReader {
+            path: path.to_path_buf(),
+            r: BufReader::with_capacity(4 << 20, file),
+            expect: 0,
+        })
+    }
+
+    /// The next record and its payload, checksums checked; `None` at the end.
+    pub fn next_record(&mut self) -> Result<Option<(RecordHeader, Vec<u8>)>> {
+        let (path, expect) = (&self.path, self.expect);
+        let mut h = RecordHeader::zeroed();
+        match self.r.read_exact(bytemuck::bytes_of_mut(&mut h)) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::UnexpectedEof => return Ok(None),
+            Err(e) => return Err(e).with_context(|| format!("reading {}", path.display())),
+        }
+        if h.magic != MAGIC || h.crc() != h.header_crc32 || h.chunk as u64 != expect {
+            bail!("{}: record {expect} is corrupt", path.display());
+        }
+        let mut payload = vec![0u8; h.payload_len as usize];
+        self.r
+            .read_exact(&mut payload)
+            .with_context(|| format!("{}: record {expect} is truncated", path.display()))?;
+        if crc32fast::hash(&payload) != h.payload_crc32 {
+            bail!("{}: record {expect}'s payload is corrupt", path.display());
+        }
+        self.expect += 1;
+        Ok(Some((h, payload)))
+    }
+}
+
+/// Reads a finished log in order, handing each record and its payload to `f`.
+pub fn read_log(
+    path: &Path,
+    f: &mut dyn FnMut(&RecordHeader, Vec<u8>) -> Result<()>,
+) -> Result<()> {
+    let mut r = LogReader::open(path)?;
+    while let Some((h, payload)) = r.next_record()? {
+        f(&h, payload)?;
+    }
+    Ok(())
 }
 
 /// A non-empty leaf read back from the log.
