@@ -7,7 +7,7 @@
 //! `N/|N|` (the packed normal) and `C/W` (or, if `W = 0`, the unweighted means). With **one**
 //! contribution these are `n₁/|n₁|` and `c₁` whatever the weight `w₁ ≥ 0` is. The clipped area
 //! matters there only through the interpolation point (the clipped part's centroid), and not
-//! at all for a triangle with **flat attributes** ([`is_flat`]): no vertex normals (the unit face
+//! at all for a triangle with **flat attributes** (`is_flat`): no vertex normals (the unit face
 //! normal everywhere), one colour at all three vertices, no texture. Then the record is the
 //! triangle's face normal and colour, and the voxel's material the triangle's. Scans, CAD and
 //! city meshes without vertex colours are flat throughout (the dragon, both bunnies, the
@@ -16,7 +16,7 @@
 //! So the chunk voxelizer runs in two passes: [`ChunkVoxelizer::add`] only marks (the exact
 //! voxel set of every triangle, a contribution count per voxel, and the (triangle, voxel) pairs
 //! in scan order); [`ChunkVoxelizer::finish`] then adds the contributions in triangle order,
-//! giving a pair weight 1 and the triangle's [`flat_values`] where the voxel's count is 1 and the
+//! giving a pair weight 1 and the triangle's `flat_values` where the voxel's count is 1 and the
 //! triangle is flat, and clipping every other pair as before (the column sweeps of
 //! [`crate::column`], resumed at any column and layer, bit for bit what clipping every voxel
 //! gives). A triangle none of whose voxels needs a clip is not set up at all.
@@ -34,8 +34,10 @@
 //! exact definition. Textured builds, and triangles with vertex normals or differing vertex
 //! colours, keep the clip (their value at the centroid depends on the clipped part).
 //!
-//! Cost: the pairs take 8 bytes each and the marked triangles one [`Triangle`] each, per chunk
-//! (kept between chunks), beside the 40-byte accumulator per voxel.
+//! Cost: the pairs take 8 bytes each and the marked triangles one [`Triangle`] each, per chunk,
+//! beside the 40-byte accumulator per voxel; a chunk whose kept pairs and triangles pass
+//! [`crate::chunk::DEFER_BYTES`] (32 MiB) clips every pair instead, so memory stays bounded by
+//! the chunk's voxels, not its triangles.
 
 use voxlod_geom::{Triangle, TRI_HAS_NORMALS};
 
@@ -52,7 +54,7 @@ pub(crate) fn is_flat(t: &Triangle) -> bool {
     t.flags & TRI_HAS_NORMALS == 0 && t.c[0] == t.c[1] && t.c[1] == t.c[2]
 }
 
-/// The values `[n_x, n_y, n_z, 1, r, g, b, a]` of a flat triangle ([`is_flat`]) at every point:
+/// The values `[n_x, n_y, n_z, 1, r, g, b, a]` of a flat triangle (`is_flat`) at every point:
 /// bit for bit what the interpolation (`interp::Interp::at`) gives it at any point (the unit
 /// face normal `n/|n|`, computed the same way, and the colour: its gradients are zero).
 #[inline]
