@@ -191,7 +191,7 @@ fn block_world_materials() {
     assert!(payload > 0);
     assert_eq!(
         inspect(&out)["channels"],
-        serde_json::json!([{"id": 1, "name": "materials", "payload_bytes": payload}])
+        serde_json::json!([{"id": 1, "name": "materials", "payload_bytes": payload, "triangles": 0}])
     );
     assert_eq!(inspect(&one)["channels"], serde_json::json!([]));
     let o = Command::new(BIN).arg("inspect").arg(&out).output().unwrap();

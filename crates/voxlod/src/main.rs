@@ -123,7 +123,7 @@ Examples:
   voxlod export bunny.voxlod -o bunny.ply         # the finest level
   voxlod export bunny.voxlod --level 2 -o coarse.ply
   voxlod export dragon.voxlod --source -o dragon-source.ply              # every leaf's source triangles
-  voxlod export dragon.voxlod --source --node 0 9 12 4 -o leaf.ply       # one leaf's (--source-geometry builds)
+  voxlod export dragon.voxlod --source --node 0 1 1 1 -o leaf.ply        # one leaf (level 0, chunk 1 1 1)
 The size of the PLY is printed before it is written.";
 
 const EXAMPLES_CLEAN: &str = "\
