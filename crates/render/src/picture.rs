@@ -23,7 +23,7 @@ pub struct Picture {
     pub shot: Shot,
     /// The nodes drawn.
     pub nodes: Vec<usize>,
-    /// Voxels in those nodes.
+    /// Voxels drawn as cubes (those of the nodes not drawn from source triangles).
     pub voxels: u64,
     /// Faces sent to the GPU (active faces turned towards the eye).
     pub faces_drawn: u64,

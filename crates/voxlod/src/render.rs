@@ -41,6 +41,10 @@ pub struct RenderArgs {
     /// Move closer: 1 frames the whole model, 2 is twice as close.
     #[arg(long, default_value_t = 1.0)]
     zoom: f64,
+    /// The point looked at, x,y,z in world coordinates (a close-up of one part with --zoom)
+    /// [default: the centre of the model].
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    target: Option<[f64; 3]>,
     /// Replace an existing output file even if it is not a PNG image.
     #[arg(long)]
     force: bool,
@@ -111,6 +115,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         up,
         fov_y_deg: a.fov,
         zoom: a.zoom,
+        target: a.target,
     };
     let (shot, nodes) = voxlod_render::frame(&r, &view, lod)?;
     let renderer = Renderer::new()?;
