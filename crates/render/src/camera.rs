@@ -22,6 +22,9 @@ pub struct View {
     pub fov_y_deg: f64,
     /// Distance divisor: 1 frames the whole model, larger values move closer.
     pub zoom: f64,
+    /// The point looked at, for close-ups of one part [default: the centre of the framed
+    /// bounds]; the camera keeps the distance `zoom` gives and the direction.
+    pub target: Option<[f64; 3]>,
 }
 
 impl Default for View {
@@ -33,6 +36,7 @@ impl Default for View {
             up: [0.0, 1.0, 0.0],
             fov_y_deg: 35.0,
             zoom: 1.0,
+            target: None,
         }
     }
 }
@@ -102,8 +106,18 @@ impl Shot {
         let up = (up - dir * up.dot(dir)).normalize();
         let lo = DVec3::from(bounds.min);
         let hi = DVec3::from(bounds.max);
-        let centre = (lo + hi) * 0.5;
+        let mut centre = (lo + hi) * 0.5;
         let radius = ((hi - lo).length() * 0.5).max(1e-9);
+        // near and far planes enclose the bounds around the point looked at
+        let mut cover = radius;
+        if let Some(t) = view.target {
+            let t = DVec3::from(t);
+            if !t.is_finite() {
+                return bad(format!("target {t} is not a point"));
+            }
+            let far_corner = (t - lo).abs().max((t - hi).abs());
+            (centre, cover) = (t, far_corner.length().max(radius));
+        }
         let fov_y = view.fov_y_deg.to_radians();
         let aspect = view.width as f64 / view.height as f64;
         let fov_x = 2.0 * ((fov_y * 0.5).tan() * aspect).atan();
@@ -114,8 +128,8 @@ impl Shot {
             target: centre,
             up,
             fov_y,
-            near: (dist - radius * 1.01).max(radius * 1e-4),
-            far: dist + radius * 1.01,
+            near: (dist - cover * 1.01).max(cover * 1e-4),
+            far: dist + cover * 1.01,
             width: view.width,
             height: view.height,
         })
@@ -349,6 +363,47 @@ mod tests {
         let bad = View {
             width: 0,
             ..View::default()
+        };
+        assert!(Shot::frame(b, &bad).is_err());
+    }
+
+    #[test]
+    fn a_target_is_in_the_middle_and_the_box_between_the_planes() {
+        let b = Aabb {
+            min: [10.0, -2.0, 5.0],
+            max: [14.0, 3.0, 6.0],
+        };
+        let t = [10.5, 2.5, 5.2]; // near a corner
+        let whole = Shot::frame(b, &View::default()).unwrap();
+        let view = View {
+            zoom: 4.0,
+            target: Some(t),
+            ..View::default()
+        };
+        let s = Shot::frame(b, &view).unwrap();
+        let c = s.project(t).unwrap();
+        assert!((c[0] - 512.0).abs() < 1e-6 && (c[1] - 384.0).abs() < 1e-6);
+        // four times closer than the whole-model framing, same direction
+        let d = |s: &Shot| s.eye - s.target;
+        assert!((d(&whole).length() / d(&s).length() - 4.0).abs() < 1e-9);
+        assert!(d(&whole).normalize().dot(d(&s).normalize()) > 1.0 - 1e-12);
+        // no corner lies beyond the far plane; the near plane is in front of the eye
+        let fwd = -d(&s).normalize();
+        for k in 0..8 {
+            let p = DVec3::new(
+                if k & 1 == 0 { b.min[0] } else { b.max[0] },
+                if k & 2 == 0 { b.min[1] } else { b.max[1] },
+                if k & 4 == 0 { b.min[2] } else { b.max[2] },
+            );
+            let depth = (p - s.eye).dot(fwd);
+            assert!(
+                depth < s.far && s.near > 0.0,
+                "corner {p} beyond the far plane"
+            );
+        }
+        let bad = View {
+            target: Some([f64::NAN, 0.0, 0.0]),
+            ..view
         };
         assert!(Shot::frame(b, &bad).is_err());
     }

@@ -21,10 +21,9 @@
 //! its error exceeds the threshold; otherwise it is selected (leaves whatever their error).
 //! The selected nodes never overlap (one per root-to-leaf path at most).
 //!
-//! **Extension point (source geometry).** Issue 15 will store each leaf chunk's source
-//! triangles. A leaf whose error still exceeds the threshold is where they belong:
-//! [`CutNode::over`] marks those leaves, so a later source-geometry stream replaces exactly
-//! them; nothing of the kind is stored or drawn today.
+//! **Source geometry.** A leaf whose error still exceeds the threshold is where the voxels no
+//! longer hold the pixel error: [`CutNode::over`] marks those leaves, and `render` draws them
+//! from their stored source triangles (issue 15, `crate::source_draw`) when the file has them.
 
 use glam::{DVec3, DVec4};
 use voxlod_format::{Aabb, Reader};
@@ -39,7 +38,7 @@ pub struct CutNode {
     /// Its error in pixels ([`voxel_pixels`]).
     pub error: f64,
     /// A leaf (level 0) whose voxels still project above the threshold: the node a source
-    /// geometry stream would draw as triangles (not stored yet).
+    /// geometry stream would draw as triangles (`render` does, see [`crate::over_leaves`]).
     pub over: bool,
 }
 

@@ -14,6 +14,7 @@ use voxlod_format::Reader;
 use crate::camera::Shot;
 use crate::faces::{face_direction, node_faces_by, ColorBy};
 use crate::picture::Picture;
+use crate::source_draw;
 use crate::RenderError;
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -54,10 +55,15 @@ pub(crate) const FACE_BYTES: u64 = std::mem::size_of::<FaceInstance>() as u64;
 /// Instances `range` of a vertex buffer of [`FaceInstance`]s, to be drawn.
 pub(crate) type Batch<'a> = (&'a wgpu::Buffer, Range<u32>);
 
+/// Source triangles to draw: a vertex buffer of `SourceVertex`, a `u32` index buffer and the
+/// number of indices.
+pub(crate) type SourceBatch<'a> = (&'a wgpu::Buffer, &'a wgpu::Buffer, u32);
+
 /// A GPU device with the voxel-face pipeline, reusable for many pictures.
 pub struct Renderer {
     gpu: voxlod_gpu::Gpu,
     pipeline: wgpu::RenderPipeline,
+    source_pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
     adapter: String,
 }
@@ -163,9 +169,12 @@ impl Renderer {
             multiview_mask: None,
             cache: None,
         });
+        let source_pipeline =
+            source_draw::pipeline(device, &pl, (COLOR_FORMAT, DEPTH_FORMAT, SAMPLES));
         let r = Renderer {
             gpu,
             pipeline,
+            source_pipeline,
             layout,
             adapter: name,
         };
@@ -207,11 +216,30 @@ impl Renderer {
         shot: &Shot,
         color: ColorBy,
     ) -> Result<Picture, RenderError> {
+        self.render_with_source(reader, nodes, &[], shot, color)
+    }
+
+    /// [`render_by`](Self::render_by), but the leaves of `source` (a subset of `nodes`, e.g.
+    /// the cut leaves marked [`over`](crate::cut::CutNode::over)) that store source triangles
+    /// are drawn from those triangles instead of their voxels. With no such leaf the picture
+    /// is that of [`render_by`](Self::render_by), byte for byte.
+    pub fn render_with_source(
+        &self,
+        reader: &Reader,
+        nodes: &[usize],
+        source: &[usize],
+        shot: &Shot,
+        color: ColorBy,
+    ) -> Result<Picture, RenderError> {
         let centre = shot.target;
+        let tris = source_draw::gather(reader, source, centre, color)?;
         let mut faces: Vec<FaceInstance> = Vec::new();
         let mut buf = Vec::new();
         let mut voxels = 0u64;
         for &i in nodes {
+            if tris.leaves.binary_search(&i).is_ok() {
+                continue;
+            }
             node_faces_by(reader, i, &mut buf, color, &mut |f| {
                 // a face is seen only from its outer side: (eye − point on its plane)·d > 0
                 let d = face_direction(f.dir);
@@ -243,7 +271,33 @@ impl Renderer {
                 })
         });
         let batches: Vec<Batch> = vbuf.iter().map(|b| (b, 0..faces.len() as u32)).collect();
-        let (w, h, rgba) = self.draw(shot, centre, &batches)?;
+        let tri_bufs = (!tris.indices.is_empty()).then(|| {
+            let init = |label, contents, usage| {
+                self.gpu
+                    .device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some(label),
+                        contents,
+                        usage,
+                    })
+            };
+            (
+                init(
+                    "source vertices",
+                    bytemuck::cast_slice(&tris.vertices),
+                    wgpu::BufferUsages::VERTEX,
+                ),
+                init(
+                    "source indices",
+                    bytemuck::cast_slice(&tris.indices),
+                    wgpu::BufferUsages::INDEX,
+                ),
+            )
+        });
+        let source_batch = tri_bufs
+            .as_ref()
+            .map(|(v, i)| (v, i, tris.indices.len() as u32));
+        let (w, h, rgba) = self.draw(shot, centre, &batches, source_batch)?;
         Ok(Picture {
             width: w,
             height: h,
@@ -252,6 +306,8 @@ impl Renderer {
             nodes: nodes.to_vec(),
             voxels,
             faces_drawn: faces.len() as u64,
+            source_leaves: tris.leaves.len() as u64,
+            source_triangles: tris.triangles,
         })
     }
 
@@ -272,12 +328,14 @@ impl Renderer {
     }
 
     /// Draws `batches` of face instances (corners relative to `origin`) as seen by `shot`
-    /// into an offscreen picture and reads it back: width, height and RGBA rows.
+    /// and, if given, source triangles (positions relative to `origin` too) into an offscreen
+    /// picture and reads it back: width, height and RGBA rows.
     pub(crate) fn draw(
         &self,
         shot: &Shot,
         origin: DVec3,
         batches: &[Batch],
+        source: Option<SourceBatch>,
     ) -> Result<(u32, u32, Vec<u8>), RenderError> {
         let centre = origin;
         let (w, h) = (shot.width, shot.height);
@@ -294,9 +352,11 @@ impl Renderer {
         let light = (-fwd * 0.8 + shot.up * 0.7 - right * 0.45)
             .normalize()
             .as_vec3();
-        let mut uniforms = [0f32; 20];
+        // view_proj, light (vec4), eye relative to the origin (vec4; read by source.wgsl)
+        let mut uniforms = [0f32; 24];
         uniforms[..16].copy_from_slice(&view_proj.to_cols_array());
         uniforms[16..19].copy_from_slice(&light.to_array());
+        uniforms[20..23].copy_from_slice(&(shot.eye - centre).as_vec3().to_array());
 
         use wgpu::util::DeviceExt;
         let ubuf = self
@@ -391,6 +451,13 @@ impl Renderer {
             for (vbuf, range) in batches {
                 pass.set_vertex_buffer(0, vbuf.slice(..));
                 pass.draw(0..6, range.clone());
+            }
+            if let Some((vbuf, ibuf, count)) = source {
+                pass.set_pipeline(&self.source_pipeline);
+                pass.set_bind_group(0, &bind, &[]);
+                pass.set_vertex_buffer(0, vbuf.slice(..));
+                pass.set_index_buffer(ibuf.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..count, 0, 0..1);
             }
         }
         let row = (4 * w).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)

@@ -43,6 +43,7 @@ mod export;
 mod export_source;
 mod faces;
 mod picture;
+mod source_draw;
 pub mod view;
 
 pub use camera::{model_bounds, robust_bounds, up_from_shape, Shot, View};
@@ -90,4 +91,20 @@ pub fn frame(reader: &Reader, view: &View, lod: Lod) -> Result<(Shot, Vec<usize>
         }
     };
     Ok((shot, nodes))
+}
+
+/// The leaves `lod` draws from their source triangles for `shot`: with [`Lod::Error`], the cut
+/// leaves marked [`over`](cut::CutNode::over) (their voxels are coarser than the pixel error),
+/// if the file stores source triangles; otherwise none.
+pub fn over_leaves(reader: &Reader, shot: &Shot, lod: Lod) -> Vec<usize> {
+    match lod {
+        Lod::Error(px) if reader.has_source_triangles() && px.is_finite() && px > 0.0 => {
+            cut::select(reader, shot, px)
+                .into_iter()
+                .filter(|c| c.over)
+                .map(|c| c.index)
+                .collect()
+        }
+        _ => Vec::new(),
+    }
 }

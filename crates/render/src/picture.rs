@@ -23,10 +23,14 @@ pub struct Picture {
     pub shot: Shot,
     /// The nodes drawn.
     pub nodes: Vec<usize>,
-    /// Voxels in those nodes.
+    /// Voxels drawn as cubes (those of the nodes not drawn from source triangles).
     pub voxels: u64,
     /// Faces sent to the GPU (active faces turned towards the eye).
     pub faces_drawn: u64,
+    /// Leaves drawn from their source triangles instead of their voxels (issue 15).
+    pub source_leaves: u64,
+    /// Source triangles drawn.
+    pub source_triangles: u64,
 }
 
 impl Picture {

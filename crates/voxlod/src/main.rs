@@ -116,7 +116,9 @@ const EXAMPLES_RENDER: &str = "\
 Examples:
   voxlod render bunny.voxlod -o bunny.png
   voxlod render city.voxlod -o city.png --up 0,0,1 --view 1,1,0.6 --size 1600x900
-  voxlod render dragon.voxlod -o dragon.png --level 2 --zoom 1.35";
+  voxlod render dragon.voxlod -o dragon.png --level 2 --zoom 1.35
+  voxlod render dragon.voxlod -o head.png --target -0.075,0.165,0 --zoom 7   # close-up: source triangles where voxels are too coarse
+  voxlod render dragon.voxlod -o head-voxels.png --target -0.075,0.165,0 --zoom 7 --no-source";
 
 const EXAMPLES_EXPORT: &str = "\
 Examples:

@@ -41,6 +41,10 @@ pub struct RenderArgs {
     /// Move closer: 1 frames the whole model, 2 is twice as close.
     #[arg(long, default_value_t = 1.0)]
     zoom: f64,
+    /// The point looked at, x,y,z in world coordinates (a close-up of one part with --zoom)
+    /// [default: the centre of the model].
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    target: Option<[f64; 3]>,
     /// Replace an existing output file even if it is not a PNG image.
     #[arg(long)]
     force: bool,
@@ -48,6 +52,11 @@ pub struct RenderArgs {
     /// per material id of the file's material channel; grey for no material).
     #[arg(long, default_value = "voxel", value_parser = parse_color)]
     color: ColorBy,
+    /// Draw voxels everywhere. By default, in a file built with --source-geometry, the leaves
+    /// of the error cut whose voxels are still coarser than --error pixels are drawn from
+    /// their source triangles.
+    #[arg(long)]
+    no_source: bool,
 }
 
 fn parse_color(s: &str) -> Result<ColorBy, String> {
@@ -106,10 +115,16 @@ pub fn run(a: RenderArgs) -> Result<()> {
         up,
         fov_y_deg: a.fov,
         zoom: a.zoom,
+        target: a.target,
     };
     let (shot, nodes) = voxlod_render::frame(&r, &view, lod)?;
     let renderer = Renderer::new()?;
-    let pic = renderer.render_by(&r, &nodes, &shot, a.color)?;
+    let source = if a.no_source {
+        Vec::new()
+    } else {
+        voxlod_render::over_leaves(&r, &shot, lod)
+    };
+    let pic = renderer.render_with_source(&r, &nodes, &source, &shot, a.color)?;
     if pic.coverage().iter().all(|&c| !c) {
         bail!("nothing of the model is in the picture (check --view, --up and --zoom)");
     }
@@ -119,7 +134,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     levels.sort_unstable();
     levels.dedup();
     println!(
-        "wrote {}: {}x{}, up {},{},{} ({up_from}), {} nodes (levels {:?}), {} voxels, {} faces drawn on {} in {:.2}s",
+        "wrote {}: {}x{}, up {},{},{} ({up_from}), {} nodes (levels {:?}), {} voxels, {} faces drawn, {} leaves as {} source triangles on {} in {:.2}s",
         a.output.display(),
         pic.width,
         pic.height,
@@ -130,6 +145,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
         levels,
         pic.voxels,
         pic.faces_drawn,
+        pic.source_leaves,
+        pic.source_triangles,
         renderer.adapter(),
         t.elapsed().as_secs_f64()
     );

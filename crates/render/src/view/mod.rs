@@ -81,7 +81,9 @@ impl<'a> Viewer<'a> {
         let (batches, all, kept) = self.stream.batches(self.reader, shot, &drawn);
         stats.faces_resident_in_drawn = all;
         stats.faces_drawn = kept;
-        let (width, height, rgba) = self.renderer.draw(shot, self.stream.origin(), &batches)?;
+        let (width, height, rgba) =
+            self.renderer
+                .draw(shot, self.stream.origin(), &batches, None)?;
         let nodes: Vec<usize> = drawn.iter().map(|d| d.index).collect();
         let voxels = nodes
             .iter()
@@ -96,6 +98,8 @@ impl<'a> Viewer<'a> {
                 nodes,
                 voxels,
                 faces_drawn: kept,
+                source_leaves: 0,
+                source_triangles: 0,
             },
             stats,
         })

@@ -13,9 +13,22 @@ pub fn meshes() -> Option<PathBuf> {
 
 /// Builds `mesh` (relative to the meshes folder) into `out` with the pipeline.
 pub fn build(meshes: &Path, mesh: &str, out: &Path, resolution: u32, mode: Mode) {
+    build_with(meshes, mesh, out, resolution, mode, false);
+}
+
+/// [`build`], storing the leaves' source triangles too when `source_geometry` is set.
+pub fn build_with(
+    meshes: &Path,
+    mesh: &str,
+    out: &Path,
+    resolution: u32,
+    mode: Mode,
+    source_geometry: bool,
+) {
     let s = BuildSettings {
         resolution,
         mode,
+        source_geometry,
         progress: false,
         ..Default::default()
     };
