@@ -79,7 +79,7 @@ merge_mem="${VOXLOD_MERGE_MEM:-${mem_mib}M}"
 
 mkdir -p "$logs"
 echo "plan: $voxlod plan $input -o $plan --shards $shards ${opts[*]}" >&2
-"$voxlod" plan "$input" -o "$plan" --shards "$shards" "${opts[@]}"
+"$voxlod" plan "$input" -o "$plan" --shards "$shards" "${opts[@]}" >&2
 
 array="$(sbatch --parsable --array="0-$((shards - 1))" --cpus-per-task="$cpus" --mem="${mem_mib}M" \
   --output="$logs/shard-%a.out" "$here/voxlod-shards.sbatch" "$voxlod" "$plan")"
