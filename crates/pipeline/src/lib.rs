@@ -17,10 +17,13 @@ mod backend;
 mod error;
 mod leaf_log;
 mod memory;
+mod merge;
 mod octree_writer;
 mod output;
 mod passes;
+mod plan;
 mod progress;
+mod shard_file;
 mod size;
 mod source_clip;
 mod source_mesh;
@@ -33,8 +36,13 @@ mod work;
 pub use backend::{Backend, Cutoff, GpuMethod};
 pub use error::StageError;
 pub use memory::MemoryPlan;
-pub use octree_writer::{LevelStats, OctreeWriter};
+pub use merge::{merge, MergeSummary};
+pub use octree_writer::{LevelStats, NodeSink, OctreeWriter, StoredPayloads};
 pub use output::{OutputGuard, OutputKind};
+pub use plan::{
+    Balance, Fingerprint, LoadedPlan, Plan, PlanGrid, PlanInput, PlanSummary, ShardRange,
+    ShardScope, PLAN_FORMAT, PLAN_VERSION,
+};
 pub use size::{format_size, parse_size};
 pub use system::{interrupted, peak_rss, request_interrupt};
 pub use work::{find_work_folders, remove_stale_work_folder, WorkFolder, WORK_PREFIX};
@@ -92,6 +100,10 @@ pub struct BuildSettings {
     #[serde(skip)]
     #[doc(hidden)]
     pub interrupt_after_chunks: Option<u64>,
+    /// A sharded build (`build --plan --shard`): the plan's shard to build; `None` for a
+    /// whole build.
+    #[serde(skip)]
+    pub shard: Option<ShardScope>,
 }
 
 impl Default for BuildSettings {
@@ -111,6 +123,7 @@ impl Default for BuildSettings {
             progress: false,
             force: false,
             interrupt_after_chunks: None,
+            shard: None,
         }
     }
 }
@@ -264,14 +277,7 @@ pub struct BuildSummary {
 /// interrupted resumes from its work folder when started again with the same arguments.
 pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSummary> {
     let t0 = Instant::now();
-    s.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
-    if !s.voxelizer.supports(s.mode) {
-        bail!(
-            "--voxelizer {} approximates the conservative set only; use --voxelizer scanline (or sat) with {} mode",
-            s.voxelizer,
-            s.mode
-        );
-    }
+    check_settings(s)?;
     let mut warnings = Vec::new();
     let threads = thread_count(s.threads, &mut warnings);
     if s.progress {
@@ -282,7 +288,11 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
     let plan = MemoryPlan::new(s.memory, threads)?;
     // The output is checked (not a folder, not the input, not another kind of file, writable
     // folder with some space) and locked before any work starts.
-    let guard = OutputGuard::acquire(output, &[input], OutputKind::Octree, s.force)?;
+    let kind = match s.shard {
+        Some(_) => OutputKind::Shard,
+        None => OutputKind::Octree,
+    };
+    let guard = OutputGuard::acquire(output, &[input], kind, s.force)?;
     let source = MeshSource::open(input)?;
     let out_dir = crate::output::output_dir(output);
     let tmp_parent = s.tmp_dir.as_deref().unwrap_or(out_dir);
@@ -324,6 +334,145 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
         }
         Err(e) => Err(failed(e, work)),
     }
+}
+
+/// Builds shard `index` of the plan at `plan_path` (`voxlod build --plan --shard`): the
+/// plan's settings, with `threads`, `memory`, `tmp_dir`, `progress` and `force` from
+/// `runtime`; the shard file goes to `out_dir` (default: beside the plan). Refuses an input
+/// whose fingerprint differs from the plan's. Resumable like any build.
+pub fn build_shard(
+    plan_path: &Path,
+    index: u32,
+    out_dir: Option<&Path>,
+    runtime: &BuildSettings,
+) -> Result<BuildSummary> {
+    let plan = LoadedPlan::load(plan_path)?;
+    let scope = plan.scope(index)?;
+    let input = &plan.plan.input.path;
+    let now = Fingerprint::of(input)?;
+    if now != plan.plan.input.fingerprint {
+        bail!(
+            "{}: the input changed since {} was planned (size, modification time or first/last MiB differ): plan again",
+            input.display(),
+            plan_path.display()
+        );
+    }
+    let mut s = plan.plan.settings.clone();
+    s.threads = runtime.threads;
+    s.memory = runtime.memory;
+    s.tmp_dir = runtime.tmp_dir.clone();
+    s.progress = runtime.progress;
+    s.force = runtime.force;
+    s.interrupt_after_chunks = runtime.interrupt_after_chunks;
+    s.shard = Some(scope);
+    build(input, &plan.shard_path(index, out_dir), &s)
+}
+
+/// Plans a sharded build of `input` (`voxlod plan`): one pass for the bounds and the
+/// per-chunk triangle counts (the ingest and count passes of a build, on the same grid), the
+/// split level and `shards` Morton ranges (`plan.rs`), written to `plan_path` as JSON.
+pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> Result<PlanSummary> {
+    let t0 = Instant::now();
+    check_settings(s)?;
+    if shards == 0 {
+        bail!("--shards 0: a plan needs at least one shard");
+    }
+    let mut warnings = Vec::new();
+    let threads = thread_count(s.threads, &mut warnings);
+    let mplan = MemoryPlan::new(s.memory, threads)?;
+    let guard = OutputGuard::acquire(plan_path, &[input], OutputKind::Plan, s.force)?;
+    let fingerprint = Fingerprint::of(input)?;
+    let source = MeshSource::open(input)?;
+    let tmp_parent = s
+        .tmp_dir
+        .as_deref()
+        .unwrap_or(crate::output::output_dir(plan_path));
+    let (work, _) = WorkDir::open(tmp_parent, plan_path, &WorkDir::key(input, s)?)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("creating the thread pool")?;
+    let mut ctx = BuildContext {
+        settings: s,
+        source: &source,
+        input,
+        output: &guard,
+        pool,
+        work: &work,
+        plan: mplan,
+        progress: s.progress,
+        times: Vec::new(),
+        warnings,
+        interrupt: &system::INTERRUPTED,
+        stop: Default::default(),
+    };
+    let counted = stages::ingest::run(&mut ctx).and_then(|mut ing| {
+        let counts = stages::tile::counts(&ctx, &mut ing)?;
+        Ok((ing, counts))
+    });
+    let (ingested, counts) = match counted {
+        Ok(r) => r,
+        Err(e) => return Err(failed(e, work)),
+    };
+    let leaves: Vec<(u64, u64)> = counts
+        .layout()
+        .iter()
+        .map(|c| (c.morton, c.count))
+        .collect();
+    let levels = ingested.grid.levels();
+    let (split_level, ranges, balance) = plan::choose_split(&leaves, levels, shards as usize);
+    let mut warnings = ctx.warnings.clone();
+    if !balance.balanced {
+        warnings.push(format!(
+            "the plan is not balanced: the largest of {shards} shards holds {:.2}× the mean binned triangles ({} subtrees at level {split_level}; the best any split level allows)",
+            balance.ratio, balance.subtrees
+        ));
+    }
+    let p = Plan {
+        format: PLAN_FORMAT.into(),
+        version: PLAN_VERSION,
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        input: PlanInput {
+            path: input
+                .canonicalize()
+                .with_context(|| format!("{}: cannot resolve the path", input.display()))?,
+            fingerprint,
+        },
+        settings: s.clone(),
+        grid: ingested.grid.into(),
+        levels,
+        manifest: stages::lod_write::manifest_fields(&ctx, &ingested),
+        channels: stages::lod_write::channels(&ctx),
+        split_level,
+        shards: ranges.clone(),
+        balance: balance.clone(),
+    };
+    let text = serde_json::to_vec_pretty(&p).context("serializing the plan")?;
+    plan::write_atomically(&guard, &text)?;
+    work.remove()?;
+    Ok(PlanSummary {
+        plan: plan_path.to_path_buf(),
+        triangles: ingested.marker.triangles,
+        chunks: leaves.len() as u64,
+        split_level,
+        shards: ranges,
+        balance,
+        seconds: t0.elapsed().as_secs_f64(),
+        warnings,
+    })
+}
+
+/// The settings checks every entry makes before any work.
+fn check_settings(s: &BuildSettings) -> Result<()> {
+    s.validate().map_err(|e| anyhow::anyhow!("{e}"))?;
+    if !s.voxelizer.supports(s.mode) {
+        bail!(
+            "--voxelizer {} approximates the conservative set only; use --voxelizer scanline (or sat) with {} mode",
+            s.voxelizer,
+            s.mode
+        );
+    }
+    Ok(())
 }
 
 /// Worker threads for `-j n` (0: one per core). More threads than cores never helps (every

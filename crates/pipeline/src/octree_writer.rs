@@ -23,6 +23,10 @@ type NodeVoxels = Arc<(Vec<Voxel>, Option<Vec<u32>>)>;
 /// A node's encoded payloads: the voxels, and the material channel's if the build has one.
 type Encoded = (EncodedNode, Option<EncodedChannel>);
 
+/// A stored node's payloads: its voxels, its material payload and its source-triangle payload
+/// (each channel only if the file has it).
+pub type StoredPayloads = (EncodedNode, Option<EncodedChannel>, Option<EncodedChannel>);
+
 /// Most nodes waiting for their encode, and most voxel bytes they hold, before the writer
 /// waits for the oldest (the LOD stage runs after the voxelizers are gone, and this stays far
 /// inside their share of the memory plan).
@@ -76,10 +80,47 @@ struct Queued {
     source: Option<EncodedChannel>,
 }
 
+/// Where an [`OctreeWriter`] puts its nodes, in post-order: an octree file ([`Writer`]) or
+/// a shard file (`shard_file.rs`).
+pub trait NodeSink {
+    /// Appends one node with its channel payloads (`channels[k]` for the sink's `k`-th channel).
+    fn write_node_with(
+        &mut self,
+        level: u32,
+        pos: [u32; 3],
+        child_mask: u8,
+        node: &EncodedNode,
+        channels: &[Option<&EncodedChannel>],
+    ) -> Result<()>;
+    /// Bytes written so far.
+    fn bytes_written(&self) -> u64;
+}
+
+impl NodeSink for Writer {
+    fn write_node_with(
+        &mut self,
+        level: u32,
+        pos: [u32; 3],
+        child_mask: u8,
+        node: &EncodedNode,
+        channels: &[Option<&EncodedChannel>],
+    ) -> Result<()> {
+        Ok(Writer::write_node_with(
+            self, level, pos, child_mask, node, channels,
+        )?)
+    }
+
+    fn bytes_written(&self) -> u64 {
+        Writer::bytes_written(self)
+    }
+}
+
 /// Receives leaf chunks in Morton order and writes leaves and parents in post-order.
-pub struct OctreeWriter<'p> {
-    writer: Writer,
+pub struct OctreeWriter<'p, W: NodeSink = Writer> {
+    writer: W,
     levels: u32,
+    /// The highest level built: the root's (`levels − 1`), or a shard's split level.
+    top: u32,
     zstd_level: i32,
     pool: &'p rayon::ThreadPool,
     pending: Vec<Option<Pending>>,
@@ -90,10 +131,10 @@ pub struct OctreeWriter<'p> {
     pub stats: Vec<LevelStats>,
 }
 
-impl<'p> OctreeWriter<'p> {
+impl<'p, W: NodeSink> OctreeWriter<'p, W> {
     /// Parents are merged and compressed on `pool`. Precondition: the caller is not one of
     /// `pool`'s threads (it waits for merges running there).
-    pub fn new(writer: Writer, levels: u32, zstd_level: i32, pool: &'p rayon::ThreadPool) -> Self {
+    pub fn new(writer: W, levels: u32, zstd_level: i32, pool: &'p rayon::ThreadPool) -> Self {
         assert!(
             pool.current_thread_index().is_none(),
             "OctreeWriter must not run on a thread of the pool it hands merges to"
@@ -101,6 +142,7 @@ impl<'p> OctreeWriter<'p> {
         OctreeWriter {
             writer,
             levels,
+            top: levels - 1,
             zstd_level,
             pool,
             pending: (0..levels).map(|_| None).collect(),
@@ -114,6 +156,18 @@ impl<'p> OctreeWriter<'p> {
                 })
                 .collect(),
         }
+    }
+
+    /// Builds the levels up to `top` only (a shard's split level): nodes at `top` get no
+    /// parent. Precondition: `top < levels`.
+    pub fn with_top(mut self, top: u32) -> Self {
+        assert!(
+            top < self.levels,
+            "top level {top} of {} levels",
+            self.levels
+        );
+        self.top = top;
+        self
     }
 
     /// Writes a leaf whose payload is already encoded (leaves are compressed in parallel) and
@@ -194,18 +248,9 @@ impl<'p> OctreeWriter<'p> {
     /// subtree is completed and written; then the node itself; then it waits for its parent.
     fn emit(&mut self, node: Queued, voxels: Child) -> Result<()> {
         let (level, coord) = (node.level, node.coord);
-        for l in level..self.levels.saturating_sub(1) {
-            let shift = l + 1 - level;
-            let ancestor = [coord[0] >> shift, coord[1] >> shift, coord[2] >> shift];
-            if self.pending[l as usize]
-                .as_ref()
-                .is_some_and(|p| p.parent != ancestor)
-            {
-                self.flush(l)?;
-            }
-        }
+        self.flush_before(level, coord)?;
         self.enqueue(node)?;
-        if level + 1 < self.levels {
+        if level < self.top {
             let parent = [coord[0] >> 1, coord[1] >> 1, coord[2] >> 1];
             let octant = (coord[0] & 1 | (coord[1] & 1) << 1 | (coord[2] & 1) << 2) as usize;
             let p = self.pending[level as usize].get_or_insert_with(|| Pending {
@@ -219,6 +264,22 @@ impl<'p> OctreeWriter<'p> {
             );
             p.children[octant] = Some(voxels);
             p.mask |= 1 << octant;
+        }
+        Ok(())
+    }
+
+    /// Post-order before node (level, coord): completes every pending parent of an earlier
+    /// subtree.
+    fn flush_before(&mut self, level: u32, coord: [u32; 3]) -> Result<()> {
+        for l in level..self.top {
+            let shift = l + 1 - level;
+            let ancestor = [coord[0] >> shift, coord[1] >> shift, coord[2] >> shift];
+            if self.pending[l as usize]
+                .as_ref()
+                .is_some_and(|p| p.parent != ancestor)
+            {
+                self.flush(l)?;
+            }
         }
         Ok(())
     }
@@ -348,27 +409,89 @@ impl<'p> OctreeWriter<'p> {
         Ok(())
     }
 
-    /// Completes every pending parent up to the root and finishes the file.
-    /// `manifest` receives the final per-level statistics.
-    pub fn finish(
-        mut self,
-        manifest: impl FnOnce(&[LevelStats]) -> serde_json::Value,
-    ) -> Result<(u64, Vec<LevelStats>)> {
+    /// Completes every pending parent up to the top level and writes every queued node;
+    /// returns the sink and the per-level statistics.
+    pub fn finish_sink(mut self) -> Result<(W, Vec<LevelStats>)> {
         for level in 0..self.levels {
             self.flush(level)?;
         }
         self.drain(true)?;
-        let stats = self.stats.clone();
-        let size = self
-            .writer
-            .finish(&manifest(&stats))
-            .context("finishing the output file")?;
-        Ok((size, stats))
+        Ok((self.writer, self.stats))
     }
 
     /// Bytes of the file written so far.
     pub fn bytes_written(&self) -> u64 {
         self.writer.bytes_written()
+    }
+
+    /// Starts a stored subtree whose root is (level, coord) (the merge of a sharded build):
+    /// completes and writes every earlier node, so that the subtree's nodes below its root
+    /// can follow with [`write_stored`](Self::write_stored), then its root with
+    /// [`push_stored_root`](Self::push_stored_root).
+    pub fn begin_subtree(&mut self, level: u32, coord: [u32; 3]) -> Result<()> {
+        anyhow::ensure!(
+            self.pending[..level as usize].iter().all(Option::is_none),
+            "subtree level {level} {coord:?} begun inside another one"
+        );
+        self.flush_before(level, coord)?;
+        self.drain(true)
+    }
+
+    /// Writes a node of a stored subtree below its root, its payloads as stored (material
+    /// channel, then the source triangles, each only if the file has the channel).
+    pub fn write_stored(
+        &mut self,
+        level: u32,
+        coord: [u32; 3],
+        child_mask: u8,
+        node: &EncodedNode,
+        channels: &[Option<&EncodedChannel>],
+    ) -> Result<()> {
+        anyhow::ensure!(self.queue.is_empty(), "write_stored outside a subtree");
+        self.stats[level as usize].nodes += 1;
+        self.stats[level as usize].voxels += node.voxel_count() as u64;
+        self.writer
+            .write_node_with(level, coord, child_mask, node, channels)
+            .with_context(|| format!("writing node level {level} {coord:?}"))
+    }
+
+    /// The root of a stored subtree: written as stored (`materials`, `source`: its channel
+    /// payloads), and its parent built from `voxels` (at level 0 the leaf's half, as
+    /// [`push_halved`](Self::push_halved) takes it; above, the node's voxels) and their
+    /// materials.
+    pub fn push_stored_root(
+        &mut self,
+        level: u32,
+        coord: [u32; 3],
+        child_mask: u8,
+        payloads: StoredPayloads,
+        voxels: (Vec<Voxel>, Option<Vec<u32>>),
+    ) -> Result<()> {
+        let (node, materials, source) = payloads;
+        let q = Queued {
+            level,
+            coord,
+            child_mask,
+            payload: Payload::Ready((node, materials)),
+            bytes: 0,
+            source,
+        };
+        self.emit(q, Child::Done(Arc::new(voxels)))
+    }
+}
+
+impl OctreeWriter<'_, Writer> {
+    /// Completes every pending parent up to the root and finishes the file.
+    /// `manifest` receives the final per-level statistics.
+    pub fn finish(
+        self,
+        manifest: impl FnOnce(&[LevelStats]) -> serde_json::Value,
+    ) -> Result<(u64, Vec<LevelStats>)> {
+        let (writer, stats) = self.finish_sink()?;
+        let size = writer
+            .finish(&manifest(&stats))
+            .context("finishing the output file")?;
+        Ok((size, stats))
     }
 }
 

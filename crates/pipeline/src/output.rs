@@ -37,6 +37,10 @@ pub enum OutputKind {
     Png,
     /// A PLY mesh (`export`, `gen`).
     Ply,
+    /// A sharded build's plan (`plan`, JSON).
+    Plan,
+    /// A shard of a sharded build (`build --plan --shard`).
+    Shard,
 }
 
 impl OutputKind {
@@ -45,6 +49,8 @@ impl OutputKind {
             OutputKind::Octree => "a voxlod octree",
             OutputKind::Png => "a PNG image",
             OutputKind::Ply => "a PLY mesh",
+            OutputKind::Plan => "a voxlod plan",
+            OutputKind::Shard => "a voxlod shard",
         }
     }
 
@@ -55,6 +61,11 @@ impl OutputKind {
             Some(OutputKind::Png)
         } else if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
             Some(OutputKind::Ply)
+        } else if head.starts_with(crate::shard_file::MAGIC) {
+            Some(OutputKind::Shard)
+        } else if head.starts_with(b"{\n  \"format\": \"v") {
+            // the first 16 bytes of a plan as `plan` writes it (`"format": "voxlod-plan"`)
+            Some(OutputKind::Plan)
         } else {
             None
         }
@@ -275,6 +286,8 @@ fn ext(kind: OutputKind) -> &'static str {
         OutputKind::Octree => "voxlod",
         OutputKind::Png => "png",
         OutputKind::Ply => "ply",
+        OutputKind::Plan => "json",
+        OutputKind::Shard => "vlshard",
     }
 }
 

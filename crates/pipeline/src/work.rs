@@ -117,6 +117,16 @@ impl WorkDir {
         } else {
             text
         };
+        // a shard's intermediates hold its own chunks only
+        let text = match &s.shard {
+            Some(sc) => format!(
+                "{text}\nshard {} of {}, plan {}",
+                sc.index,
+                sc.count,
+                crate::plan::hex(&sc.plan_sha256)
+            ),
+            None => text,
+        };
         Ok(format!(
             "{:016x}",
             fnv1a(text.as_bytes(), 0xcbf2_9ce4_8422_2325)

@@ -78,6 +78,8 @@ pub struct ChunkCounts {
     grid: Grid,
     n: u32,
     counts: Vec<u64>,
+    /// Chunks dropped by [`ChunkCounts::retain`]: their triangles are not binned.
+    dropped: Vec<bool>,
 }
 
 impl ChunkCounts {
@@ -92,6 +94,7 @@ impl ChunkCounts {
             grid: *grid,
             n,
             counts: vec![0; total as usize],
+            dropped: Vec::new(),
         })
     }
 
@@ -144,6 +147,25 @@ impl ChunkCounts {
                 for x in lo[0]..=hi[0] {
                     let i = self.index([x, y, z]);
                     self.counts[i] += 1;
+                }
+            }
+        }
+    }
+
+    /// Keeps only the chunks for which `keep(coord)` holds (a sharded build bins the chunks of
+    /// its own subtrees): the others' counts become 0, and [`scatter`] skips their triangles
+    /// instead of taking them for a changed input.
+    pub fn retain(&mut self, keep: impl Fn([u32; 3]) -> bool) {
+        let n = self.n;
+        self.dropped = vec![false; self.counts.len()];
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    let i = self.index([x, y, z]);
+                    if !keep([x, y, z]) {
+                        self.counts[i] = 0;
+                        self.dropped[i] = true;
+                    }
                 }
             }
         }
@@ -258,6 +280,8 @@ pub(crate) struct Scatter<'g> {
     chunks: Vec<ChunkBin>,
     /// Chunk linear index -> position in `chunks`.
     slot: Vec<u32>,
+    /// Chunks whose triangles are skipped ([`ChunkCounts::retain`]).
+    dropped: Vec<bool>,
     n: u32,
     layout: RecordLayout,
     /// Triangles already written per chunk.
@@ -312,6 +336,7 @@ impl<'g> Scatter<'g> {
             file,
             chunks,
             slot,
+            dropped: counts.dropped.clone(),
             n: counts.n,
             layout,
             written: vec![0; k],
@@ -352,6 +377,9 @@ impl<'g> Scatter<'g> {
         let rec = self.layout.bytes();
         let s = self.slot[li];
         if s == u32::MAX {
+            if self.dropped.get(li).copied().unwrap_or(false) {
+                return Ok(());
+            }
             let n = self.n as usize;
             return Err(TileError::Callback(format!(
                 "chunk {:?} received a triangle but none was counted: the input changed between passes",

@@ -17,6 +17,7 @@ mod gen;
 mod inspect;
 mod json;
 mod render;
+mod shard;
 mod verify;
 mod view;
 
@@ -68,6 +69,14 @@ enum Command {
     /// List and remove stale work folders of killed builds (`.voxlod-work-*`) in a folder.
     #[command(after_help = EXAMPLES_CLEAN)]
     Clean(clean::CleanArgs),
+    /// Plan a sharded build: cut the chunk grid into balanced Morton ranges of subtrees, one
+    /// per machine (then `build --plan P --shard I` on each, and `merge`).
+    #[command(after_help = shard::EXAMPLES_PLAN)]
+    Plan(shard::PlanArgs),
+    /// Merge the shard files of a sharded build into the octree file a one-machine build
+    /// writes, byte for byte.
+    #[command(after_help = shard::EXAMPLES_MERGE)]
+    Merge(shard::MergeArgs),
 }
 
 // Examples shown after each command's --help (as ripgrep does), each one a command that works
@@ -88,6 +97,7 @@ Examples:
   voxlod build city.obj -m thin -j 4 --backend cpu
   voxlod build scan.ply --config configs/preview.toml --json > summary.json
   voxlod build dragon.ply -r 4096 --source-geometry   # leaf chunks keep their source triangles
+  voxlod build --plan scan.plan.json --shard $SLURM_ARRAY_TASK_ID   # one shard of `voxlod plan`
 The output's folder must exist. A build that stops (Ctrl-C, kill) resumes when the same
 command is run again.";
 
@@ -180,6 +190,27 @@ struct BuildArgs {
     /// folder].
     #[arg(short, long)]
     output: Option<PathBuf>,
+    #[command(flatten)]
+    settings: SettingsArgs,
+    #[command(flatten)]
+    shard: shard::ShardArgs,
+    /// No progress (bars on a terminal, a line every few seconds otherwise).
+    #[arg(short, long)]
+    quiet: bool,
+    /// Print the summary as JSON on stdout (fields: docs/JSON.md).
+    #[arg(long)]
+    json: bool,
+    /// Replace an existing output file even if it is not a voxlod octree.
+    #[arg(long)]
+    force: bool,
+    /// Testing aid: stop as if interrupted after this many leaf chunks.
+    #[arg(long, hide = true)]
+    debug_interrupt_after_chunks: Option<u64>,
+}
+
+/// The build settings, shared by `build` and `plan`.
+#[derive(Args)]
+struct SettingsArgs {
     /// Settings file (TOML, e.g. configs/default.toml); flags given here override it.
     #[arg(long)]
     config: Option<PathBuf>,
@@ -225,18 +256,6 @@ struct BuildArgs {
     /// Folder for temporary files [default: the output's folder].
     #[arg(long)]
     tmp: Option<PathBuf>,
-    /// No progress (bars on a terminal, a line every few seconds otherwise).
-    #[arg(short, long)]
-    quiet: bool,
-    /// Print the summary as JSON on stdout (fields: docs/JSON.md).
-    #[arg(long)]
-    json: bool,
-    /// Replace an existing output file even if it is not a voxlod octree.
-    #[arg(long)]
-    force: bool,
-    /// Testing aid: stop as if interrupted after this many leaf chunks.
-    #[arg(long, hide = true)]
-    debug_interrupt_after_chunks: Option<u64>,
 }
 
 #[derive(Args)]
@@ -261,6 +280,8 @@ fn main() -> ExitCode {
         Command::Export(a) => export::run(a),
         Command::View(a) => view::run(a),
         Command::Clean(a) => clean::run(a),
+        Command::Plan(a) => shard::run_plan(a),
+        Command::Merge(a) => shard::run_merge(a),
     };
     match r {
         Ok(()) => ExitCode::SUCCESS,
@@ -277,7 +298,8 @@ fn load_config(path: &Path) -> Result<BuildSettings> {
     toml::from_str(&text).with_context(|| format!("settings file {}", path.display()))
 }
 
-fn run_build(a: BuildArgs) -> Result<()> {
+/// The settings of `build` and `plan`: the settings file, then the flags.
+fn settings(a: &SettingsArgs) -> Result<BuildSettings> {
     let mut s = match &a.config {
         Some(p) => load_config(p)?,
         None => BuildSettings::default(),
@@ -327,20 +349,19 @@ fn run_build(a: BuildArgs) -> Result<()> {
             _ => anyhow::bail!("--{} {}: {}", e.field.replace('_', "-"), e.value, e.message),
         }
     }
+    Ok(s)
+}
+
+fn run_build(a: BuildArgs) -> Result<()> {
+    if a.shard.plan.is_some() {
+        return shard::run_build_shard(&a);
+    }
+    let mut s = settings(&a.settings)?;
     s.progress = !a.quiet;
     s.force = a.force;
     s.interrupt_after_chunks = a.debug_interrupt_after_chunks;
 
-    // Ctrl-C: the first asks the build to stop at the next safe point (its work folder is kept
-    // so the same command resumes); a second one ends the process at once.
-    let _ = ctrlc::set_handler(|| {
-        if voxlod_pipeline::interrupted() {
-            eprintln!("\ninterrupted again: stopping now (run the same command to resume)");
-            std::process::exit(130);
-        }
-        eprintln!("\ninterrupt: stopping at the next safe point (Ctrl-C again to stop at once)");
-        voxlod_pipeline::request_interrupt();
-    });
+    install_ctrlc();
 
     // Without an input, build the bundled sample, written once to a fixed place so that an
     // interrupted sample build resumes like any other.
@@ -382,6 +403,19 @@ fn run_build(a: BuildArgs) -> Result<()> {
         print_summary(&summary, &shown);
     }
     Ok(())
+}
+
+/// Ctrl-C: the first asks the build to stop at the next safe point (its work folder is kept
+/// so the same command resumes); a second one ends the process at once.
+fn install_ctrlc() {
+    let _ = ctrlc::set_handler(|| {
+        if voxlod_pipeline::interrupted() {
+            eprintln!("\ninterrupted again: stopping now (run the same command to resume)");
+            std::process::exit(130);
+        }
+        eprintln!("\ninterrupt: stopping at the next safe point (Ctrl-C again to stop at once)");
+        voxlod_pipeline::request_interrupt();
+    });
 }
 
 /// Warns (on stderr, unless quiet) when `output` does not end in `.ext`: the file is still
@@ -576,6 +610,8 @@ mod tests {
             EXAMPLES_EXPORT,
             EXAMPLES_CLEAN,
             view::EXAMPLES,
+            shard::EXAMPLES_PLAN,
+            shard::EXAMPLES_MERGE,
         ];
         // every subcommand shows examples (a new one without them fails here)
         for sub in Cli::command()

@@ -20,8 +20,9 @@ use super::voxelize::Voxelized;
 use super::BuildContext;
 use crate::error::StageError;
 use crate::leaf_log;
-use crate::octree_writer::{LevelStats, OctreeWriter};
+use crate::octree_writer::{LevelStats, NodeSink, OctreeWriter};
 use crate::progress::Stage;
+use crate::shard_file::{ShardHeader, ShardWriter};
 use crate::size::format_size;
 use crate::work::WorkFile;
 
@@ -52,13 +53,9 @@ pub(crate) fn run(
     };
     // the material channel: its records follow each leaf's payload in the leaf log
     let materials = crate::textures::has_material_channel(ctx.source.info());
-    let mut channels = Vec::new();
-    if materials {
-        channels.push(CHANNEL_MATERIAL);
-    }
-    // the source triangles (`--source-geometry`): the source log's records, beside the leaves
-    if s.source_geometry {
-        channels.push(CHANNEL_TRIANGLES);
+    let channels = channels(ctx);
+    if let Some(scope) = &s.shard {
+        return write_shard(ctx, voxelized, scope, channels, t);
     }
     let writer = Writer::create_with_channels(ctx.output.staged(), spec, &channels)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &ctx.pool);
@@ -69,6 +66,50 @@ pub(crate) fn run(
         m["levels"] = serde_json::json!(levels);
         m
     })?;
+    ctx.output
+        .commit()
+        .map_err(|e| StageError::Output(crate::chain_text(&e)))?;
+    ctx.stage_done("lod+write", t, false);
+    Ok(Written { bytes, levels })
+}
+
+/// The octree's optional channels: the material channel (its records follow each leaf's
+/// payload in the leaf log) if the input has materials, the source triangles
+/// (`--source-geometry`: the source log's records, beside the leaves).
+pub(crate) fn channels(ctx: &BuildContext) -> Vec<u32> {
+    let mut channels = Vec::new();
+    if crate::textures::has_material_channel(ctx.source.info()) {
+        channels.push(CHANNEL_MATERIAL);
+    }
+    if ctx.settings.source_geometry {
+        channels.push(CHANNEL_TRIANGLES);
+    }
+    channels
+}
+
+/// A sharded build's LOD + write: its subtrees up to the split level, into the shard file.
+fn write_shard(
+    ctx: &mut BuildContext,
+    voxelized: &Voxelized,
+    scope: &crate::ShardScope,
+    channels: Vec<u32>,
+    t: Instant,
+) -> Result<Written, StageError> {
+    let header = ShardHeader {
+        index: scope.index,
+        count: scope.count,
+        split_level: scope.split_level,
+        levels: scope.levels,
+        plan_sha256: scope.plan_sha256,
+        channels,
+    };
+    let materials = header.channels.contains(&CHANNEL_MATERIAL);
+    let sink = ShardWriter::create(ctx.output.staged(), header)?;
+    let mut octree = OctreeWriter::new(sink, scope.levels, ctx.settings.zstd_level, &ctx.pool)
+        .with_top(scope.split_level);
+    write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
+    let (sink, levels) = octree.finish_sink()?;
+    let bytes = sink.finish()?;
     ctx.output
         .commit()
         .map_err(|e| StageError::Output(crate::chain_text(&e)))?;
@@ -121,9 +162,9 @@ type Leaf = (
 /// ahead of the merges and parent encodes of this one (two leaves in flight at most). The
 /// leaves' payloads are not decoded: they go into the file as the voxelize stage encoded
 /// them, and their parents are made from their halves.
-fn write_leaves(
+fn write_leaves<W: NodeSink>(
     ctx: &BuildContext,
-    octree: &mut OctreeWriter,
+    octree: &mut OctreeWriter<W>,
     records: u64,
     materials: bool,
 ) -> Result<(), StageError> {
@@ -199,7 +240,7 @@ fn split_leaf(
 }
 
 /// The manifest without its `levels` (known once the file is written).
-fn manifest_fields(ctx: &BuildContext, ingested: &Ingested) -> serde_json::Value {
+pub(crate) fn manifest_fields(ctx: &BuildContext, ingested: &Ingested) -> serde_json::Value {
     let s = ctx.settings;
     let grid = &ingested.grid;
     let mut settings = serde_json::json!({

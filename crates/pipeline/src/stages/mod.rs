@@ -93,6 +93,20 @@ pub(crate) struct Built {
 /// in the work folder is skipped (the voxelize stage's marker skips the tile stage too).
 pub(crate) fn run(ctx: &mut BuildContext) -> Result<Built, StageError> {
     let mut ingested = ingest::run(ctx)?;
+    if let Some(scope) = &ctx.settings.shard {
+        // the plan's fingerprint was checked; its grid and channels must come out the same
+        let channels = lod_write::channels(ctx);
+        if ingested.grid != scope.grid || channels != scope.channels {
+            return Err(anyhow::anyhow!(
+                "{}: the input gives the grid {:?} and channels {channels:?}, the plan {:?} and {:?}: plan again",
+                ctx.input.display(),
+                ingested.grid,
+                scope.grid,
+                scope.channels
+            )
+            .into());
+        }
+    }
     let voxelized = match voxelize::Voxelized::resume(ctx) {
         Some(v) => v,
         None => {

@@ -98,12 +98,9 @@ pub(crate) fn run(ctx: &mut BuildContext, ingested: &mut Ingested) -> Result<Til
     Ok(Tiled { bins })
 }
 
-/// The count pass (unless `counts` are given) and the scatter pass.
-fn tile(
-    ctx: &BuildContext,
-    ing: &Ingested,
-    counts: Option<ChunkCounts>,
-) -> Result<Bins, StageError> {
+/// The passes over the ingested triangles (the spool, or the memory-mapped input again),
+/// given to `f`.
+fn with_passes<R>(ctx: &BuildContext, ing: &Ingested, f: impl FnOnce(&dyn Passes) -> R) -> R {
     let count = ing.marker.count;
     let spool;
     let input;
@@ -123,38 +120,67 @@ fn tile(
         };
         &input
     };
-    let src = Interruptible { inner: src, ctx };
-    let counts = match counts {
-        Some(c) => c,
-        None => {
-            let bar = Stage::items(ctx.progress, "count", count);
-            let c = ctx
-                .pool
-                .install(|| voxlod_tile::count(&src, &ing.grid, &mut |d, n| bar.set(d, n)))
-                .map_err(|e| ctx.stop.lift(e))?;
-            bar.finish();
-            c
-        }
-    };
-    ctx.check_interrupt()?;
-    check_bins_space(ctx, &counts, ing.layout)?;
-    let bar = Stage::items(ctx.progress, "scatter", count);
-    let bins = ctx
+    f(&Interruptible { inner: src, ctx })
+}
+
+/// The count pass: triangles per leaf chunk (what `voxlod plan` cuts into shards).
+pub(crate) fn count_pass(
+    ctx: &BuildContext,
+    ing: &Ingested,
+    src: &dyn Passes,
+) -> Result<ChunkCounts, StageError> {
+    let bar = Stage::items(ctx.progress, "count", ing.marker.count);
+    let c = ctx
         .pool
-        .install(|| {
-            voxlod_tile::scatter(
-                &src,
-                &ing.grid,
-                &counts,
-                &ctx.work.file(WorkFile::Bins),
-                ing.layout,
-                ctx.plan.scatter_buffer,
-                &mut |d, n| bar.set(d, n),
-            )
-        })
+        .install(|| voxlod_tile::count(src, &ing.grid, &mut |d, n| bar.set(d, n)))
         .map_err(|e| ctx.stop.lift(e))?;
     bar.finish();
-    Ok(bins)
+    Ok(c)
+}
+
+/// The chunk counts of the ingested triangles: taken during ingest, else by a count pass.
+pub(crate) fn counts(ctx: &BuildContext, ing: &mut Ingested) -> Result<ChunkCounts, StageError> {
+    match ing.early_counts.take() {
+        Some(c) => Ok(c),
+        None => with_passes(ctx, ing, |src| count_pass(ctx, ing, src)),
+    }
+}
+
+/// The count pass (unless `counts` are given) and the scatter pass. A sharded build keeps
+/// the chunks of its own subtrees only.
+fn tile(
+    ctx: &BuildContext,
+    ing: &Ingested,
+    counts: Option<ChunkCounts>,
+) -> Result<Bins, StageError> {
+    with_passes(ctx, ing, |src| {
+        let mut counts = match counts {
+            Some(c) => c,
+            None => count_pass(ctx, ing, src)?,
+        };
+        if let Some(scope) = &ctx.settings.shard {
+            counts.retain(|c| scope.contains_chunk(c));
+        }
+        ctx.check_interrupt()?;
+        check_bins_space(ctx, &counts, ing.layout)?;
+        let bar = Stage::items(ctx.progress, "scatter", ing.marker.count);
+        let bins = ctx
+            .pool
+            .install(|| {
+                voxlod_tile::scatter(
+                    src,
+                    &ing.grid,
+                    &counts,
+                    &ctx.work.file(WorkFile::Bins),
+                    ing.layout,
+                    ctx.plan.scatter_buffer,
+                    &mut |d, n| bar.set(d, n),
+                )
+            })
+            .map_err(|e| ctx.stop.lift(e))?;
+        bar.finish();
+        Ok(bins)
+    })
 }
 
 /// Refuses the scatter pass if the bins, whose exact size the counts give, cannot fit.

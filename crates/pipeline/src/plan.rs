@@ -1,0 +1,488 @@
+//! `voxlod plan`: cuts one build into shards for a cluster (Entwine's `build --subset` /
+//! `merge` scheme applied to the octree of Chajdas et al.).
+//!
+//! The octree file is written in post-order, so the nodes of a whole subtree form one
+//! contiguous run of it, and a node's payload depends only on its subtree. A plan picks a
+//! *split level* S and gives each shard a contiguous Morton range of the level-S nodes: the
+//! shard bins, voxelizes and builds the LOD of those subtrees only (`build --plan --shard`),
+//! and `merge` copies their payloads and builds the levels above S. The plan holds everything
+//! the merge needs to write the one-machine build's bytes (settings, grid, manifest fields).
+//!
+//! Split rule: the coarsest level S whose non-empty subtrees, cut into `shards` contiguous
+//! ranges with the smallest possible largest range (by binned triangles: a triangle counts
+//! once per chunk it is binned to, the voxelizer's work), has no shard above 1.5× the mean.
+//! When no level allows that (fewer subtrees than shards, one dominant subtree), the level
+//! with the smallest largest shard is taken and the plan says it is unbalanced.
+
+use std::io::{Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use voxlod_geom::{morton3, Grid};
+
+use crate::BuildSettings;
+
+/// The plan file's `format` value.
+pub const PLAN_FORMAT: &str = "voxlod-plan";
+/// Version of the plan file (and of the shard files made from it).
+pub const PLAN_VERSION: u32 = 1;
+/// Bytes hashed at each end of the input for its fingerprint.
+const FINGERPRINT_SPAN: u64 = 1 << 20;
+/// A shard may hold at most this many times the mean (as the fraction 3/2).
+const BALANCE: (u64, u64) = (3, 2);
+
+/// An input file's identity: size, modification time and SHA-256 of its first and last MiB
+/// (the whole file when it is at most 2 MiB). Cheap on a file of any size; a change inside the
+/// middle that keeps size and time is not seen.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Fingerprint {
+    /// Bytes.
+    pub size: u64,
+    /// Modification time, nanoseconds since the Unix epoch.
+    pub mtime_ns: u128,
+    /// Hex SHA-256 of the first MiB followed by the last MiB (or of the whole file).
+    pub head_tail_sha256: String,
+}
+
+impl Fingerprint {
+    /// The fingerprint of the file at `path`.
+    pub fn of(path: &Path) -> Result<Fingerprint> {
+        let mut f = std::fs::File::open(path)
+            .with_context(|| format!("{}: cannot open the input", path.display()))?;
+        let meta = f
+            .metadata()
+            .with_context(|| format!("{}: cannot read its metadata", path.display()))?;
+        let size = meta.len();
+        let mtime_ns = meta
+            .modified()
+            .ok()
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map_or(0, |d| d.as_nanos());
+        let mut h = Sha256::new();
+        let mut buf = Vec::new();
+        let read = |f: &mut std::fs::File, at: u64, len: u64, buf: &mut Vec<u8>| {
+            buf.clear();
+            f.seek(SeekFrom::Start(at))?;
+            f.take(len).read_to_end(buf)
+        };
+        let head = size.min(FINGERPRINT_SPAN);
+        read(&mut f, 0, head, &mut buf)
+            .with_context(|| format!("{}: reading its first MiB", path.display()))?;
+        h.update(&buf);
+        let tail_start = size.saturating_sub(FINGERPRINT_SPAN).max(head);
+        read(&mut f, tail_start, size - tail_start, &mut buf)
+            .with_context(|| format!("{}: reading its last MiB", path.display()))?;
+        h.update(&buf);
+        Ok(Fingerprint {
+            size,
+            mtime_ns,
+            head_tail_sha256: hex(&h.finalize()),
+        })
+    }
+}
+
+/// Lower-case hex of `bytes`.
+pub(crate) fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The input as the plan saw it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanInput {
+    /// Absolute path of the input (shards read it from a shared filesystem).
+    pub path: PathBuf,
+    /// Its identity when planned: a shard refuses an input whose fingerprint differs.
+    pub fingerprint: Fingerprint,
+}
+
+/// One shard: a contiguous range of level-`split_level` Morton codes.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShardRange {
+    /// 0-based shard index.
+    pub index: u32,
+    /// First Morton code of the range (level-`split_level` chunk coordinates).
+    pub morton_start: u64,
+    /// End of the range, exclusive.
+    pub morton_end: u64,
+    /// Non-empty subtrees in the range.
+    pub subtrees: u64,
+    /// Binned triangles of its leaf chunks (a triangle counts once per chunk).
+    pub triangles: u64,
+}
+
+/// How even the shards are.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Balance {
+    /// Mean binned triangles per shard.
+    pub mean: f64,
+    /// The largest shard's binned triangles.
+    pub max: u64,
+    /// `max / mean` (0 without triangles).
+    pub ratio: f64,
+    /// True if no shard is above 1.5× the mean.
+    pub balanced: bool,
+    /// Non-empty subtrees at the split level.
+    pub subtrees: u64,
+}
+
+/// A plan file (JSON). docs/FORMAT.md, "Sharded builds", describes every field.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plan {
+    /// [`PLAN_FORMAT`].
+    pub format: String,
+    /// [`PLAN_VERSION`].
+    pub version: u32,
+    /// Tool version that wrote it; shards and merge refuse another.
+    pub tool_version: String,
+    /// The input and its fingerprint.
+    pub input: PlanInput,
+    /// The build settings (threads, memory and the temporary folder may be overridden per
+    /// shard; nothing else changes the bytes).
+    pub settings: BuildSettings,
+    /// The grid every shard must find (from the input's bounds).
+    pub grid: PlanGrid,
+    /// The octree's levels.
+    pub levels: u32,
+    /// The output's manifest without its `levels` (they are summed by the merge).
+    pub manifest: serde_json::Value,
+    /// The octree's optional channels (ids, FORMAT.md 14).
+    pub channels: Vec<u32>,
+    /// Level of the shards' subtree roots.
+    pub split_level: u32,
+    /// The shards, in Morton order, together covering every level-`split_level` code.
+    pub shards: Vec<ShardRange>,
+    /// How even they are.
+    pub balance: Balance,
+}
+
+/// The grid (`voxlod_geom::Grid`) as the plan stores it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanGrid {
+    /// World position of the grid's minimum corner.
+    pub origin: [f64; 3],
+    /// Edge of one leaf voxel.
+    pub voxel_size: f64,
+    /// Voxels per axis.
+    pub resolution: u32,
+}
+
+impl From<Grid> for PlanGrid {
+    fn from(g: Grid) -> Self {
+        PlanGrid {
+            origin: g.origin,
+            voxel_size: g.voxel_size,
+            resolution: g.resolution,
+        }
+    }
+}
+
+impl From<PlanGrid> for Grid {
+    fn from(g: PlanGrid) -> Self {
+        Grid {
+            origin: g.origin,
+            voxel_size: g.voxel_size,
+            resolution: g.resolution,
+        }
+    }
+}
+
+/// A plan as read from its file, with the SHA-256 of the file's bytes (which every shard
+/// file records).
+#[derive(Clone, Debug)]
+pub struct LoadedPlan {
+    /// The plan.
+    pub plan: Plan,
+    /// SHA-256 of the plan file.
+    pub sha256: [u8; 32],
+    /// The plan file's path.
+    pub path: PathBuf,
+}
+
+impl LoadedPlan {
+    /// Reads and checks a plan file.
+    pub fn load(path: &Path) -> Result<LoadedPlan> {
+        let bytes = std::fs::read(path)
+            .with_context(|| format!("{}: cannot read the plan", path.display()))?;
+        let plan: Plan = serde_json::from_slice(&bytes)
+            .with_context(|| format!("{}: not a voxlod plan", path.display()))?;
+        if plan.format != PLAN_FORMAT || plan.version != PLAN_VERSION {
+            bail!(
+                "{}: a plan of format {:?} version {}, this tool reads {PLAN_FORMAT:?} version {PLAN_VERSION}",
+                path.display(),
+                plan.format,
+                plan.version
+            );
+        }
+        if plan.tool_version != env!("CARGO_PKG_VERSION") {
+            bail!(
+                "{}: planned by voxlod {}, this is {}: plan again with this version (the bytes may differ)",
+                path.display(),
+                plan.tool_version,
+                env!("CARGO_PKG_VERSION")
+            );
+        }
+        let covered = plan
+            .shards
+            .iter()
+            .enumerate()
+            .all(|(i, s)| s.index == i as u32)
+            && plan
+                .shards
+                .windows(2)
+                .all(|w| w[0].morton_end == w[1].morton_start)
+            && plan.shards.first().is_some_and(|s| s.morton_start == 0)
+            && plan.shards.last().is_some_and(|s| {
+                s.morton_end == 1u64 << (3 * (plan.levels - 1 - plan.split_level))
+            });
+        if plan.split_level >= plan.levels || !covered {
+            bail!(
+                "{}: the shard ranges do not cover the level-{} chunks in order (edited by hand?)",
+                path.display(),
+                plan.split_level
+            );
+        }
+        Ok(LoadedPlan {
+            sha256: Sha256::digest(&bytes).into(),
+            plan,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// The name of shard `index`'s file: `shard-IIII.vlshard`.
+    pub fn shard_file_name(index: u32) -> String {
+        format!("shard-{index:04}.vlshard")
+    }
+
+    /// Where shard `index` is written or read: in `dir`, else beside the plan.
+    pub fn shard_path(&self, index: u32, dir: Option<&Path>) -> PathBuf {
+        let dir = dir.unwrap_or_else(|| crate::output::output_dir(&self.path));
+        dir.join(Self::shard_file_name(index))
+    }
+
+    /// The scope of shard `index`, or an error if the plan has no such shard.
+    pub fn scope(&self, index: u32) -> Result<ShardScope> {
+        let n = self.plan.shards.len();
+        let Some(r) = self.plan.shards.get(index as usize) else {
+            bail!(
+                "--shard {index}: {} has {n} shards, 0 to {}",
+                self.path.display(),
+                n - 1
+            );
+        };
+        Ok(ShardScope {
+            index,
+            count: n as u32,
+            split_level: self.plan.split_level,
+            levels: self.plan.levels,
+            morton_start: r.morton_start,
+            morton_end: r.morton_end,
+            plan_sha256: self.sha256,
+            grid: self.plan.grid.into(),
+            channels: self.plan.channels.clone(),
+        })
+    }
+}
+
+/// What a sharded build restricts itself to (from its plan).
+#[derive(Clone, Debug)]
+pub struct ShardScope {
+    /// 0-based shard index.
+    pub index: u32,
+    /// Shards in the plan.
+    pub count: u32,
+    /// Level of the subtree roots.
+    pub split_level: u32,
+    /// Levels of the octree.
+    pub levels: u32,
+    /// The shard's level-`split_level` Morton codes, `[start, end)`.
+    pub morton_start: u64,
+    /// 〃 end.
+    pub morton_end: u64,
+    /// SHA-256 of the plan file.
+    pub plan_sha256: [u8; 32],
+    /// The grid the plan found.
+    pub grid: Grid,
+    /// The octree's channels.
+    pub channels: Vec<u32>,
+}
+
+impl ShardScope {
+    /// True if leaf chunk `c` lies in one of the shard's subtrees.
+    pub fn contains_chunk(&self, c: [u32; 3]) -> bool {
+        let m = morton3(c[0], c[1], c[2]) >> (3 * self.split_level);
+        (self.morton_start..self.morton_end).contains(&m)
+    }
+}
+
+/// Subtrees at level `s`: (Morton code, binned triangles) of the non-empty ones, in Morton
+/// order, from the non-empty leaf chunks `leaves` (Morton code, triangles) in Morton order.
+pub(crate) fn subtrees(leaves: &[(u64, u64)], s: u32) -> Vec<(u64, u64)> {
+    let mut out: Vec<(u64, u64)> = Vec::new();
+    for &(m, w) in leaves {
+        let code = m >> (3 * s);
+        match out.last_mut() {
+            Some(last) if last.0 == code => last.1 += w,
+            _ => out.push((code, w)),
+        }
+    }
+    out
+}
+
+/// Cuts `weights` into at most `n` contiguous groups with the smallest possible largest sum
+/// (binary search on that sum, greedy check), then splits the heaviest groups of more than one
+/// item while fewer than `n` groups exist (never raising the largest sum). Returns each
+/// group's end index (exclusive), at most `n` of them.
+pub(crate) fn partition(weights: &[u64], n: usize) -> Vec<usize> {
+    assert!(n >= 1, "at least one shard");
+    let greedy = |cap: u64| -> Option<Vec<usize>> {
+        let mut ends = Vec::new();
+        let mut sum = 0u64;
+        for (i, &w) in weights.iter().enumerate() {
+            if sum + w > cap && i > 0 && sum > 0 {
+                ends.push(i);
+                sum = 0;
+            }
+            sum += w;
+        }
+        ends.push(weights.len());
+        (ends.len() <= n).then_some(ends)
+    };
+    let (mut lo, mut hi) = (
+        weights.iter().copied().max().unwrap_or(0),
+        weights.iter().sum::<u64>(),
+    );
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if greedy(mid).is_some() {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    let mut ends = greedy(lo).expect("the total always fits one group per shard");
+    if weights.is_empty() {
+        return ends;
+    }
+    // use the idle shards: split the heaviest splittable group at its most even point
+    while ends.len() < n {
+        let start = |g: usize| if g == 0 { 0 } else { ends[g - 1] };
+        let sum = |a: usize, b: usize| weights[a..b].iter().sum::<u64>();
+        let Some(g) = (0..ends.len())
+            .filter(|&g| ends[g] - start(g) > 1)
+            .max_by_key(|&g| (sum(start(g), ends[g]), std::cmp::Reverse(g)))
+        else {
+            break;
+        };
+        let (a, b) = (start(g), ends[g]);
+        let cut = (a + 1..b)
+            .min_by_key(|&c| (sum(a, c).max(sum(c, b)), c))
+            .expect("a group of two or more items");
+        ends.insert(g, cut);
+    }
+    ends
+}
+
+/// The shards for split level `s` over `leaves` (see [`subtrees`]) in a tree of `levels`
+/// levels, and their balance.
+pub(crate) fn shards_at(
+    leaves: &[(u64, u64)],
+    levels: u32,
+    s: u32,
+    n: usize,
+) -> (Vec<ShardRange>, Balance) {
+    let trees = subtrees(leaves, s);
+    let weights: Vec<u64> = trees.iter().map(|t| t.1).collect();
+    let ends = partition(&weights, n);
+    let full = 1u64 << (3 * (levels - 1 - s));
+    let mut shards = Vec::with_capacity(n);
+    let mut from = 0usize;
+    for i in 0..n {
+        let to = ends.get(i).copied().unwrap_or(trees.len());
+        let morton_start = shards.last().map_or(0, |p: &ShardRange| p.morton_end);
+        let morton_end = if i + 1 == n {
+            full
+        } else if to < trees.len() {
+            trees[to].0
+        } else {
+            full
+        };
+        shards.push(ShardRange {
+            index: i as u32,
+            morton_start,
+            morton_end,
+            subtrees: (to - from) as u64,
+            triangles: weights[from..to].iter().sum(),
+        });
+        from = to;
+    }
+    let total: u64 = weights.iter().sum();
+    let max = shards.iter().map(|s| s.triangles).max().unwrap_or(0);
+    let mean = total as f64 / n as f64;
+    let balance = Balance {
+        mean,
+        max,
+        ratio: if total > 0 { max as f64 / mean } else { 0.0 },
+        balanced: max * BALANCE.1 * n as u64 <= BALANCE.0 * total,
+        subtrees: trees.len() as u64,
+    };
+    (shards, balance)
+}
+
+/// The split level by the rule at the top of this file, its shards and their balance.
+pub(crate) fn choose_split(
+    leaves: &[(u64, u64)],
+    levels: u32,
+    n: usize,
+) -> (u32, Vec<ShardRange>, Balance) {
+    let mut best: Option<(u32, Vec<ShardRange>, Balance)> = None;
+    for s in (0..levels).rev() {
+        let (shards, balance) = shards_at(leaves, levels, s, n);
+        if balance.balanced {
+            return (s, shards, balance);
+        }
+        if best.as_ref().is_none_or(|b| balance.max < b.2.max) {
+            best = Some((s, shards, balance));
+        }
+    }
+    best.expect("a tree has at least one level")
+}
+
+/// What `voxlod plan` did.
+#[derive(Clone, Debug, Serialize)]
+pub struct PlanSummary {
+    /// The plan file written.
+    pub plan: PathBuf,
+    /// Triangles read.
+    pub triangles: u64,
+    /// Non-empty leaf chunks.
+    pub chunks: u64,
+    /// Level of the subtree roots.
+    pub split_level: u32,
+    /// The shards.
+    pub shards: Vec<ShardRange>,
+    /// Their balance.
+    pub balance: Balance,
+    /// Wall time, seconds.
+    pub seconds: f64,
+    /// Warnings (unbalanced plan, input warnings).
+    pub warnings: Vec<String>,
+}
+
+/// Writes `text` to `guard`'s staged file, fsyncs it and renames it into place.
+pub(crate) fn write_atomically(guard: &crate::OutputGuard, text: &[u8]) -> Result<()> {
+    let staged = guard.staged();
+    let mut f = std::fs::File::create(staged)
+        .with_context(|| format!("{}: cannot create", staged.display()))?;
+    f.write_all(text)
+        .and_then(|()| f.sync_all())
+        .with_context(|| format!("{}: cannot write", staged.display()))?;
+    guard.commit()
+}
