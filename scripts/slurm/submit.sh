@@ -82,7 +82,8 @@ echo "plan: $voxlod plan $input -o $plan --shards $shards ${opts[*]}" >&2
 "$voxlod" plan "$input" -o "$plan" --shards "$shards" "${opts[@]}" >&2
 
 array="$(sbatch --parsable --array="0-$((shards - 1))" --cpus-per-task="$cpus" --mem="${mem_mib}M" \
-  --output="$logs/shard-%a.out" "$here/voxlod-shards.sbatch" "$voxlod" "$plan")"
+  --output="$logs/shard-%a.out" "$here/voxlod-shards.sbatch" "$voxlod" "$plan")" \
+  || die "sbatch refused the shard array (its message is above); nothing was submitted"
 array="${array%%;*}"
 if ! merge="$(sbatch --parsable --dependency="afterok:$array" --kill-on-invalid-dep=yes \
   --cpus-per-task=1 --mem="$merge_mem" --output="$logs/merge.out" \
