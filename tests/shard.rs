@@ -354,3 +354,45 @@ fn interrupted_shard_reruns_to_the_same_bytes() {
     ok(merge(&p, &out));
     assert!(std::fs::read(out).unwrap() == want);
 }
+
+/// Spheres of three OBJ materials (a version-2 file with the material channel: every node has
+/// a material payload, the roots' materials are decoded for the levels above): the merge is
+/// the single build byte for byte.
+#[test]
+fn merge_equals_single_build_with_the_material_channel() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let names = ["stone", "grass", "dirt"];
+    let mtl: String = names
+        .iter()
+        .map(|n| format!("newmtl {n}\nKd 0.4 0.5 0.6\n"))
+        .collect();
+    std::fs::write(d.join("s.mtl"), mtl).unwrap();
+    let (v, f) = voxlod_testkit::mesh::icosphere(3);
+    let mut obj = String::from("mtllib s.mtl\n");
+    for k in 0..6u32 {
+        let c = [
+            (k % 3) as f64 * 2.5,
+            (k / 3) as f64 * 2.5,
+            (k % 2) as f64 * 2.5,
+        ];
+        for p in &v {
+            obj += &format!("v {} {} {}\n", p[0] + c[0], p[1] + c[1], p[2] + c[2]);
+        }
+        obj += &format!("usemtl {}\n", names[(k % 3) as usize]);
+        let base = k * v.len() as u32 + 1;
+        for t in &f {
+            obj += &format!("f {} {} {}\n", t[0] + base, t[1] + base, t[2] + base);
+        }
+    }
+    let input = d.join("spheres.obj");
+    std::fs::write(&input, obj).unwrap();
+    let set = ["-r", "1024", "--backend", "cpu"];
+    let (_, v) = plan(&input, d, 2, &set);
+    assert_eq!(
+        v["channels"],
+        serde_json::json!([1]),
+        "the material channel"
+    );
+    check_identical(&input, &set, &[2, 7]);
+}
