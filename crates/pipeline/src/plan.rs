@@ -229,6 +229,15 @@ impl LoadedPlan {
                 env!("CARGO_PKG_VERSION")
             );
         }
+        let max_levels = voxlod_geom::Grid::MAX_RESOLUTION.trailing_zeros() - 7;
+        if plan.levels == 0 || plan.levels > max_levels || plan.split_level >= plan.levels {
+            bail!(
+                "{}: {} levels with split level {} (edited by hand?)",
+                path.display(),
+                plan.levels,
+                plan.split_level
+            );
+        }
         let covered = plan
             .shards
             .iter()
@@ -242,7 +251,7 @@ impl LoadedPlan {
             && plan.shards.last().is_some_and(|s| {
                 s.morton_end == 1u64 << (3 * (plan.levels - 1 - plan.split_level))
             });
-        if plan.split_level >= plan.levels || !covered {
+        if !covered {
             bail!(
                 "{}: the shard ranges do not cover the level-{} chunks in order (edited by hand?)",
                 path.display(),
