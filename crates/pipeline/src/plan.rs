@@ -229,6 +229,15 @@ impl LoadedPlan {
                 env!("CARGO_PKG_VERSION")
             );
         }
+        let max_levels = voxlod_geom::Grid::MAX_RESOLUTION.trailing_zeros() - 7;
+        if plan.levels == 0 || plan.levels > max_levels || plan.split_level >= plan.levels {
+            bail!(
+                "{}: {} levels with split level {} (edited by hand?)",
+                path.display(),
+                plan.levels,
+                plan.split_level
+            );
+        }
         let covered = plan
             .shards
             .iter()
@@ -242,7 +251,7 @@ impl LoadedPlan {
             && plan.shards.last().is_some_and(|s| {
                 s.morton_end == 1u64 << (3 * (plan.levels - 1 - plan.split_level))
             });
-        if plan.split_level >= plan.levels || !covered {
+        if !covered {
             bail!(
                 "{}: the shard ranges do not cover the level-{} chunks in order (edited by hand?)",
                 path.display(),
@@ -485,4 +494,95 @@ pub(crate) fn write_atomically(guard: &crate::OutputGuard, text: &[u8]) -> Resul
         .and_then(|()| f.sync_all())
         .with_context(|| format!("{}: cannot write", staged.display()))?;
     guard.commit()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The smallest possible largest group over every cut of `w` into at most `n` contiguous
+    /// groups, by enumerating the cut positions (brute force).
+    fn brute(w: &[u64], n: usize) -> u64 {
+        let k = w.len().saturating_sub(1);
+        let mut best = u64::MAX;
+        for mask in 0u32..(1 << k) {
+            if mask.count_ones() as usize + 1 > n {
+                continue;
+            }
+            let (mut cur, mut max) = (0u64, 0u64);
+            for (i, &x) in w.iter().enumerate() {
+                cur += x;
+                if i < k && mask & (1 << i) != 0 {
+                    max = max.max(cur);
+                    cur = 0;
+                }
+            }
+            best = best.min(max.max(cur));
+        }
+        best
+    }
+
+    /// `partition` reaches the brute-force optimum on random small cases, its groups are
+    /// contiguous and non-empty, and it uses every shard when there are enough items.
+    #[test]
+    fn partition_is_optimal_and_uses_every_shard() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rng = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for _ in 0..3000 {
+            let len = (rng() % 9) as usize + 1;
+            let n = (rng() % 6) as usize + 1;
+            let w: Vec<u64> = (0..len)
+                .map(|_| {
+                    if rng() % 4 == 0 {
+                        rng() % 1000
+                    } else {
+                        rng() % 10
+                    }
+                })
+                .collect();
+            let ends = partition(&w, n);
+            assert!(
+                ends.len() <= n && *ends.last().unwrap() == len,
+                "{w:?} {n}: {ends:?}"
+            );
+            assert!(
+                ends.windows(2).all(|p| p[0] < p[1]) && ends[0] > 0,
+                "{ends:?}"
+            );
+            assert_eq!(ends.len(), n.min(len), "{w:?} {n}: {ends:?}");
+            let mut from = 0;
+            let mut max = 0;
+            for &e in &ends {
+                max = max.max(w[from..e].iter().sum::<u64>());
+                from = e;
+            }
+            assert_eq!(max, brute(&w, n), "{w:?} into {n}: {ends:?}");
+        }
+    }
+
+    /// Two level-1 subtrees, one of them eight times heavier: 4 shards cannot balance at level
+    /// 1 (or 2), so the leaves (level 0) are the split level, and the ranges cover the codes.
+    #[test]
+    fn split_level_goes_down_until_balanced() {
+        // 3 levels: 4³ leaf chunks; subtree 0 (leaf codes 0..8) light, subtree 7 heavy
+        let mut leaves: Vec<(u64, u64)> = vec![(0, 10), (3, 10)];
+        leaves.extend((56..64).map(|m| (m, 10)));
+        let (s, shards, b) = choose_split(&leaves, 3, 4);
+        assert_eq!(s, 0);
+        assert!(b.balanced && b.max <= 30, "{b:?}");
+        assert_eq!(shards.first().unwrap().morton_start, 0);
+        assert_eq!(shards.last().unwrap().morton_end, 64);
+        assert_eq!(shards.iter().map(|r| r.triangles).sum::<u64>(), 100);
+        // one shard: the whole tree, split at the root
+        let (s, shards, _) = choose_split(&leaves, 3, 1);
+        assert_eq!((s, shards[0].morton_end), (2, 1));
+        // more shards than leaves: unbalanced at best, some shards empty
+        let (_, shards, b) = choose_split(&leaves[..2], 3, 4);
+        assert!(!b.balanced && shards.iter().filter(|r| r.triangles == 0).count() == 2);
+    }
 }

@@ -97,7 +97,7 @@ Examples:
   voxlod build city.obj -m thin -j 4 --backend cpu
   voxlod build scan.ply --config configs/preview.toml --json > summary.json
   voxlod build dragon.ply -r 4096 --source-geometry   # leaf chunks keep their source triangles
-  voxlod build --plan scan.plan.json --shard $SLURM_ARRAY_TASK_ID   # one shard of `voxlod plan`
+  voxlod build --plan scan.plan.json --shard 3    # shard 3 of `voxlod plan` (Slurm: $SLURM_ARRAY_TASK_ID)
 The output's folder must exist. A build that stops (Ctrl-C, kill) resumes when the same
 command is run again.";
 

@@ -93,8 +93,7 @@ pub(crate) fn run_plan(a: PlanArgs) -> Result<()> {
     super::install_ctrlc();
     let p = voxlod_pipeline::plan(&a.input, &a.output, &s, a.shards)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&p)?);
-        return Ok(());
+        return super::json::print(&p);
     }
     for w in &p.warnings {
         eprintln!("warning: {w}");
@@ -176,7 +175,7 @@ pub(crate) fn run_merge(a: MergeArgs) -> Result<()> {
     };
     let m = voxlod_pipeline::merge(&a.plan, &a.output, a.shard_dir.as_deref(), &runtime)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&m)?);
+        super::json::print(&m)?;
     } else if !a.quiet {
         println!(
             "{}: {} from {} shards ({} nodes copied, {} subtree roots at level {} decoded), {:.2} s, peak memory {}",
