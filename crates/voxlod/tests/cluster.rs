@@ -204,6 +204,11 @@ fn failed_shard_stops_the_merge_and_rerun_finishes(d: &Path, mesh: &str, expecte
         "only shard 1 failed: {err}"
     );
     assert!(err.contains("rerun.sh fail.shards 1"), "{err}");
+    // The tail of the shard's log, which wait.sh shows: voxlod's error naming the file.
+    assert!(
+        err.contains("shard-0001.vlshard is a directory"),
+        "wait.sh shows the shard's error: {err}"
+    );
     let m = &scontrol_job(&merge)[0];
     assert_eq!(
         m["JobState"], "CANCELLED",
