@@ -114,13 +114,6 @@ impl Face {
     /// and bottom `U = +x` and `V = n × U`.
     pub fn corners(&self) -> [[u32; 3]; 4] {
         let n = DIRS[self.dir as usize];
-        let cross = |a: [i64; 3], b: [i64; 3]| {
-            [
-                a[1] * b[2] - a[2] * b[1],
-                a[2] * b[0] - a[0] * b[2],
-                a[0] * b[1] - a[1] * b[0],
-            ]
-        };
         let (u, v) = if n[1] == 0 {
             let v = [0, 1, 0];
             (cross(v, n), v)
@@ -137,6 +130,15 @@ impl Face {
         };
         [at(0, 0), at(1, 0), at(1, 1), at(0, 1)]
     }
+}
+
+/// The cross product `a × b`.
+fn cross(a: [i64; 3], b: [i64; 3]) -> [i64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// Every exposed face of `world`, sorted by material, then by block (z, y, x) and direction:
@@ -196,12 +198,7 @@ mod tests {
             }
             let e1: [i64; 3] = std::array::from_fn(|k| c[1][k] - c[0][k]);
             let e2: [i64; 3] = std::array::from_fn(|k| c[2][k] - c[0][k]);
-            let cr = [
-                e1[1] * e2[2] - e1[2] * e2[1],
-                e1[2] * e2[0] - e1[0] * e2[2],
-                e1[0] * e2[1] - e1[1] * e2[0],
-            ];
-            assert_eq!(cr, n, "dir {dir}");
+            assert_eq!(cross(e1, e2), n, "dir {dir}");
             // the opposite corners are distinct: a unit square, not a degenerate one
             assert_ne!(c[0], c[2]);
             assert_ne!(c[1], c[3]);

@@ -152,11 +152,15 @@ mod tests {
             (0..3).map(|c| (p[c] - q[c]).abs()).sum::<i32>() > 30
         };
         assert!(far(Material::GrassTop, Material::GrassSide));
-        assert!(
-            far(Material::GrassSide, Material::Dirt)
-                || texels(Material::GrassSide)[0] != texels(Material::Dirt)[0]
-        );
         assert!(far(Material::LogTop, Material::LogSide));
+        assert!(far(Material::Sand, Material::Stone));
+        // the grass side: green at the top row, brown (dirt) at the bottom row
+        let side = texels(Material::GrassSide);
+        let n = TEXTURE_SIZE as usize;
+        assert!(side[..n].iter().all(|p| p[1] > p[0] && p[1] > p[2]));
+        assert!(side[n * (n - 1)..]
+            .iter()
+            .all(|p| p[0] > p[1] && p[1] > p[2]));
         assert_eq!(integer_sqrt(15), 3);
         assert_eq!(integer_sqrt(16), 4);
     }
