@@ -12,7 +12,8 @@
 //!   (textures decoded by the `image` crate, sRGB by the tests' own formula); where the
 //!   diagonal crosses it, within the range of the texels around its footprint.
 //!
-//! And the file's bytes do not depend on the thread count.
+//! Built at 512³ (eight leaf chunks), `verify` accepts the file, its parents' materials
+//! recomputed, and its bytes do not depend on the thread count.
 
 mod common;
 
@@ -152,6 +153,7 @@ fn voxels_carry_the_material_and_texture_of_their_block_face() {
     build(&obj, &out, &settings(2)).unwrap();
     let r = Reader::open(&out).unwrap();
     assert!(r.has_materials());
+    assert!(voxlod_check::verify(&out).ok());
     let names: Vec<String> = r.manifest().unwrap()["materials"]
         .as_array()
         .unwrap()
@@ -244,13 +246,23 @@ fn voxels_carry_the_material_and_texture_of_their_block_face() {
     );
     assert!(crossed > 0);
 
-    // the same bytes on one thread and on three
-    for t in [1, 3] {
-        let other = d.path().join(format!("w{t}.voxlod"));
-        build(&obj, &other, &settings(t)).unwrap();
-        assert!(
-            std::fs::read(&other).unwrap() == std::fs::read(&out).unwrap(),
-            "{t} threads"
-        );
-    }
+    // at 512³ (eight leaf chunks, two levels): the same bytes on one thread and on three, and
+    // verify recomputes every parent, its materials included
+    let files: Vec<Vec<u8>> = [1, 3]
+        .into_iter()
+        .map(|t| {
+            let other = d.path().join(format!("w{t}.voxlod"));
+            let s = BuildSettings {
+                resolution: 512,
+                ..settings(t)
+            };
+            build(&obj, &other, &s).unwrap();
+            let report = voxlod_check::verify(&other);
+            assert!(report.ok(), "{:?}", report.problems);
+            assert!(report.materials_checked > 0);
+            assert_eq!(report.materials_checked, report.parents_checked);
+            std::fs::read(&other).unwrap()
+        })
+        .collect();
+    assert!(files[0] == files[1], "1 and 3 threads gave other bytes");
 }
