@@ -48,6 +48,7 @@ pub fn write_world(world: &World, obj: &Path, force: bool) -> Result<Written, Er
         dir.join(format!(".{name}.part-{}", std::process::id()))
     };
     let parts: Vec<PathBuf> = targets.iter().map(|p| part(p)).collect();
+    remove_stale_parts(&dir, &targets);
     let result = write_parts(world, &parts, &mtl_name, &tex_name);
     let written = match result {
         Ok(w) => w,
@@ -72,6 +73,30 @@ pub fn write_world(world: &World, obj: &Path, force: bool) -> Result<Written, Er
         bytes,
         ..written
     })
+}
+
+/// Removes the temporary files a killed run left for these targets (`.NAME.part-PID` whose
+/// process is gone; on systems without `/proc` none are removed).
+fn remove_stale_parts(dir: &Path, targets: &[PathBuf]) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    let prefixes: Vec<String> = targets
+        .iter()
+        .filter_map(|t| t.file_name())
+        .map(|n| format!(".{}.part-", n.to_string_lossy()))
+        .collect();
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let pid = prefixes.iter().find_map(|p| name.strip_prefix(p.as_str()));
+        if let Some(pid) = pid.and_then(|p| p.parse::<u32>().ok()) {
+            let gone =
+                Path::new("/proc/self").exists() && !Path::new(&format!("/proc/{pid}")).exists();
+            if gone {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
 }
 
 /// The output's folder (which must exist) and file stem (which must have no white space, as

@@ -147,7 +147,14 @@ fn bad_outputs_are_clear_errors_and_leave_nothing() {
     let e = err(&d.path().join("w.obj"));
     assert!(e.contains("w-sand.png") && e.contains("--force"), "{e}");
     assert_eq!(files(d.path()).len(), 1);
+    // a part file left by a killed run (no such process) is removed, one of a live one kept
+    let stale = d.path().join(".w.mtl.part-4294967295");
+    let live = d.path().join(".w.obj.part-1"); // pid 1 always runs
+    std::fs::write(&stale, b"half").unwrap();
+    std::fs::write(&live, b"busy").unwrap();
     write_world(&w, &d.path().join("w.obj"), true).unwrap();
+    assert!(!stale.exists());
+    std::fs::remove_file(&live).unwrap();
     assert_eq!(files(d.path()).len(), 11);
     for (s, e) in [(31, "31"), (4096, "4096")] {
         let m = World::generate(s, 1).err().unwrap().to_string();
