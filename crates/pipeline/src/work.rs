@@ -213,9 +213,28 @@ impl WorkDir {
     }
 
     /// Removes the folder and everything in it.
+    ///
+    /// `remove_dir_all` lists the folder and then removes what it listed; on some filesystems
+    /// (seen under gVisor, once in eight Slurm test runs) the listing can miss an entry and the
+    /// final rmdir fails with "Directory not empty". A few retries remove what was missed; a
+    /// folder that still cannot be removed is an error naming it.
     pub(crate) fn remove(self) -> Result<()> {
-        std::fs::remove_dir_all(&self.path)
-            .with_context(|| format!("removing the work folder {}", self.path.display()))
+        let mut tries = 0;
+        loop {
+            match std::fs::remove_dir_all(&self.path) {
+                Ok(()) => return Ok(()),
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound && tries > 0 => return Ok(()),
+                Err(e) if e.kind() == std::io::ErrorKind::DirectoryNotEmpty && tries < 5 => {
+                    tries += 1;
+                    std::thread::sleep(std::time::Duration::from_millis(20 * tries));
+                }
+                Err(e) => {
+                    return Err(e).with_context(|| {
+                        format!("removing the work folder {}", self.path.display())
+                    })
+                }
+            }
+        }
     }
 }
 
