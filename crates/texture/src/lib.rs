@@ -406,6 +406,11 @@ impl TextureSet {
         self.by_material.get(m as usize).and_then(|t| t.as_deref())
     }
 
+    /// The usable textures, material by material (a texture shared by materials repeats).
+    pub fn textures(&self) -> impl Iterator<Item = &Texture> {
+        self.by_material.iter().flatten().map(|t| &**t)
+    }
+
     /// True if no material has a usable texture.
     pub fn is_empty(&self) -> bool {
         self.by_material.iter().all(|t| t.is_none())

@@ -470,6 +470,17 @@ fn print_summary(s: &BuildSummary, input: &str) {
         format_size(s.memory_plan.budget),
         format_size(s.memory_plan.planned)
     );
+    if let Some(t) = &s.texture_cache {
+        println!(
+            "  textures     {} decoded, read by tile through a {} cache (peak {}, {} tiles read from a {} tile file{})",
+            format_size(t.decoded_bytes),
+            format_size(t.capacity),
+            format_size(t.peak_resident),
+            t.tile_reads,
+            format_size(t.file_bytes),
+            if t.reused { ", reused" } else { "" }
+        );
+    }
     for w in &s.warnings {
         println!("  warning      {w}");
     }
