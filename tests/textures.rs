@@ -481,22 +481,6 @@ fn patchwork_obj(dir: &Path) -> PathBuf {
     path
 }
 
-/// The work folder of the interrupted build of `out`.
-fn work_folder(dir: &Path) -> PathBuf {
-    let found: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| {
-            p.file_name()
-                .unwrap()
-                .to_string_lossy()
-                .starts_with(".voxlod-work")
-        })
-        .collect();
-    assert_eq!(found.len(), 1, "{found:?}");
-    found[0].clone()
-}
-
 /// Decoded textures of 85 MiB, over five times the 16 MiB the plan leaves them under
 /// `--memory 464MiB` with two voxelizers: read by tile through a cache whose peak stays within
 /// its share, and the same file, byte for byte, as a build holding them whole; an interrupted
@@ -545,7 +529,9 @@ fn textures_over_their_memory_share_give_the_same_bytes() {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("interrupted"), "{err}");
-    let tiles = work_folder(d.path()).join("textures.tiles");
+    let work = voxlod_pipeline::find_work_folders(d.path()).unwrap();
+    assert_eq!(work.len(), 1, "one work folder kept");
+    let tiles = work[0].path.join("textures.tiles");
     assert!(tiles.is_file(), "{}", tiles.display());
     check(
         &build(&obj, &out, &[&small[..], &["--force"]].concat()),

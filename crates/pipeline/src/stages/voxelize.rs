@@ -72,8 +72,17 @@ impl Voxelized {
 /// Runs the voxelize stage with the voxelizer the settings choose.
 pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, StageError> {
     let threads = ctx.pool.current_num_threads();
+    let t = Instant::now();
     let textures = crate::textures::load(ctx)?;
     let tiles = textures.clone().filter(|t| t.tiles().is_some());
+    if textures.is_some() {
+        // decoding (and tiling) the textures, before the voxelizers start
+        let reused = tiles
+            .as_ref()
+            .and_then(|t| t.tiles())
+            .is_some_and(|t| t.reused);
+        ctx.stage_done("textures", t, reused);
+    }
     let materials = crate::textures::has_material_channel(ctx.source.info());
     let (vz, backend) = crate::backend::select(
         ctx.settings,
