@@ -86,6 +86,7 @@ Examples:
   voxlod build scan.ply                           # writes scan.voxlod, 1024³, in this folder
   voxlod build scan.ply.gz -o /data/scan.voxlod -r 8192 --memory 8GiB
   voxlod build city.obj -m thin -j 4 --backend cpu
+  voxlod build photoscan.obj --memory 1GiB        # its textures stay inside the 1 GiB too
   voxlod build scan.ply --config configs/preview.toml --json > summary.json
   voxlod build dragon.ply -r 4096 --source-geometry   # leaf chunks keep their source triangles
 The output's folder must exist. A build that stops (Ctrl-C, kill) resumes when the same
@@ -199,7 +200,8 @@ struct BuildArgs {
     /// Worker threads; 0 = one per core [default: 0].
     #[arg(short = 'j', long)]
     threads: Option<usize>,
-    /// Memory budget, e.g. 512MiB, 2GiB [default: 2GiB].
+    /// Memory budget of the whole process, decoded textures included (tiled to the work folder
+    /// when they exceed what the voxelizers leave), e.g. 512MiB, 2GiB [default: 2GiB].
     #[arg(long, value_parser = parse_size)]
     memory: Option<u64>,
     /// zstd level of node payloads (-7..=22; higher: smaller and slower) [default: 1].
