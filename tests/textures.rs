@@ -408,3 +408,134 @@ fn bunny_glb_has_the_voxels_of_the_ply() {
         "the GLB build's voxel set differs from the PLY build's"
     );
 }
+
+/// A 512² plane of 64×64 quads of 8×8 voxels in z = 0.5 (the grid fitted to it: 4 leaf
+/// chunks at `-r 512`), each quad mapped to an 8×8-texel patch at a pseudo-random place of one
+/// of four 2048² textures (one texel per voxel: every lookup reads level 0 or 1, all over the
+/// textures), so a cache smaller than the textures keeps evicting and reading tiles.
+fn patchwork_obj(dir: &Path) -> PathBuf {
+    let n = 2048u32;
+    let mut mtl = String::new();
+    for t in 0..4u32 {
+        let name = format!("tex{t}.png");
+        // smooth gradients with a fine pattern: distinct texels, mips that differ, quick PNGs
+        let px = move |x: u32, y: u32| {
+            [
+                ((x * (t + 1)) >> 3) as u8 ^ ((x ^ y) & 7) as u8,
+                ((y * (3 - t + 1)) >> 3) as u8,
+                ((x + y + 64 * t) >> 4) as u8 ^ (((x * y) >> 5) & 15) as u8,
+                255 - ((x ^ y) >> 6) as u8 * t as u8,
+            ]
+        };
+        if t == 2 {
+            image::RgbaImage::from_fn(n, n, |x, y| image::Rgba(px(x, y)))
+                .save(dir.join(&name))
+                .unwrap();
+        } else {
+            image::RgbImage::from_fn(n, n, |x, y| {
+                let p = px(x, y);
+                image::Rgb([p[0], p[1], p[2]])
+            })
+            .save(dir.join(&name))
+            .unwrap();
+        }
+        mtl += &format!("newmtl m{t}\nKd 1 1 1\nmap_Kd {name}\n");
+    }
+    std::fs::write(dir.join("patch.mtl"), mtl).unwrap();
+    let mut obj = String::from("mtllib patch.mtl\n");
+    let mut s = 12345u64;
+    let mut next = || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (s >> 33) as u32
+    };
+    let mut faces = [String::new(), String::new(), String::new(), String::new()];
+    let mut k = 1;
+    for j in 0..64u32 {
+        for i in 0..64u32 {
+            let (x, y) = (8 * i, 8 * j);
+            let (u, v) = ((next() % (n - 8)) as f32, (next() % (n - 8)) as f32);
+            let f = n as f32;
+            for (dx, dy) in [(0, 0), (8, 0), (8, 8), (0, 8)] {
+                obj += &format!("v {} {} 0.5\n", x + dx, y + dy);
+                obj += &format!("vt {} {}\n", (u + dx as f32) / f, (v + dy as f32) / f);
+            }
+            faces[((i + j) % 4) as usize] += &format!(
+                "f {k}/{k} {}/{} {}/{} {}/{}\n",
+                k + 1,
+                k + 1,
+                k + 2,
+                k + 2,
+                k + 3,
+                k + 3
+            );
+            k += 4;
+        }
+    }
+    for (t, f) in faces.iter().enumerate() {
+        obj += &format!("usemtl m{t}\n{f}");
+    }
+    let path = dir.join("patch.obj");
+    std::fs::write(&path, obj).unwrap();
+    path
+}
+
+/// Decoded textures of 85 MiB, over five times the 16 MiB the plan leaves them under
+/// `--memory 464MiB` with two voxelizers: read by tile through a cache whose peak stays within
+/// its share, and the same file, byte for byte, as a build holding them whole; an interrupted
+/// build's tile file is reused on resume.
+#[test]
+fn textures_over_their_memory_share_give_the_same_bytes() {
+    let d = tempfile::tempdir().unwrap();
+    let obj = patchwork_obj(d.path());
+    let whole = d.path().join("whole.voxlod");
+    let s = build(&obj, &whole, &["-r", "512", "-j", "2", "--memory", "2GiB"]);
+    assert!(warnings(&s).is_empty(), "{:?}", warnings(&s));
+    assert!(s["texture_cache"].is_null(), "{}", s["texture_cache"]);
+    let decoded = s["memory_plan"]["textures"].as_u64().unwrap();
+    assert_eq!(decoded, 4 * 22_369_620, "four 2048² pyramids");
+
+    let out = d.path().join("tiled.voxlod");
+    let small = ["-r", "512", "-j", "2", "--memory", "464MiB"];
+    let check = |s: &serde_json::Value, reused: bool| {
+        assert!(warnings(s).is_empty(), "{:?}", warnings(s));
+        let share = s["memory_plan"]["textures"].as_u64().unwrap();
+        assert_eq!(share, 16 << 20, "{}", s["memory_plan"]);
+        assert_eq!(s["memory_plan"]["voxelizers"], 2);
+        let c = &s["texture_cache"];
+        assert_eq!(c["decoded_bytes"].as_u64().unwrap(), decoded);
+        assert!(decoded >= 4 * share);
+        assert_eq!(c["capacity"].as_u64().unwrap(), share);
+        let peak = c["peak_resident"].as_u64().unwrap();
+        assert!(peak > 0 && peak <= share, "{c}");
+        // more tiles read than the cache holds: it evicted and read again
+        assert!(c["tile_reads"].as_u64().unwrap() * 16384 > share, "{c}");
+        assert_eq!(c["reused"], reused, "{c}");
+        assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&whole).unwrap());
+    };
+    check(&build(&obj, &out, &small), false);
+
+    // interrupted after one of the four chunks: the tile file stays in the work folder, and
+    // the resumed build reuses it
+    let o = Command::new(BIN)
+        .arg("build")
+        .arg(&obj)
+        .arg("-o")
+        .arg(&out)
+        .args(["-q", "--force", "--debug-interrupt-after-chunks", "1"])
+        .args(small)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("interrupted"), "{err}");
+    let work = voxlod_pipeline::find_work_folders(d.path()).unwrap();
+    assert_eq!(work.len(), 1, "one work folder kept");
+    let tiles = work[0].path.join("textures.tiles");
+    assert!(tiles.is_file(), "{}", tiles.display());
+    check(
+        &build(&obj, &out, &[&small[..], &["--force"]].concat()),
+        true,
+    );
+    // (a corrupt or truncated tile file is rebuilt: crates/texture/tests/tile_cache.rs)
+}

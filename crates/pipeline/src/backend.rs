@@ -271,6 +271,8 @@ pub(crate) trait Voxelize: Sync {
 /// chunk to chunk).
 pub(crate) struct CpuVoxelizers {
     slots: Vec<Mutex<ChunkVoxelizer>>,
+    /// the textures, to check their tile cache for read errors after each chunk
+    textures: Option<Arc<TextureSet>>,
 }
 
 impl CpuVoxelizers {
@@ -290,7 +292,7 @@ impl CpuVoxelizers {
                 Mutex::new(cv)
             })
             .collect();
-        CpuVoxelizers { slots }
+        CpuVoxelizers { slots, textures }
     }
 }
 
@@ -309,6 +311,13 @@ impl Voxelize for CpuVoxelizers {
             ControlFlow::Continue(())
         })?;
         let voxels = vz.finish();
+        // a texture tile that could not be read gave wrong colours: the chunk fails
+        if let Some(e) = self.textures.as_ref().and_then(|t| t.tiles()?.error()) {
+            return Err(StageError::Other(anyhow::anyhow!(
+                "voxelizing chunk {:?}: {e}",
+                chunk.coord()
+            )));
+        }
         Ok(ChunkVoxels {
             voxels,
             skipped: vz.skipped() - before,

@@ -45,6 +45,7 @@ pub use plan::{
 };
 pub use size::{format_size, parse_size};
 pub use system::{interrupted, peak_rss, request_interrupt};
+pub use textures::TextureCacheSummary;
 pub use work::{find_work_folders, remove_stale_work_folder, WorkFolder, WORK_PREFIX};
 
 use std::path::{Path, PathBuf};
@@ -247,6 +248,9 @@ pub struct BuildSummary {
     pub bytes_per_voxel: f64,
     /// How the memory budget was split.
     pub memory_plan: MemoryPlan,
+    /// The tile cache of decoded textures larger than their share of the plan; `None` when
+    /// they were held whole, the mesh has none, or a resumed build skipped the voxelize stage.
+    pub texture_cache: Option<TextureCacheSummary>,
     /// Peak resident memory of the whole process (bytes).
     pub peak_rss: u64,
     /// Largest temporary disk use planned (bytes): spool (if one is written) plus bins.
@@ -605,6 +609,7 @@ fn summarize(ctx: BuildContext, built: Built, resumed: bool, t0: Instant) -> Bui
         bytes: written.bytes,
         levels: written.levels,
         memory_plan: ctx.plan,
+        texture_cache: voxelized.texture_cache,
         peak_rss: system::peak_rss(),
         temp_disk: ingested.temp_disk,
         tile_source: if ingested.marker.spooled {

@@ -27,6 +27,10 @@ pub struct MemoryPlan {
     pub voxelizers: usize,
     /// Bytes planned in total.
     pub planned: u64,
+    /// Decoded textures during the voxelize stage (0 for a mesh without textures): their
+    /// pyramids whole when they fit [`MemoryPlan::texture_share`], otherwise a tile cache of
+    /// that share ([`MemoryPlan::with_textures`]).
+    pub textures: u64,
 }
 
 impl MemoryPlan {
@@ -56,36 +60,51 @@ impl MemoryPlan {
             scatter_buffer,
             voxelizers,
             planned,
+            textures: 0,
         })
     }
 
+    /// What the voxelize stage leaves for decoded textures: the budget less the base, the LOD
+    /// stage and the chunk voxelizers (at least 16 MiB, as [`MemoryPlan::new`] keeps 16 MiB
+    /// beside the voxelizers). The scatter buffer is gone by then.
+    pub fn texture_share(&self) -> u64 {
+        self.budget - BASE_BYTES - LOD_BYTES - self.voxelizers as u64 * VOXELIZER_BYTES
+    }
+
+    /// The plan with `decoded` bytes of decoded textures: held whole if they fit the texture
+    /// share, else a tile cache of the whole share.
+    pub fn with_textures(mut self, decoded: u64) -> MemoryPlan {
+        self.textures = decoded.min(self.texture_share());
+        let voxelize = self.voxelizers as u64 * VOXELIZER_BYTES + self.textures;
+        self.planned = BASE_BYTES + LOD_BYTES + voxelize.max(self.scatter_buffer);
+        self
+    }
+
     /// The plan in words, its parts adding up to its total: base + LOD + the larger of the
-    /// voxelizers and the scatter buffer (the scatter pass runs before the voxelizers exist,
-    /// so the two share their memory).
+    /// voxelizers (with the decoded textures, if any) and the scatter buffer (the scatter pass
+    /// runs before the voxelizers exist, so the two share their memory).
     pub fn describe(&self) -> String {
-        let voxelizers = self.voxelizers as u64 * VOXELIZER_BYTES;
-        let (shared, other) = if voxelizers >= self.scatter_buffer {
-            (
-                format!(
-                    "{} chunk voxelizer(s) × {}",
-                    self.voxelizers,
-                    format_size(VOXELIZER_BYTES)
-                ),
-                format!(
-                    "before them the scatter buffer, {}",
-                    format_size(self.scatter_buffer)
-                ),
-            )
-        } else {
-            (
-                format!("scatter buffer {}", format_size(self.scatter_buffer)),
-                format!(
-                    "after it {} chunk voxelizer(s) × {}",
-                    self.voxelizers,
-                    format_size(VOXELIZER_BYTES)
-                ),
-            )
-        };
+        let mut voxelize = format!(
+            "{} chunk voxelizer(s) × {}",
+            self.voxelizers,
+            format_size(VOXELIZER_BYTES)
+        );
+        if self.textures > 0 {
+            voxelize += &format!(" + textures {}", format_size(self.textures));
+        }
+        let scatter = format_size(self.scatter_buffer);
+        let (shared, other) =
+            if self.voxelizers as u64 * VOXELIZER_BYTES + self.textures >= self.scatter_buffer {
+                (
+                    voxelize,
+                    format!("before them the scatter buffer, {scatter}"),
+                )
+            } else {
+                (
+                    format!("scatter buffer {scatter}"),
+                    format!("after it {voxelize}"),
+                )
+            };
         format!(
             "memory plan: {} of {} budget = base {} + LOD {} + {shared} (in the same memory, {other})",
             format_size(self.planned),
@@ -111,6 +130,21 @@ mod tests {
                 // the parts the description adds up give the total
                 let shared = (p.voxelizers as u64 * VOXELIZER_BYTES).max(p.scatter_buffer);
                 assert_eq!(BASE_BYTES + LOD_BYTES + shared, p.planned);
+                assert!(p.texture_share() >= 16 << 20, "{p:?}");
+                // textures of any size stay inside the budget: whole, or a cache of the share
+                for decoded in [1u64 << 20, p.texture_share(), 64 << 30] {
+                    let t = p.with_textures(decoded);
+                    assert_eq!(t.textures, decoded.min(p.texture_share()));
+                    assert!(t.planned <= budget, "{t:?}");
+                    let voxelize = t.voxelizers as u64 * VOXELIZER_BYTES + t.textures;
+                    assert_eq!(
+                        t.planned,
+                        BASE_BYTES + LOD_BYTES + voxelize.max(t.scatter_buffer)
+                    );
+                    assert!(t
+                        .describe()
+                        .contains(&format!("+ textures {}", format_size(t.textures))));
+                }
                 let d = p.describe();
                 assert!(
                     d.contains(&format!(

@@ -1,39 +1,93 @@
 //! The build's textures: decoded once from the material table ingest found
 //! ([`voxlod_ingest::MeshInfo::materials`]) and handed to the CPU chunk voxelizers
-//! (docs/TEXTURES.md). A texture that cannot be read is a warning naming the file.
+//! (docs/TEXTURES.md), inside the memory plan: whole in memory when the decoded pyramids fit
+//! the plan's texture share ([`MemoryPlan::texture_share`]), otherwise tiled to the work
+//! folder's `textures.tiles` and read through a tile cache of that share
+//! ([`TextureSet::load_within`]). A texture that cannot be read is a warning naming the file.
 
-use std::path::Path;
 use std::sync::Arc;
+
+use serde::Serialize;
 use voxlod_ingest::MeshInfo;
 use voxlod_texture::TextureSet;
 
-/// The textures of `info`'s materials, `None` if the mesh has no texture coordinates or no
-/// usable texture; what could not be used goes to `warnings`, and so does a set of decoded
-/// textures larger than a quarter of the memory `budget` (they are not yet inside the plan).
-pub(crate) fn load(
-    info: &MeshInfo,
-    input: &Path,
-    budget: u64,
-    warnings: &mut Vec<String>,
-) -> Option<Arc<TextureSet>> {
+use crate::error::StageError;
+use crate::memory::{MemoryPlan, BASE_BYTES, LOD_BYTES};
+use crate::size::format_size;
+use crate::stages::BuildContext;
+use crate::work::WorkFile;
+
+/// The tile cache of a build whose decoded textures exceed their share of the plan
+/// (`--json` `texture_cache`).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+pub struct TextureCacheSummary {
+    /// Bytes of the decoded pyramids (what holding them whole would take).
+    pub decoded_bytes: u64,
+    /// The cache's capacity: the plan's texture share, bytes.
+    pub capacity: u64,
+    /// The most bytes of tiles the cache held at once.
+    pub peak_resident: u64,
+    /// Tiles (64×64 RGBA8, 16 KiB) read from the tile file.
+    pub tile_reads: u64,
+    /// Size of the tile file in the work folder, bytes.
+    pub file_bytes: u64,
+    /// True if the tile file of the interrupted build was reused (complete, CRC checked).
+    pub reused: bool,
+}
+
+/// The textures of the mesh, `None` if it has no texture coordinates or no usable texture;
+/// what could not be used goes to the warnings. Sets the plan's texture part
+/// ([`MemoryPlan::with_textures`]). An error is a failure to write the tile file.
+pub(crate) fn load(ctx: &mut BuildContext) -> Result<Option<Arc<TextureSet>>, StageError> {
+    let info = ctx.source.info();
     if !info.has_texcoords {
-        return None;
+        return Ok(None);
     }
-    let set = TextureSet::load(&info.materials);
-    warnings.extend(
-        set.warnings
-            .iter()
-            .map(|w| format!("{}: {w}", input.display())),
-    );
-    let bytes = set.bytes() as u64;
-    if bytes > budget / 4 {
+    let share = ctx.plan.texture_share();
+    let file = ctx.work.file(WorkFile::TextureTiles);
+    let set = TextureSet::load_within(&info.materials, share, &file)
+        .map_err(|e| StageError::Other(anyhow::anyhow!(e)))?;
+    let input = ctx.input.display();
+    ctx.warnings
+        .extend(set.warnings.iter().map(|w| format!("{input}: {w}")));
+    if set.is_empty() {
+        return Ok(None);
+    }
+    ctx.plan = ctx.plan.with_textures(set.bytes() as u64);
+    if let Some(t) = set.tiles() {
+        decode_warning(&set, &ctx.plan, &mut ctx.warnings);
+        if ctx.progress {
+            eprintln!(
+                "textures: {} decoded, more than their {} share: read by 64×64 tile through a {} cache from {} ({}, {})",
+                format_size(t.decoded_bytes),
+                format_size(share),
+                format_size(share),
+                t.file.display(),
+                if t.reused { "reused" } else { "written" },
+                format_size(t.file_bytes)
+            );
+        }
+    }
+    Ok(Some(Arc::new(set)))
+}
+
+/// Warns if decoding the largest texture (the `image` crate decodes PNG and JPEG whole:
+/// 8 bytes per level-0 texel at most, RGB and RGBA copies and level 1) needs more than the
+/// plan has before the voxelizers start (the budget less base and LOD).
+fn decode_warning(set: &TextureSet, plan: &MemoryPlan, warnings: &mut Vec<String>) {
+    let largest = set
+        .textures()
+        .map(|t| t.size().0 as u64 * t.size().1 as u64)
+        .max()
+        .unwrap_or(0);
+    let room = plan.budget - BASE_BYTES - LOD_BYTES;
+    if 8 * largest > room {
         warnings.push(format!(
-            "the decoded textures take {:.0} MiB, held in memory outside the --memory plan ({:.0} MiB): peak memory can exceed the budget",
-            bytes as f64 / (1u64 << 20) as f64,
-            budget as f64 / (1u64 << 20) as f64
+            "the largest texture ({largest} texels) is decoded whole before it is tiled, up to {}, more than the {} the memory plan has before the voxelizers start: peak memory can exceed the budget",
+            format_size(8 * largest),
+            format_size(room)
         ));
     }
-    (!set.is_empty()).then(|| Arc::new(set))
 }
 
 /// True if the build writes the per-voxel material channel (docs/FORMAT.md 14.3): the mesh's

@@ -40,6 +40,9 @@ pub(crate) enum WorkFile {
     Source,
     /// The source-geometry stage's marker (its totals).
     SourceMarker,
+    /// The decoded textures' tiles, when they exceed their share of the memory plan
+    /// (`voxlod_texture::TextureSet::load_within`; complete and checked by its own CRC).
+    TextureTiles,
 }
 
 impl WorkFile {
@@ -54,6 +57,7 @@ impl WorkFile {
             WorkFile::LeavesMarker => "leaves.json",
             WorkFile::Source => "source.bin",
             WorkFile::SourceMarker => "source.json",
+            WorkFile::TextureTiles => "textures.tiles",
         }
     }
 }

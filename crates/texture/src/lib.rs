@@ -33,6 +33,14 @@ use std::path::Path;
 use std::sync::Arc;
 use voxlod_geom::{Material, Wrap};
 
+mod pyramid;
+mod tile_cache;
+mod tile_file;
+mod tiled_set;
+
+pub use tile_cache::{CacheStats, Tile, TileCache, MIN_CAPACITY, TILE, TILE_BYTES};
+pub use tiled_set::TileSummary;
+
 /// sRGB-encoded value in 0..=1 to linear light (IEC 61966-2-1).
 #[inline]
 pub fn srgb_to_linear(x: f32) -> f32 {
@@ -61,23 +69,32 @@ pub fn linear_to_srgb8(x: f32) -> u8 {
 }
 
 /// The linear value of every sRGB8 code.
-fn lut() -> &'static [f32; 256] {
+pub(crate) fn lut() -> &'static [f32; 256] {
     static LUT: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
     LUT.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
 }
 
-/// One mip level: `w × h` RGBA8 texels (sRGB colour, linear alpha), row 0 at the top.
+/// Where a texture's texels are: every level in memory, or tiles of the tile file read
+/// through the shared tile cache.
 #[derive(Clone, Debug)]
-struct Level {
-    w: u32,
-    h: u32,
-    texels: Vec<[u8; 4]>,
+enum Store {
+    /// Each level's `w × h` texels, row 0 at the top.
+    Memory(Vec<Vec<[u8; 4]>>),
+    /// The pyramid's tiles from `first_tile` on in the tile file ([`tile_file`]).
+    Tiles {
+        cache: Arc<TileCache>,
+        /// index of each level's first tile
+        first: Vec<u64>,
+    },
 }
 
-/// An RGBA8 texture and its mip pyramid (see the crate docs).
+/// An RGBA8 texture and its mip pyramid (see the crate docs), held whole in memory or read
+/// by tile through a [`TileCache`]; both sample with the same arithmetic.
 #[derive(Clone, Debug)]
 pub struct Texture {
-    levels: Vec<Level>,
+    /// each level's size, level 0 first
+    sizes: Vec<(u32, u32)>,
+    store: Store,
     wrap: [Wrap; 2],
 }
 
@@ -85,7 +102,8 @@ impl Texture {
     /// The texture of a `w × h` image (`texels` row by row from the top) with its pyramid:
     /// level `k` is `max(1, w >> k) × max(1, h >> k)`, down to 1×1; its texel `(i, j)`
     /// averages, in linear light, the level-0 texels `(x, y)` with `⌊x·w_k/w⌋ = i` and
-    /// `⌊y·h_k/h⌋ = j` (a partition of the image, so odd sizes lose nothing). `Err` if the sizes do not match or are zero.
+    /// `⌊y·h_k/h⌋ = j` (a partition of the image, so odd sizes lose nothing; [`pyramid`]).
+    /// `Err` if the sizes do not match or are zero.
     pub fn from_rgba8(
         w: u32,
         h: u32,
@@ -99,76 +117,49 @@ impl Texture {
                 texels.len()
             ));
         }
-        let lut = lut();
-        let mut levels = vec![Level { w, h, texels }];
-        let mut k = 1;
-        while levels.last().is_some_and(|l| l.w > 1 || l.h > 1) {
-            let (wk, hk) = ((w >> k).max(1), (h >> k).max(1));
-            let base = &levels[0];
-            let mut out = Vec::with_capacity(wk as usize * hk as usize);
-            // column block of each level-0 column
-            let col: Vec<u32> = (0..w)
-                .map(|x| (x as u64 * wk as u64 / w as u64) as u32)
-                .collect();
-            let col = |x: u32| col[x as usize];
-            let mut sums = vec![[0f64; 4]; wk as usize];
-            let mut counts = vec![0u64; wk as usize];
-            for j in 0..hk {
-                let y0 = (j as u64 * h as u64).div_ceil(hk as u64) as u32;
-                let y1 = ((j as u64 + 1) * h as u64).div_ceil(hk as u64) as u32;
-                sums.iter_mut().for_each(|s| *s = [0.0; 4]);
-                counts.iter_mut().for_each(|c| *c = 0);
-                for y in y0..y1 {
-                    let row = &base.texels[(y * w) as usize..((y + 1) * w) as usize];
-                    for (x, t) in row.iter().enumerate() {
-                        let i = col(x as u32) as usize;
-                        let s = &mut sums[i];
-                        s[0] += lut[t[0] as usize] as f64;
-                        s[1] += lut[t[1] as usize] as f64;
-                        s[2] += lut[t[2] as usize] as f64;
-                        s[3] += t[3] as f64;
-                        counts[i] += 1;
-                    }
-                }
-                for (s, &n) in sums.iter().zip(&counts) {
-                    let inv = 1.0 / n.max(1) as f64;
-                    out.push([
-                        linear_to_srgb8((s[0] * inv) as f32),
-                        linear_to_srgb8((s[1] * inv) as f32),
-                        linear_to_srgb8((s[2] * inv) as f32),
-                        (s[3] * inv).round() as u8,
-                    ]);
-                }
-            }
-            levels.push(Level {
-                w: wk,
-                h: hk,
-                texels: out,
-            });
-            k += 1;
+        let sizes = pyramid::level_sizes(w, h);
+        let mut levels = Vec::with_capacity(sizes.len());
+        for k in 1..sizes.len() {
+            levels.push(pyramid::box_level(&texels, w, h, k as u32));
         }
-        Ok(Texture { levels, wrap })
+        levels.insert(0, texels);
+        Ok(Texture {
+            sizes,
+            store: Store::Memory(levels),
+            wrap,
+        })
+    }
+
+    /// The texture of a tile file's entry, read through `cache`.
+    fn tiled(e: &tile_file::Entry, cache: Arc<TileCache>, wrap: [Wrap; 2]) -> Texture {
+        let sizes = pyramid::level_sizes(e.w, e.h);
+        let mut first = Vec::with_capacity(sizes.len());
+        let mut next = e.first_tile;
+        for &(w, h) in &sizes {
+            first.push(next);
+            let (tx, ty) = tile_file::level_tiles(w, h);
+            next += tx as u64 * ty as u64;
+        }
+        Texture {
+            sizes,
+            store: Store::Tiles { cache, first },
+            wrap,
+        }
+    }
+
+    /// True if the texture is read by tile through a cache (not held whole in memory).
+    pub fn is_tiled(&self) -> bool {
+        matches!(self.store, Store::Tiles { .. })
     }
 
     /// Decodes a PNG or JPEG file (the format is taken from its content) into a texture.
     pub fn load(path: &Path, wrap: [Wrap; 2]) -> Result<Texture, String> {
-        let img = image::ImageReader::open(path)
-            .map_err(|e| e.to_string())?
-            .with_guessed_format()
-            .map_err(|e| e.to_string())?
-            .decode()
-            .map_err(|e| e.to_string())?;
-        Self::from_image(img, wrap)
+        Self::from_image(read_image(path, None)?, wrap)
     }
 
     /// Decodes PNG or JPEG bytes held in memory (a glTF embedded image) into a texture.
     pub fn decode(bytes: &[u8], wrap: [Wrap; 2]) -> Result<Texture, String> {
-        let img = image::ImageReader::new(std::io::Cursor::new(bytes))
-            .with_guessed_format()
-            .map_err(|e| e.to_string())?
-            .decode()
-            .map_err(|e| e.to_string())?;
-        Self::from_image(img, wrap)
+        Self::from_image(decode_bytes(bytes)?, wrap)
     }
 
     fn from_image(img: image::DynamicImage, wrap: [Wrap; 2]) -> Result<Texture, String> {
@@ -184,23 +175,30 @@ impl Texture {
 
     /// Width and height of level 0.
     pub fn size(&self) -> (u32, u32) {
-        (self.levels[0].w, self.levels[0].h)
+        self.sizes[0]
     }
 
     /// Number of mip levels (level 0 up to 1×1).
     pub fn levels(&self) -> usize {
-        self.levels.len()
+        self.sizes.len()
     }
 
-    /// Bytes the decoded pyramid holds.
+    /// Bytes the decoded pyramid takes (RGBA8, every level), held in memory or not.
     pub fn bytes(&self) -> usize {
-        self.levels.iter().map(|l| l.texels.len() * 4).sum()
+        self.sizes
+            .iter()
+            .map(|&(w, h)| w as usize * h as usize * 4)
+            .sum()
     }
 
     /// The texel of level `k` at `(x, y)` (row 0 at the top).
     pub fn texel(&self, k: usize, x: u32, y: u32) -> [u8; 4] {
-        let l = &self.levels[k];
-        l.texels[(y * l.w + x) as usize]
+        let (w, h) = self.sizes[k];
+        assert!(x < w && y < h, "texel ({x}, {y}) of a {w}×{h} level");
+        match &self.store {
+            Store::Memory(levels) => levels[k][(y * w + x) as usize],
+            Store::Tiles { cache, first } => TileReader::new(cache, first[k], w).texel(x, y),
+        }
     }
 
     /// The filtered colour at texture coordinates `(u, v)` and level of detail `lod`
@@ -208,7 +206,7 @@ impl Texture {
     /// 0..=1 and straight alpha in 0..=1. Trilinear: bilinear in levels `⌊lod⌋` and `⌊lod⌋+1`,
     /// blended by the fraction.
     pub fn sample(&self, u: f64, v: f64, lod: f32) -> [f32; 4] {
-        let top = (self.levels.len() - 1) as f32;
+        let top = (self.sizes.len() - 1) as f32;
         let lod = if lod.is_finite() {
             lod.clamp(0.0, top)
         } else {
@@ -225,36 +223,107 @@ impl Texture {
     }
 
     fn bilinear(&self, k: usize, u: f64, v: f64) -> [f32; 4] {
-        let l = &self.levels[k];
-        let lut = lut();
-        let x = u * l.w as f64 - 0.5;
-        let y = (1.0 - v) * l.h as f64 - 0.5;
+        let (w, h) = self.sizes[k];
+        let x = u * w as f64 - 0.5;
+        let y = (1.0 - v) * h as f64 - 0.5;
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let xs = [
-            wrap(x0, l.w, self.wrap[0]),
-            wrap(x0 + 1.0, l.w, self.wrap[0]),
-        ];
-        let ys = [
-            wrap(y0, l.h, self.wrap[1]),
-            wrap(y0 + 1.0, l.h, self.wrap[1]),
-        ];
-        let mut out = [0f32; 4];
-        for (j, wy) in [(0, 1.0 - fy), (1, fy)] {
-            for (i, wx) in [(0, 1.0 - fx), (1, fx)] {
-                let wgt = wx * wy;
-                if wgt == 0.0 {
-                    continue;
-                }
-                let t = l.texels[(ys[j] * l.w + xs[i]) as usize];
-                out[0] += wgt * lut[t[0] as usize];
-                out[1] += wgt * lut[t[1] as usize];
-                out[2] += wgt * lut[t[2] as usize];
-                out[3] += wgt * (t[3] as f32 / 255.0);
+        let xs = [wrap(x0, w, self.wrap[0]), wrap(x0 + 1.0, w, self.wrap[0])];
+        let ys = [wrap(y0, h, self.wrap[1]), wrap(y0 + 1.0, h, self.wrap[1])];
+        match &self.store {
+            Store::Memory(levels) => {
+                let l = &levels[k];
+                weigh(xs, ys, fx, fy, |x, y| l[(y * w + x) as usize])
+            }
+            Store::Tiles { cache, first } => {
+                let mut tiles = TileReader::new(cache, first[k], w);
+                weigh(xs, ys, fx, fy, |x, y| tiles.texel(x, y))
             }
         }
-        out
     }
+}
+
+/// The bilinear filter of the texels `(xs[i], ys[j])` with the fractions `(fx, fy)`, in
+/// linear light (straight alpha); texels of weight 0 are not looked up.
+#[inline]
+fn weigh(
+    xs: [u32; 2],
+    ys: [u32; 2],
+    fx: f32,
+    fy: f32,
+    mut texel: impl FnMut(u32, u32) -> [u8; 4],
+) -> [f32; 4] {
+    let lut = lut();
+    let mut out = [0f32; 4];
+    for (j, wy) in [(0, 1.0 - fy), (1, fy)] {
+        for (i, wx) in [(0, 1.0 - fx), (1, fx)] {
+            let wgt = wx * wy;
+            if wgt == 0.0 {
+                continue;
+            }
+            let t = texel(xs[i], ys[j]);
+            out[0] += wgt * lut[t[0] as usize];
+            out[1] += wgt * lut[t[1] as usize];
+            out[2] += wgt * lut[t[2] as usize];
+            out[3] += wgt * (t[3] as f32 / 255.0);
+        }
+    }
+    out
+}
+
+/// Texel lookups in one level of a tiled texture: the tile of the last lookup is kept, so
+/// the four texels of a bilinear lookup cost one cache lookup unless they straddle tiles.
+struct TileReader<'a> {
+    cache: &'a TileCache,
+    first: u64,
+    across: u64,
+    held: Option<(u64, Tile)>,
+}
+
+impl<'a> TileReader<'a> {
+    fn new(cache: &'a TileCache, first: u64, w: u32) -> TileReader<'a> {
+        TileReader {
+            cache,
+            first,
+            across: w.div_ceil(TILE) as u64,
+            held: None,
+        }
+    }
+
+    #[inline]
+    fn texel(&mut self, x: u32, y: u32) -> [u8; 4] {
+        let id = self.first + (y / TILE) as u64 * self.across + (x / TILE) as u64;
+        let tile = match &self.held {
+            Some((i, t)) if *i == id => t,
+            _ => &self.held.insert((id, self.cache.tile(id))).1,
+        };
+        tile[((y % TILE) * TILE + x % TILE) as usize]
+    }
+}
+
+/// The image of a material's texture: its embedded bytes if any, else the file `path`, the
+/// format taken from the content (PNG or JPEG).
+pub(crate) fn read_image(
+    path: &Path,
+    embedded: Option<&voxlod_geom::Embedded>,
+) -> Result<image::DynamicImage, String> {
+    if let Some(b) = embedded {
+        return decode_bytes(&b.0);
+    }
+    image::ImageReader::open(path)
+        .map_err(|e| e.to_string())?
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?
+        .decode()
+        .map_err(|e| e.to_string())
+}
+
+fn decode_bytes(bytes: &[u8]) -> Result<image::DynamicImage, String> {
+    image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?
+        .decode()
+        .map_err(|e| e.to_string())
 }
 
 /// Texel index `i` (any integer value, as f64) wrapped into `0..n`.
@@ -283,6 +352,8 @@ pub struct TextureSet {
     by_material: Vec<Option<Arc<Texture>>>,
     /// What could not be used, each naming the file (the material's colour factor is used).
     pub warnings: Vec<String>,
+    /// The tile file and cache of a set read by tile ([`TextureSet::load_within`]).
+    tiles: Option<TileSummary>,
 }
 
 impl TextureSet {
@@ -325,6 +396,7 @@ impl TextureSet {
         TextureSet {
             by_material: by_material.into_iter().map(|t| t.map(Arc::new)).collect(),
             warnings: Vec::new(),
+            tiles: None,
         }
     }
 
@@ -332,6 +404,11 @@ impl TextureSet {
     #[inline]
     pub fn get(&self, m: u32) -> Option<&Texture> {
         self.by_material.get(m as usize).and_then(|t| t.as_deref())
+    }
+
+    /// The usable textures, material by material (a texture shared by materials repeats).
+    pub fn textures(&self) -> impl Iterator<Item = &Texture> {
+        self.by_material.iter().flatten().map(|t| &**t)
     }
 
     /// True if no material has a usable texture.
@@ -445,7 +522,16 @@ mod tests {
         assert_eq!(t.sample(0.25, 0.75, 0.0), [1.0, 0.0, 0.0, 1.0]);
         assert_eq!(t.sample(0.25, 0.25, 0.0), [0.0, 0.0, 1.0, 1.0]);
         // repeat wraps a whole period
-        let r = Texture::from_rgba8(2, 2, t.levels[0].texels.clone(), [Wrap::Repeat; 2]).unwrap();
+        let r = Texture::from_rgba8(
+            2,
+            2,
+            match &t.store {
+                Store::Memory(l) => l[0].clone(),
+                _ => unreachable!(),
+            },
+            [Wrap::Repeat; 2],
+        )
+        .unwrap();
         assert_eq!(r.sample(3.25, -0.25, 0.0), [1.0, 0.0, 0.0, 1.0]);
     }
 
@@ -490,7 +576,7 @@ mod tests {
         let t = set.get(1).unwrap();
         assert_eq!(t.size(), (5, 3));
         for k in 0..t.levels() {
-            let (w, h) = (t.levels[k].w, t.levels[k].h);
+            let (w, h) = t.sizes[k];
             for y in 0..h {
                 for x in 0..w {
                     assert_eq!(t.texel(k, x, y), file.texel(k, x, y));

@@ -97,6 +97,7 @@ Examples:
   voxlod build scan.ply                           # writes scan.voxlod, 1024³, in this folder
   voxlod build scan.ply.gz -o /data/scan.voxlod -r 8192 --memory 8GiB
   voxlod build city.obj -m thin -j 4 --backend cpu
+  voxlod build photoscan.obj --memory 1GiB        # its textures stay inside the 1 GiB too
   voxlod build scan.ply --config configs/preview.toml --json > summary.json
   voxlod build dragon.ply -r 4096 --source-geometry   # leaf chunks keep their source triangles
   voxlod build --plan scan.plan.json --shard 3    # shard 3 of `voxlod plan` (Slurm: $SLURM_ARRAY_TASK_ID)
@@ -250,7 +251,8 @@ struct SettingsArgs {
     /// Worker threads; 0 = one per core [default: 0].
     #[arg(short = 'j', long)]
     threads: Option<usize>,
-    /// Memory budget, e.g. 512MiB, 2GiB [default: 2GiB].
+    /// Memory budget of the whole process, decoded textures included (tiled to the work folder
+    /// when they exceed what the voxelizers leave), e.g. 512MiB, 2GiB [default: 2GiB].
     #[arg(long, value_parser = parse_size)]
     memory: Option<u64>,
     /// zstd level of node payloads (-7..=22; higher: smaller and slower) [default: 1].
@@ -524,6 +526,17 @@ fn print_summary(s: &BuildSummary, input: &str) {
         format_size(s.memory_plan.budget),
         format_size(s.memory_plan.planned)
     );
+    if let Some(t) = &s.texture_cache {
+        println!(
+            "  textures     {} decoded, read by tile through a {} cache (peak {}, {} tiles read from a {} tile file{})",
+            format_size(t.decoded_bytes),
+            format_size(t.capacity),
+            format_size(t.peak_resident),
+            t.tile_reads,
+            format_size(t.file_bytes),
+            if t.reused { ", reused" } else { "" }
+        );
+    }
     for w in &s.warnings {
         println!("  warning      {w}");
     }

@@ -49,6 +49,8 @@ pub(crate) struct Voxelized {
     pub backend: String,
     /// What the GPU backend did; None on the CPU or when resumed.
     pub gpu_stats: Option<GpuStats>,
+    /// The textures' tile cache, if they were read by tile; None when resumed.
+    pub texture_cache: Option<crate::textures::TextureCacheSummary>,
 }
 
 impl Voxelized {
@@ -62,6 +64,7 @@ impl Voxelized {
             marker,
             backend: "(voxelized by the interrupted run)".into(),
             gpu_stats: None,
+            texture_cache: None,
         })
     }
 }
@@ -69,12 +72,17 @@ impl Voxelized {
 /// Runs the voxelize stage with the voxelizer the settings choose.
 pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, StageError> {
     let threads = ctx.pool.current_num_threads();
-    let textures = crate::textures::load(
-        ctx.source.info(),
-        ctx.input,
-        ctx.settings.memory,
-        &mut ctx.warnings,
-    );
+    let t = Instant::now();
+    let textures = crate::textures::load(ctx)?;
+    let tiles = textures.clone().filter(|t| t.tiles().is_some());
+    if textures.is_some() {
+        // decoding (and tiling) the textures, before the voxelizers start
+        let reused = tiles
+            .as_ref()
+            .and_then(|t| t.tiles())
+            .is_some_and(|t| t.reused);
+        ctx.stage_done("textures", t, reused);
+    }
     let materials = crate::textures::has_material_channel(ctx.source.info());
     let (vz, backend) = crate::backend::select(
         ctx.settings,
@@ -86,10 +94,22 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, Sta
     )?;
     let (marker, gpu_stats) = run_with(ctx, &tiled, vz)?;
     tiled.bins.remove()?;
+    let texture_cache = tiles.as_ref().and_then(|t| t.tiles()).map(|t| {
+        let st = t.stats();
+        crate::textures::TextureCacheSummary {
+            decoded_bytes: t.decoded_bytes,
+            capacity: st.capacity,
+            peak_resident: st.peak_resident,
+            tile_reads: st.tile_reads,
+            file_bytes: t.file_bytes,
+            reused: t.reused,
+        }
+    });
     Ok(Voxelized {
         marker,
         backend,
         gpu_stats,
+        texture_cache,
     })
 }
 

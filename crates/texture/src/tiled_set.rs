@@ -1,0 +1,214 @@
+//! A mesh's textures inside a share of the memory budget: whole in memory when their decoded
+//! pyramids fit the share (as [`TextureSet::load`]), otherwise decoded one at a time into the
+//! tile file ([`crate::tile_file`]) and sampled through one shared [`TileCache`] of the
+//! share's bytes. The sizes are read from the image headers first, so the choice is made
+//! before anything is decoded. A resumed build reuses a complete tile file of the same
+//! sources (length, CRC and keys checked) and rebuilds any other.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use voxlod_geom::{Material, Wrap};
+
+use crate::pyramid::pyramid_bytes;
+use crate::tile_cache::{CacheStats, TileCache, MIN_CAPACITY};
+use crate::tile_file::{open_complete, TileWriter};
+use crate::{Texture, TextureSet};
+
+/// A tiled texture set's file and cache (see the module docs).
+#[derive(Clone, Debug)]
+pub struct TileSummary {
+    /// The cache's share of the memory plan, bytes.
+    pub share: u64,
+    /// Bytes of the decoded pyramids (what holding them whole would take).
+    pub decoded_bytes: u64,
+    /// The tile file.
+    pub file: PathBuf,
+    /// Its size, bytes.
+    pub file_bytes: u64,
+    /// True if a complete tile file of an interrupted build was reused.
+    pub reused: bool,
+    cache: Arc<TileCache>,
+}
+
+impl TileSummary {
+    /// What the cache did so far (its peak resident bytes among them).
+    pub fn stats(&self) -> CacheStats {
+        self.cache.stats()
+    }
+
+    /// The first read error of the tile file, naming it (see [`TileCache::error`]).
+    pub fn error(&self) -> Option<String> {
+        self.cache.error()
+    }
+}
+
+/// One distinct texture source (file or embedded image) and the wrap it is sampled with.
+struct Source<'a> {
+    m: &'a Material,
+    path: &'a Path,
+    wrap: [Wrap; 2],
+}
+
+/// FNV-1a, 64 bit (stable across Rust releases, unlike std's hasher).
+fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
+    for b in bytes {
+        h ^= *b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+impl Source<'_> {
+    /// The image's size from its header alone.
+    fn probe(&self) -> Result<(u32, u32), String> {
+        let size = match &self.m.embedded {
+            Some(b) => image::ImageReader::new(std::io::Cursor::new(&b.0[..]))
+                .with_guessed_format()
+                .map_err(|e| e.to_string())?
+                .into_dimensions(),
+            None => image::ImageReader::open(self.path)
+                .map_err(|e| e.to_string())?
+                .with_guessed_format()
+                .map_err(|e| e.to_string())?
+                .into_dimensions(),
+        };
+        size.map_err(|e| e.to_string())
+    }
+
+    /// The image decoded whole as the in-memory path decodes it: its size and RGBA8 texels,
+    /// row 0 at the top.
+    fn decode_rgba(&self) -> Result<(u32, u32, Vec<u8>), String> {
+        let img = crate::read_image(self.path, self.m.embedded.as_ref())?.into_rgba8();
+        let (w, h) = img.dimensions();
+        Ok((w, h, img.into_raw()))
+    }
+
+    /// The identity the tile file records: the path with the file's size and modification
+    /// time, or the embedded bytes.
+    fn key(&self) -> u64 {
+        let h = fnv1a(
+            self.path.as_os_str().as_encoded_bytes(),
+            0xcbf2_9ce4_8422_2325,
+        );
+        match &self.m.embedded {
+            Some(b) => fnv1a(&b.0, h),
+            None => {
+                let meta = std::fs::metadata(self.path).ok();
+                let len = meta.as_ref().map_or(0, |m| m.len());
+                let mtime = meta
+                    .and_then(|m| m.modified().ok())
+                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                    .map_or(0, |d| d.as_nanos() as u64);
+                fnv1a(&mtime.to_le_bytes(), fnv1a(&len.to_le_bytes(), h))
+            }
+        }
+    }
+
+    fn warning(&self, e: &str) -> String {
+        format!(
+            "texture {} of material {:?} cannot be read ({e}); the material's colour is used",
+            self.path.display(),
+            self.m.name
+        )
+    }
+}
+
+impl TextureSet {
+    /// The textures of `materials` within `share` bytes (≥ [`MIN_CAPACITY`]): whole in memory
+    /// if their decoded pyramids fit, otherwise through a tile cache of `share` bytes over the
+    /// tile file `tile_file` (reused if complete, else written; see the module docs). A
+    /// texture that cannot be read is a warning, as with [`TextureSet::load`]; an error is a
+    /// failure to write or read the tile file, naming it.
+    pub fn load_within(
+        materials: &[Material],
+        share: u64,
+        tile_file: &Path,
+    ) -> Result<TextureSet, String> {
+        assert!(share >= MIN_CAPACITY, "a texture share of {share} bytes");
+        // the distinct sources, as `load` dedups them, with each material's source
+        let mut sources: Vec<Source> = Vec::new();
+        let mut of_material = Vec::with_capacity(materials.len());
+        for m in materials {
+            of_material.push(m.texture.as_deref().map(|path| {
+                let found = sources
+                    .iter()
+                    .position(|s| s.path == path && s.wrap == m.wrap);
+                found.unwrap_or_else(|| {
+                    sources.push(Source {
+                        m,
+                        path,
+                        wrap: m.wrap,
+                    });
+                    sources.len() - 1
+                })
+            }));
+        }
+        let mut warnings = Vec::new();
+        let mut sizes = Vec::with_capacity(sources.len());
+        for s in &sources {
+            sizes.push(s.probe().map_err(|e| warnings.push(s.warning(&e))).ok());
+        }
+        let decoded: u64 = sizes
+            .iter()
+            .flatten()
+            .map(|&(w, h)| pyramid_bytes(w, h))
+            .sum();
+        if decoded <= share {
+            return Ok(TextureSet::load(materials));
+        }
+        let probed: Vec<usize> = (0..sources.len()).filter(|&i| sizes[i].is_some()).collect();
+        let keys: Vec<u64> = probed.iter().map(|&i| sources[i].key()).collect();
+        let what =
+            |e: std::io::Error| format!("{}: writing the texture tiles: {e}", tile_file.display());
+        let (entries, reused) = match open_complete(tile_file, &keys) {
+            Some(entries) => (probed.iter().copied().zip(entries).collect(), true),
+            None => {
+                let mut out = TileWriter::create(tile_file).map_err(what)?;
+                let mut written = Vec::new();
+                for (&i, &key) in probed.iter().zip(&keys) {
+                    // one texture decoded at a time, dropped once its tiles are written
+                    match sources[i].decode_rgba() {
+                        Ok((w, h, rgba)) => {
+                            out.add(key, bytemuck::cast_slice(&rgba), w, h)
+                                .map_err(what)?;
+                            written.push(i);
+                        }
+                        Err(e) => warnings.push(sources[i].warning(&e)),
+                    }
+                }
+                let entries = out.finish().map_err(what)?;
+                (written.into_iter().zip(entries).collect::<Vec<_>>(), false)
+            }
+        };
+        let cache = Arc::new(
+            TileCache::open(tile_file, share)
+                .map_err(|e| format!("{}: opening the texture tiles: {e}", tile_file.display()))?,
+        );
+        let mut textures: Vec<Option<Arc<Texture>>> = vec![None; sources.len()];
+        for (i, e) in &entries {
+            textures[*i] = Some(Arc::new(Texture::tiled(e, cache.clone(), sources[*i].wrap)));
+        }
+        let file_bytes = std::fs::metadata(tile_file).map_or(0, |m| m.len());
+        Ok(TextureSet {
+            by_material: of_material
+                .into_iter()
+                .map(|s| s.and_then(|i| textures[i].clone()))
+                .collect(),
+            warnings,
+            tiles: Some(TileSummary {
+                share,
+                decoded_bytes: decoded,
+                file: tile_file.to_path_buf(),
+                file_bytes,
+                reused,
+                cache,
+            }),
+        })
+    }
+
+    /// The tile file and cache, if the textures are read by tile.
+    pub fn tiles(&self) -> Option<&TileSummary> {
+        self.tiles.as_ref()
+    }
+}
