@@ -106,7 +106,8 @@ pub struct GpuVoxelizer {
     inflight: [Option<wgpu::SubmissionIndex>; 2],
     /// the triangle buffer the next batch goes to
     next: usize,
-    resident: Option<Resident>,
+    /// the last batch submitted (its triangles stay in their buffer until overwritten)
+    resident: Option<Batch>,
     /// triangles per batch
     batch: usize,
     /// most voxel slots per accumulation window (`MAX_WINDOW` but for tests)
@@ -734,17 +735,14 @@ impl GpuVoxelizer {
             let slots = (lo as u32, hi as u32);
             match self.resident {
                 // one batch: its triangles are still on the device
-                Some(r) if marked_batches == 1 => {
-                    let tri_base = 0;
-                    self.record(
-                        r.slot,
-                        r.len,
-                        tri_base,
-                        origin_i,
-                        PHASE_ACCUMULATE,
+                Some(batch) if marked_batches == 1 => {
+                    debug_assert_eq!(batch.tri_base, 0, "the chunk's only batch is its first");
+                    let pass = Pass {
+                        origin: origin_i,
+                        phase: PHASE_ACCUMULATE,
                         slots,
-                        r.defers,
-                    )?;
+                    };
+                    self.record(batch, pass)?;
                 }
                 _ => {
                     let mut st = Stream::new(origin_i, PHASE_ACCUMULATE, slots);
@@ -866,21 +864,15 @@ impl GpuVoxelizer {
         let defers = self.may_defer(tris);
         // (a chunk whose stream exceeds u32 indices falls back as a whole)
         let tri_base = st.tris.min(u32::MAX as u64) as u32;
-        let idx = self.record(
-            slot,
-            tris.len(),
-            tri_base,
-            st.origin,
-            st.phase,
-            st.slots,
-            defers,
-        )?;
-        self.inflight[slot] = Some(idx);
-        self.resident = Some(Resident {
+        let batch = Batch {
             slot,
             len: tris.len(),
+            tri_base,
             defers,
-        });
+        };
+        let idx = self.record(batch, st.pass)?;
+        self.inflight[slot] = Some(idx);
+        self.resident = Some(batch);
         st.batches += 1;
         st.tris += tris.len() as u64;
         Ok(())
@@ -919,21 +911,21 @@ impl GpuVoxelizer {
         Ok(std::array::from_fn(|k| c[k]))
     }
 
-    /// Records and submits the classification pass and, if `defers`, the second pass of one
-    /// batch (`len` triangles in triangle buffer `slot`, the first of them triangle `tri_base`
-    /// of the chunk's stream). Marking clears the batch's bits of listed triangles (the shaders
+    /// Records and submits `pass`'s classification pass and, if `batch.defers`, its second
+    /// pass over one batch. Marking clears the batch's bits of listed triangles (the shaders
     /// set them); accumulation overwrites the listed triangles with zeros (skipped).
-    #[allow(clippy::too_many_arguments)]
-    fn record(
-        &mut self,
-        slot: usize,
-        len: usize,
-        tri_base: u32,
-        origin: [i32; 3],
-        phase: u32,
-        slots: (u32, u32),
-        defers: bool,
-    ) -> Result<wgpu::SubmissionIndex, GpuError> {
+    fn record(&mut self, batch: Batch, pass: Pass) -> Result<wgpu::SubmissionIndex, GpuError> {
+        let Batch {
+            slot,
+            len,
+            tri_base,
+            defers,
+        } = batch;
+        let Pass {
+            origin,
+            phase,
+            slots,
+        } = pass;
         let groups = (len as u32).div_ceil(WG);
         let groups_x = groups.min(32768);
         let groups_y = groups.div_ceil(groups_x);
@@ -1053,11 +1045,18 @@ fn certainly_inline(t: &Triangle, cutoff: f64) -> bool {
 /// triangles to, a batch at a time.
 pub type Feed<'a> = dyn FnMut(&[Triangle]) + 'a;
 
-/// One replay of a chunk's triangles: what its batches run and what was submitted.
-struct Stream {
+/// What the batches of one replay run: the chunk's origin (grid coordinates), the phase
+/// (`PHASE_MARK` or `PHASE_ACCUMULATE`) and the window of slots `[lo, hi)` accumulated.
+#[derive(Clone, Copy)]
+struct Pass {
     origin: [i32; 3],
     phase: u32,
     slots: (u32, u32),
+}
+
+/// One replay of a chunk's triangles: what its batches run and what was submitted.
+struct Stream {
+    pass: Pass,
     batches: u64,
     tris: u64,
     error: Option<GpuError>,
@@ -1066,9 +1065,11 @@ struct Stream {
 impl Stream {
     fn new(origin: [i32; 3], phase: u32, slots: (u32, u32)) -> Stream {
         Stream {
-            origin,
-            phase,
-            slots,
+            pass: Pass {
+                origin,
+                phase,
+                slots,
+            },
             batches: 0,
             tris: 0,
             error: None,
@@ -1076,11 +1077,15 @@ impl Stream {
     }
 }
 
-/// The last batch submitted: which triangle buffer holds it.
+/// One batch on the device: `len` triangles in triangle buffer `slot`, the first of them
+/// triangle `tri_base` of the chunk's stream, and whether the second pass is recorded for it.
+/// The last batch submitted is kept ([`GpuVoxelizer`]'s `resident`) so that a chunk of one
+/// batch is accumulated without uploading it again.
 #[derive(Clone, Copy)]
-struct Resident {
+struct Batch {
     slot: usize,
     len: usize,
+    tri_base: u32,
     defers: bool,
 }
 
