@@ -119,7 +119,6 @@ fn tile(
         input = InputPasses {
             source: ctx.source,
             count,
-            stop: &ctx.stop,
         };
         &input
     };
@@ -131,7 +130,7 @@ fn tile(
             let c = ctx
                 .pool
                 .install(|| voxlod_tile::count(&src, &ing.grid, &mut |d, n| bar.set(d, n)))
-                .map_err(|e| ctx.stop.lift(e))?;
+                .map_err(StageError::from)?;
             bar.finish();
             c
         }
@@ -152,7 +151,7 @@ fn tile(
                 &mut |d, n| bar.set(d, n),
             )
         })
-        .map_err(|e| ctx.stop.lift(e))?;
+        .map_err(StageError::from)?;
     bar.finish();
     Ok(bins)
 }
