@@ -66,6 +66,17 @@ impl BuildContext<'_> {
         Ok(())
     }
 
+    /// Chunk `i` of `total` is in a stage's log (leaf or source log): shows it on `bar`, and
+    /// requests an interrupt once `interrupt_after_chunks` chunks are logged (the resume
+    /// tests' hook).
+    pub(crate) fn chunk_logged(&self, bar: &crate::progress::Stage, i: usize, total: usize) {
+        bar.set(i as u64 + 1, total as u64);
+        let after = self.settings.interrupt_after_chunks;
+        if after.is_some_and(|n| i as u64 + 1 >= n) {
+            self.interrupt.store(true, Ordering::SeqCst);
+        }
+    }
+
     /// Records a stage's time, started at `t`; `resumed` if its artifact came from the work
     /// folder.
     pub(crate) fn stage_done(&mut self, stage: &'static str, t: Instant, resumed: bool) {
