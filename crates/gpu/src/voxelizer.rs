@@ -166,6 +166,7 @@ impl GpuVoxelizer {
         cutoff: f32,
         precision: Option<Precision>,
     ) -> Result<GpuVoxelizer, GpuError> {
+        // Reads best whole: the device objects, as the WGSL binds them.
         let gpu = open()?;
         let precision = match precision {
             Some(Precision::F64) if !gpu.f64 => {
@@ -581,6 +582,7 @@ impl GpuVoxelizer {
         origin: [u32; 3],
         replay: &mut dyn FnMut(&mut Feed<'_>) -> Result<(), E>,
     ) -> Result<Vec<Voxel>, E> {
+        // Reads best whole: the hybrid algorithm's phases, in order.
         if origin
             .iter()
             .any(|&c| c % CHUNK != 0 || c > i32::MAX as u32 - CHUNK)
@@ -952,19 +954,7 @@ impl GpuVoxelizer {
         let (compute, raster, sweep) = self.bind_groups(slot);
         let words = (len as u64).div_ceil(32);
         if phase == PHASE_ACCUMULATE {
-            // the listed triangles' contributions come from the host: replace them by
-            // degenerate (zero-area) triangles, which the shaders skip
-            let first = self.listed.partition_point(|&i| i < tri_base);
-            let zero = [0u8; std::mem::size_of::<ShaderTriangle>()];
-            for &i in &self.listed[first..] {
-                let k = (i - tri_base) as u64;
-                if k >= len as u64 {
-                    break;
-                }
-                self.gpu
-                    .queue
-                    .write_buffer(&self.tris[slot], k * zero.len() as u64, &zero);
-            }
+            self.zero_listed(batch);
         }
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         if phase == PHASE_MARK {
@@ -977,12 +967,45 @@ impl GpuVoxelizer {
             pass.set_bind_group(0, &compute, &[]);
             pass.dispatch_workgroups(groups_x, groups_y, 1);
         }
-        if !defers {
-            // every triangle was voxelized by the classification pass
-        } else if self.method == GpuMethod::Triangle {
+        // without `defers`, the classification pass voxelized every triangle
+        if defers {
+            self.record_second_pass(&mut enc, &raster, &sweep);
+        }
+        let idx = self.gpu.queue.submit([enc.finish()]);
+        self.gpu.check()?;
+        Ok(idx)
+    }
+
+    /// In the accumulation phase the listed triangles' contributions come from the host:
+    /// replaces the batch's listed triangles in its triangle buffer by degenerate (zero-area)
+    /// triangles, which the shaders skip.
+    fn zero_listed(&self, batch: Batch) {
+        let first = self.listed.partition_point(|&i| i < batch.tri_base);
+        let zero = [0u8; std::mem::size_of::<ShaderTriangle>()];
+        for &i in &self.listed[first..] {
+            let k = (i - batch.tri_base) as u64;
+            if k >= batch.len as u64 {
+                break;
+            }
+            self.gpu
+                .queue
+                .write_buffer(&self.tris[batch.slot], k * zero.len() as u64, &zero);
+        }
+    }
+
+    /// Records the second pass over the triangles the classification pass deferred (its
+    /// indirect arguments in `args`): the sweep pass of [`GpuMethod::Triangle`], else the
+    /// fragment pass, rasterized at the chunk's resolution.
+    fn record_second_pass(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        raster: &wgpu::BindGroup,
+        sweep: &wgpu::BindGroup,
+    ) {
+        if self.method == GpuMethod::Triangle {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&self.sweep);
-            pass.set_bind_group(0, &sweep, &[]);
+            pass.set_bind_group(0, sweep, &[]);
             pass.dispatch_workgroups_indirect(&self.args, 16);
         } else {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -1000,12 +1023,9 @@ impl GpuVoxelizer {
             });
             pass.set_viewport(0.0, 0.0, CHUNK as f32, CHUNK as f32, 0.0, 1.0);
             pass.set_pipeline(&self.raster);
-            pass.set_bind_group(0, &raster, &[]);
+            pass.set_bind_group(0, raster, &[]);
             pass.draw_indirect(&self.args, 0);
         }
-        let idx = self.gpu.queue.submit([enc.finish()]);
-        self.gpu.check()?;
-        Ok(idx)
     }
 }
 

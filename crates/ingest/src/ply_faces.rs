@@ -114,14 +114,10 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     off: usize,
     em: &mut Emitter,
 ) -> Result<(), IngestError> {
+    // Reads best whole: one pipelined algorithm; its closures share state.
     use rayon::prelude::*;
-    let FaceRecords {
-        path,
-        el,
-        list,
-        verts,
-        flags,
-    } = *faces;
+    let (path, el, list, verts, flags) =
+        (faces.path, faces.el, faces.list, faces.verts, faces.flags);
     let prepare = em.prepare;
     // the sequential reader from record `first`, which starts at byte `at`
     let sequential = |first: u64, at: usize, em: &mut Emitter| {
@@ -292,13 +288,8 @@ pub(crate) fn stream_faces<R: Records, V: VertexSource, S: Sink>(
     range: std::ops::Range<u64>,
     only_triangles: bool,
 ) -> Result<Option<u64>, IngestError> {
-    let FaceRecords {
-        path,
-        el,
-        list,
-        verts,
-        flags,
-    } = *faces;
+    let (path, el, list, verts, flags) =
+        (faces.path, faces.el, faces.list, faces.verts, faces.flags);
     debug_assert!(flags & (TRI_HAS_UV - 1) & !(TRI_HAS_COLORS | TRI_HAS_NORMALS) == 0);
     if el.data.any() && !strips {
         // per-face material, colour or texture coordinates: whole records (ply_face_data.rs)

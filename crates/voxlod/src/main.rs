@@ -277,7 +277,9 @@ fn load_config(path: &Path) -> Result<BuildSettings> {
     toml::from_str(&text).with_context(|| format!("settings file {}", path.display()))
 }
 
-fn run_build(a: BuildArgs) -> Result<()> {
+/// The build's settings: the settings file's (or the defaults), each flag given on top, checked;
+/// a bad value is an error naming the flag or the settings file it came from.
+fn build_settings(a: &BuildArgs) -> Result<BuildSettings> {
     let mut s = match &a.config {
         Some(p) => load_config(p)?,
         None => BuildSettings::default(),
@@ -330,7 +332,11 @@ fn run_build(a: BuildArgs) -> Result<()> {
     s.progress = !a.quiet;
     s.force = a.force;
     s.interrupt_after_chunks = a.debug_interrupt_after_chunks;
+    Ok(s)
+}
 
+fn run_build(a: BuildArgs) -> Result<()> {
+    let s = build_settings(&a)?;
     // Ctrl-C: the first asks the build to stop at the next safe point (its work folder is kept
     // so the same command resumes); a second one ends the process at once.
     let _ = ctrlc::set_handler(|| {
