@@ -149,6 +149,7 @@ impl Writer {
         node: &EncodedNode,
         channels: &[Option<&EncodedChannel>],
     ) -> Result<(), FormatError> {
+        // Reads best whole: a node's checks, then its bytes in file order.
         self.check_usable()?;
         let bad = |what: String| FormatError::Tree {
             path: self.path.clone(),
@@ -278,6 +279,7 @@ impl Writer {
     /// header, fsyncs, renames [`temp_path`]`(path)` to `path` (replacing any old file) and
     /// fsyncs the directory. Only then does `path` exist. Returns the file size.
     pub fn finish(mut self, manifest: &serde_json::Value) -> Result<u64, FormatError> {
+        // Reads best whole: the crash-safe completion sequence, in order.
         self.check_usable()?;
         let top = self.spec.levels - 1;
         for e in &self.entries {

@@ -106,7 +106,8 @@ pub struct GpuVoxelizer {
     inflight: [Option<wgpu::SubmissionIndex>; 2],
     /// the triangle buffer the next batch goes to
     next: usize,
-    resident: Option<Resident>,
+    /// the last batch submitted (its triangles stay in their buffer until overwritten)
+    resident: Option<Batch>,
     /// triangles per batch
     batch: usize,
     /// most voxel slots per accumulation window (`MAX_WINDOW` but for tests)
@@ -165,6 +166,7 @@ impl GpuVoxelizer {
         cutoff: f32,
         precision: Option<Precision>,
     ) -> Result<GpuVoxelizer, GpuError> {
+        // Reads best whole: the device objects, as the WGSL binds them.
         let gpu = open()?;
         let precision = match precision {
             Some(Precision::F64) if !gpu.f64 => {
@@ -580,6 +582,7 @@ impl GpuVoxelizer {
         origin: [u32; 3],
         replay: &mut dyn FnMut(&mut Feed<'_>) -> Result<(), E>,
     ) -> Result<Vec<Voxel>, E> {
+        // Reads best whole: the hybrid algorithm's phases, in order.
         if origin
             .iter()
             .any(|&c| c % CHUNK != 0 || c > i32::MAX as u32 - CHUNK)
@@ -734,17 +737,14 @@ impl GpuVoxelizer {
             let slots = (lo as u32, hi as u32);
             match self.resident {
                 // one batch: its triangles are still on the device
-                Some(r) if marked_batches == 1 => {
-                    let tri_base = 0;
-                    self.record(
-                        r.slot,
-                        r.len,
-                        tri_base,
-                        origin_i,
-                        PHASE_ACCUMULATE,
+                Some(batch) if marked_batches == 1 => {
+                    debug_assert_eq!(batch.tri_base, 0, "the chunk's only batch is its first");
+                    let pass = Pass {
+                        origin: origin_i,
+                        phase: PHASE_ACCUMULATE,
                         slots,
-                        r.defers,
-                    )?;
+                    };
+                    self.record(batch, pass)?;
                 }
                 _ => {
                     let mut st = Stream::new(origin_i, PHASE_ACCUMULATE, slots);
@@ -866,21 +866,15 @@ impl GpuVoxelizer {
         let defers = self.may_defer(tris);
         // (a chunk whose stream exceeds u32 indices falls back as a whole)
         let tri_base = st.tris.min(u32::MAX as u64) as u32;
-        let idx = self.record(
-            slot,
-            tris.len(),
-            tri_base,
-            st.origin,
-            st.phase,
-            st.slots,
-            defers,
-        )?;
-        self.inflight[slot] = Some(idx);
-        self.resident = Some(Resident {
+        let batch = Batch {
             slot,
             len: tris.len(),
+            tri_base,
             defers,
-        });
+        };
+        let idx = self.record(batch, st.pass)?;
+        self.inflight[slot] = Some(idx);
+        self.resident = Some(batch);
         st.batches += 1;
         st.tris += tris.len() as u64;
         Ok(())
@@ -919,21 +913,21 @@ impl GpuVoxelizer {
         Ok(std::array::from_fn(|k| c[k]))
     }
 
-    /// Records and submits the classification pass and, if `defers`, the second pass of one
-    /// batch (`len` triangles in triangle buffer `slot`, the first of them triangle `tri_base`
-    /// of the chunk's stream). Marking clears the batch's bits of listed triangles (the shaders
+    /// Records and submits `pass`'s classification pass and, if `batch.defers`, its second
+    /// pass over one batch. Marking clears the batch's bits of listed triangles (the shaders
     /// set them); accumulation overwrites the listed triangles with zeros (skipped).
-    #[allow(clippy::too_many_arguments)]
-    fn record(
-        &mut self,
-        slot: usize,
-        len: usize,
-        tri_base: u32,
-        origin: [i32; 3],
-        phase: u32,
-        slots: (u32, u32),
-        defers: bool,
-    ) -> Result<wgpu::SubmissionIndex, GpuError> {
+    fn record(&mut self, batch: Batch, pass: Pass) -> Result<wgpu::SubmissionIndex, GpuError> {
+        let Batch {
+            slot,
+            len,
+            tri_base,
+            defers,
+        } = batch;
+        let Pass {
+            origin,
+            phase,
+            slots,
+        } = pass;
         let groups = (len as u32).div_ceil(WG);
         let groups_x = groups.min(32768);
         let groups_y = groups.div_ceil(groups_x);
@@ -960,19 +954,7 @@ impl GpuVoxelizer {
         let (compute, raster, sweep) = self.bind_groups(slot);
         let words = (len as u64).div_ceil(32);
         if phase == PHASE_ACCUMULATE {
-            // the listed triangles' contributions come from the host: replace them by
-            // degenerate (zero-area) triangles, which the shaders skip
-            let first = self.listed.partition_point(|&i| i < tri_base);
-            let zero = [0u8; std::mem::size_of::<ShaderTriangle>()];
-            for &i in &self.listed[first..] {
-                let k = (i - tri_base) as u64;
-                if k >= len as u64 {
-                    break;
-                }
-                self.gpu
-                    .queue
-                    .write_buffer(&self.tris[slot], k * zero.len() as u64, &zero);
-            }
+            self.zero_listed(batch);
         }
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         if phase == PHASE_MARK {
@@ -985,12 +967,45 @@ impl GpuVoxelizer {
             pass.set_bind_group(0, &compute, &[]);
             pass.dispatch_workgroups(groups_x, groups_y, 1);
         }
-        if !defers {
-            // every triangle was voxelized by the classification pass
-        } else if self.method == GpuMethod::Triangle {
+        // without `defers`, the classification pass voxelized every triangle
+        if defers {
+            self.record_second_pass(&mut enc, &raster, &sweep);
+        }
+        let idx = self.gpu.queue.submit([enc.finish()]);
+        self.gpu.check()?;
+        Ok(idx)
+    }
+
+    /// In the accumulation phase the listed triangles' contributions come from the host:
+    /// replaces the batch's listed triangles in its triangle buffer by degenerate (zero-area)
+    /// triangles, which the shaders skip.
+    fn zero_listed(&self, batch: Batch) {
+        let first = self.listed.partition_point(|&i| i < batch.tri_base);
+        let zero = [0u8; std::mem::size_of::<ShaderTriangle>()];
+        for &i in &self.listed[first..] {
+            let k = (i - batch.tri_base) as u64;
+            if k >= batch.len as u64 {
+                break;
+            }
+            self.gpu
+                .queue
+                .write_buffer(&self.tris[batch.slot], k * zero.len() as u64, &zero);
+        }
+    }
+
+    /// Records the second pass over the triangles the classification pass deferred (its
+    /// indirect arguments in `args`): the sweep pass of [`GpuMethod::Triangle`], else the
+    /// fragment pass, rasterized at the chunk's resolution.
+    fn record_second_pass(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        raster: &wgpu::BindGroup,
+        sweep: &wgpu::BindGroup,
+    ) {
+        if self.method == GpuMethod::Triangle {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&self.sweep);
-            pass.set_bind_group(0, &sweep, &[]);
+            pass.set_bind_group(0, sweep, &[]);
             pass.dispatch_workgroups_indirect(&self.args, 16);
         } else {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -1008,12 +1023,9 @@ impl GpuVoxelizer {
             });
             pass.set_viewport(0.0, 0.0, CHUNK as f32, CHUNK as f32, 0.0, 1.0);
             pass.set_pipeline(&self.raster);
-            pass.set_bind_group(0, &raster, &[]);
+            pass.set_bind_group(0, raster, &[]);
             pass.draw_indirect(&self.args, 0);
         }
-        let idx = self.gpu.queue.submit([enc.finish()]);
-        self.gpu.check()?;
-        Ok(idx)
     }
 }
 
@@ -1053,11 +1065,18 @@ fn certainly_inline(t: &Triangle, cutoff: f64) -> bool {
 /// triangles to, a batch at a time.
 pub type Feed<'a> = dyn FnMut(&[Triangle]) + 'a;
 
-/// One replay of a chunk's triangles: what its batches run and what was submitted.
-struct Stream {
+/// What the batches of one replay run: the chunk's origin (grid coordinates), the phase
+/// (`PHASE_MARK` or `PHASE_ACCUMULATE`) and the window of slots `[lo, hi)` accumulated.
+#[derive(Clone, Copy)]
+struct Pass {
     origin: [i32; 3],
     phase: u32,
     slots: (u32, u32),
+}
+
+/// One replay of a chunk's triangles: what its batches run and what was submitted.
+struct Stream {
+    pass: Pass,
     batches: u64,
     tris: u64,
     error: Option<GpuError>,
@@ -1066,9 +1085,11 @@ struct Stream {
 impl Stream {
     fn new(origin: [i32; 3], phase: u32, slots: (u32, u32)) -> Stream {
         Stream {
-            origin,
-            phase,
-            slots,
+            pass: Pass {
+                origin,
+                phase,
+                slots,
+            },
             batches: 0,
             tris: 0,
             error: None,
@@ -1076,11 +1097,15 @@ impl Stream {
     }
 }
 
-/// The last batch submitted: which triangle buffer holds it.
+/// One batch on the device: `len` triangles in triangle buffer `slot`, the first of them
+/// triangle `tri_base` of the chunk's stream, and whether the second pass is recorded for it.
+/// The last batch submitted is kept ([`GpuVoxelizer`]'s `resident`) so that a chunk of one
+/// batch is accumulated without uploading it again.
 #[derive(Clone, Copy)]
-struct Resident {
+struct Batch {
     slot: usize,
     len: usize,
+    tri_base: u32,
     defers: bool,
 }
 

@@ -149,9 +149,10 @@ pub enum IngestError {
         /// What is wrong, in words.
         message: String,
     },
-    /// The caller's batch callback failed; streaming stopped there.
-    #[error("triangle consumer failed: {0}")]
-    Callback(String),
+    /// The caller's batch callback failed; streaming stopped there. Its error is kept whole
+    /// (and shown as it is): the caller takes its own type back with `downcast`.
+    #[error(transparent)]
+    Callback(Box<dyn std::error::Error + Send + Sync>),
 }
 
 impl IngestError {

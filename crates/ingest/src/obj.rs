@@ -53,6 +53,7 @@ fn tokens(line: &str) -> std::str::SplitAsciiWhitespace<'_> {
 
 /// Checks the file line by line and counts what it declares.
 fn scan(path: &Path) -> Result<Scan, IngestError> {
+    // Reads best whole: one match over a line's keyword, line by line.
     let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
     let mut r = BufReader::with_capacity(1 << 18, file);
     let mut s = Scan {
@@ -267,6 +268,7 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
 
 impl ObjSource {
     pub fn open(path: &Path) -> Result<(ObjSource, MeshInfo), IngestError> {
+        // Reads best whole: tobj's load joined with the pre-scan's lines.
         let s = scan(path)?;
         let mut warnings = Vec::new();
         let mut has_colors = s.colored_vertices > 0 && s.colored_vertices == s.vertices;
@@ -390,6 +392,7 @@ impl ObjSource {
     }
 
     pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
+        // Reads best whole: one pass over tobj's meshes, faces in file order, into the emitter.
         let path = &self.path;
         // `..Default::default()` covers fields that tobj features enabled elsewhere may add
         #[allow(clippy::needless_update)]

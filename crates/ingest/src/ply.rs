@@ -6,6 +6,7 @@
 use crate::batch::Emitter;
 use crate::bounds::parallel_bounds;
 use crate::map_guard::MappedFile;
+use crate::ply_face_data::FaceRecords;
 use crate::ply_faces::{stream_faces, stream_triangles_parallel};
 use crate::ply_header::{parse_header, Element, Encoding, Header, Scalar};
 use crate::ply_materials::material_table;
@@ -296,31 +297,18 @@ impl PlySource {
         for &(ei, list, strips) in &self.header.layout.sources {
             let off = self.offsets[ei].unwrap_or(data.len());
             let el = &self.header.elements[ei];
+            let faces = FaceRecords {
+                path: &self.path,
+                el,
+                list,
+                verts,
+                flags: self.flags(),
+            };
             if strips {
                 let mut src = SliceRecords::<BE>::new(&self.path, data, off);
-                stream_faces(
-                    &self.path,
-                    &mut src,
-                    el,
-                    list,
-                    strips,
-                    verts,
-                    self.flags(),
-                    em,
-                    0..el.count,
-                    false,
-                )?;
+                stream_faces(&faces, strips, &mut src, em, 0..el.count, false)?;
             } else {
-                stream_triangles_parallel::<BE, V>(
-                    &self.path,
-                    data,
-                    off,
-                    el,
-                    list,
-                    verts,
-                    self.flags(),
-                    em,
-                )?;
+                stream_triangles_parallel::<BE, V>(&faces, data, off, em)?;
             }
         }
         Ok(())
@@ -413,18 +401,14 @@ impl PlySource {
             if let Some(si) = l.sources.iter().position(|s| s.0 == i) {
                 if let (false, Some(v)) = (done[si], verts.as_ref()) {
                     let (_, list, strips) = l.sources[si];
-                    stream_faces(
-                        &self.path,
-                        src,
+                    let faces = FaceRecords {
+                        path: &self.path,
                         el,
                         list,
-                        strips,
-                        v,
-                        self.flags(),
-                        em,
-                        0..el.count,
-                        false,
-                    )?;
+                        verts: v,
+                        flags: self.flags(),
+                    };
+                    stream_faces(&faces, strips, src, em, 0..el.count, false)?;
                     done[si] = true;
                     continue;
                 }

@@ -108,27 +108,21 @@ fn triangle_record_bytes(el: &Element, list: usize) -> Option<usize> {
 /// handed to `em` in record order, so the triangles, counts and the first error are those of
 /// the sequential reader. At the first record that is not a triangle, the rest is read
 /// sequentially.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
-    path: &Path,
+    faces: &FaceRecords<V>,
     data: &[u8],
     off: usize,
-    el: &Element,
-    list: usize,
-    verts: &V,
-    flags: u32,
     em: &mut Emitter,
 ) -> Result<(), IngestError> {
+    // Reads best whole: one pipelined algorithm; its closures share state.
     use rayon::prelude::*;
+    let (path, el, list, verts, flags) =
+        (faces.path, faces.el, faces.list, faces.verts, faces.flags);
     let prepare = em.prepare;
     // the sequential reader from record `first`, which starts at byte `at`
     let sequential = |first: u64, at: usize, em: &mut Emitter| {
         let mut src = SliceRecords::<BE>::new(path, data, at);
-        let range = first..el.count;
-        stream_faces(
-            path, &mut src, el, list, false, verts, flags, em, range, false,
-        )
-        .map(drop)
+        stream_faces(faces, false, &mut src, em, first..el.count, false).map(drop)
     };
     let threads = rayon::current_num_threads() as u64;
     let size = match triangle_record_bytes(el, list) {
@@ -179,18 +173,7 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
                 };
                 let r = if from < b {
                     let mut src = SliceRecords::<BE>::new(path, data, at(from));
-                    stream_faces(
-                        path,
-                        &mut src,
-                        el,
-                        list,
-                        false,
-                        verts,
-                        flags,
-                        &mut lb,
-                        from..b,
-                        true,
-                    )
+                    stream_faces(faces, false, &mut src, &mut lb, from..b, true)
                 } else {
                     Ok(None)
                 };
@@ -293,33 +276,23 @@ fn plain_triangles<const BE: bool, V: VertexSource>(
     first + (recs.len() / PLAIN_RECORD) as u64
 }
 
-/// Streams the records `range` of element `el` (a `face` or `tristrips` element whose vertex
-/// index list is property `list`; `src` positioned at record `range.start`) into `em`. `flags` are
-/// the triangle flags the vertices support. With `only_triangles`, stops before the first
-/// record whose list does not hold exactly 3 indices and returns its index.
-#[allow(clippy::too_many_arguments)]
+/// Streams the records `range` of `faces` (a `face` element, or with `strips` a `tristrips`
+/// element; `src` positioned at record `range.start`) into `em`. `faces.flags` are the
+/// triangle flags the vertices support. With `only_triangles`, stops before the first record
+/// whose list does not hold exactly 3 indices and returns its index.
 pub(crate) fn stream_faces<R: Records, V: VertexSource, S: Sink>(
-    path: &Path,
-    src: &mut R,
-    el: &Element,
-    list: usize,
+    faces: &FaceRecords<V>,
     strips: bool,
-    verts: &V,
-    flags: u32,
+    src: &mut R,
     em: &mut S,
     range: std::ops::Range<u64>,
     only_triangles: bool,
 ) -> Result<Option<u64>, IngestError> {
+    let (path, el, list, verts, flags) =
+        (faces.path, faces.el, faces.list, faces.verts, faces.flags);
     debug_assert!(flags & (TRI_HAS_UV - 1) & !(TRI_HAS_COLORS | TRI_HAS_NORMALS) == 0);
     if el.data.any() && !strips {
         // per-face material, colour or texture coordinates: whole records (ply_face_data.rs)
-        let faces = FaceRecords {
-            path,
-            el,
-            list,
-            verts,
-            flags,
-        };
         return faces.stream(src, em, range, only_triangles);
     }
     let nv = verts.count();

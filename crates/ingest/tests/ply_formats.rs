@@ -388,13 +388,21 @@ fn batches_and_callback_errors() {
         .stream(
             &mut |_| {
                 calls += 1;
-                Err(IngestError::Callback("disk full".into()))
+                Err(IngestError::Callback(Box::new(std::io::Error::other(
+                    "disk full",
+                ))))
             },
             &mut |_, _| {},
         )
         .unwrap_err();
     assert_eq!(calls, 1);
-    assert!(matches!(e, IngestError::Callback(ref m) if m == "disk full"));
+    // the consumer's error comes back whole: its type, and its message as the error's own
+    assert_eq!(e.to_string(), "disk full");
+    let IngestError::Callback(inner) = e else {
+        panic!("{e:?}")
+    };
+    let inner = inner.downcast::<std::io::Error>().expect("the io::Error");
+    assert_eq!(inner.kind(), std::io::ErrorKind::Other);
 }
 
 /// `vertex_bounds`: the bounds of every vertex (used or not) for a memory-mapped binary PLY

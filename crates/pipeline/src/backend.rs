@@ -227,22 +227,25 @@ impl ChunkSource for BinChunk<'_> {
         self.bins.chunks()[self.index].origin()
     }
     fn replay(&self, f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>) -> Result<(), StageError> {
-        // the tile crate's callback can only stop a read with an error: a break is one that
-        // is recognised by this flag, not by its text
-        let mut stopped = false;
-        let r = self.bins.read_chunk(self.index, READ_BATCH, &mut |tris| {
-            if f(tris).is_break() {
-                stopped = true;
-                return Err(TileError::Callback("stopped by the voxelizer".into()));
-            }
-            Ok(())
-        });
+        // the tile crate's callback can only stop a read with an error: a break is that
+        // error carrying `ReadStopped`, recognised by its type
+        let r = self
+            .bins
+            .read_chunk(self.index, READ_BATCH, &mut |tris| match f(tris) {
+                ControlFlow::Break(()) => Err(TileError::Callback(Box::new(ReadStopped))),
+                ControlFlow::Continue(()) => Ok(()),
+            });
         match r {
-            Err(_) if stopped => Ok(()),
+            Err(TileError::Callback(e)) if e.is::<ReadStopped>() => Ok(()),
             r => r.map_err(StageError::from),
         }
     }
 }
+
+/// The callback error with which [`BinChunk::replay`] ends a read early; never shown.
+#[derive(Debug, thiserror::Error)]
+#[error("the voxelizer stopped reading the chunk")]
+struct ReadStopped;
 
 /// A leaf chunk's result: its voxels (sorted by Morton code) and the triangles the voxelizer
 /// skipped (zero area after the move to grid coordinates).

@@ -40,10 +40,10 @@ pub enum StageError {
     },
     /// Reading the input mesh failed.
     #[error(transparent)]
-    Ingest(#[from] IngestError),
+    Ingest(IngestError),
     /// Tiling (spool, count, scatter, bins) failed.
     #[error(transparent)]
-    Tile(#[from] TileError),
+    Tile(TileError),
     /// Writing the octree file failed.
     #[error(transparent)]
     Format(#[from] FormatError),
@@ -92,28 +92,47 @@ impl StageError {
     }
 }
 
-/// The typed reason a callback stopped a loop that belongs to another crate (ingest's batch
-/// stream, the tile passes), whose callback error is only text: the callback stores its reason
-/// here and returns any error; the stage then takes the reason back ([`StopReason::lift`]).
-#[derive(Default)]
-pub(crate) struct StopReason(std::sync::Mutex<Option<StageError>>);
-
-impl StopReason {
-    /// Keeps `e` as the reason; returns its text for the foreign crate's callback error.
-    pub(crate) fn set(&self, e: StageError) -> String {
-        let text = e.to_string();
-        // a poisoned lock only means a thread panicked while storing: the slot is still valid
-        *self.0.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
-        text
+/// A callback's error boxed by another crate's loop (ingest's batch stream, the tile passes)
+/// as the error the build stopped with: a `StageError` the callback
+/// stopped with comes back as itself, an ingest or tile error (one pass's reading of the input,
+/// the spool's writing) as its own variant, so an interrupt stays `Interrupted` and a changed
+/// input `InputChanged` however deep the loops were nested. `Err` gives back anything else.
+fn unbox(
+    e: Box<dyn std::error::Error + Send + Sync>,
+) -> Result<StageError, Box<dyn std::error::Error + Send + Sync>> {
+    let e = match e.downcast::<StageError>() {
+        Ok(e) => return Ok(*e),
+        Err(e) => e,
+    };
+    let e = match e.downcast::<TileError>() {
+        Ok(e) => return Ok((*e).into()),
+        Err(e) => e,
+    };
+    match e.downcast::<IngestError>() {
+        Ok(e) => Ok((*e).into()),
+        Err(e) => Err(e),
     }
+}
 
-    /// The stored reason if a callback stopped the loop, else `e` itself.
-    pub(crate) fn lift(&self, e: impl Into<StageError>) -> StageError {
-        self.0
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .take()
-            .unwrap_or_else(|| e.into())
+impl From<IngestError> for StageError {
+    fn from(e: IngestError) -> Self {
+        match e {
+            IngestError::Callback(e) => {
+                unbox(e).unwrap_or_else(|e| Self::Ingest(IngestError::Callback(e)))
+            }
+            e => Self::Ingest(e),
+        }
+    }
+}
+
+impl From<TileError> for StageError {
+    fn from(e: TileError) -> Self {
+        match e {
+            TileError::Callback(e) => {
+                unbox(e).unwrap_or_else(|e| Self::Tile(TileError::Callback(e)))
+            }
+            e => Self::Tile(e),
+        }
     }
 }
 
@@ -121,15 +140,87 @@ impl StopReason {
 mod tests {
     use super::*;
 
-    /// The reason a callback stored wins over the foreign crate's textual error, once.
+    fn boxed(
+        e: impl std::error::Error + Send + Sync + 'static,
+    ) -> Box<dyn std::error::Error + Send + Sync> {
+        Box::new(e)
+    }
+
+    /// A stage error that stopped a foreign loop comes back typed, through any nesting of the
+    /// loops (a tile pass over the input: tile callback inside ingest's stream), with its
+    /// message unchanged; a foreign error stays what it was.
     #[test]
-    fn stop_reason_lifts_the_typed_error() {
-        let stop = StopReason::default();
-        let text = stop.set(StageError::Interrupted { work: "/w".into() });
+    fn callback_errors_come_back_typed() {
+        let interrupted = || StageError::Interrupted { work: "/w".into() };
+        let text = interrupted().to_string();
         assert!(text.starts_with("interrupted; the work done so far is kept in /w"));
-        let e = stop.lift(TileError::Callback(text));
+        let e = StageError::from(TileError::Callback(boxed(interrupted())));
         assert!(matches!(e, StageError::Interrupted { .. }), "{e:?}");
-        let e = stop.lift(TileError::Callback("other".into()));
-        assert!(matches!(e, StageError::Tile(TileError::Callback(ref m)) if m == "other"));
+        assert_eq!(e.to_string(), text);
+        let e = StageError::from(IngestError::Callback(boxed(interrupted())));
+        assert!(matches!(e, StageError::Interrupted { .. }), "{e:?}");
+        // the InputPasses nesting: ingest's stream around the tile pass's callback
+        let changed = StageError::InputChanged {
+            path: "/m.ply".into(),
+            now: 3,
+            first: 4,
+        };
+        let nested = TileError::Callback(boxed(IngestError::Callback(boxed(TileError::Callback(
+            boxed(changed),
+        )))));
+        let e = StageError::from(nested);
+        assert!(
+            matches!(
+                e,
+                StageError::InputChanged {
+                    now: 3,
+                    first: 4,
+                    ..
+                }
+            ),
+            "{e:?}"
+        );
+        assert_eq!(
+            e.to_string(),
+            "/m.ply: yielded 3 triangles, 4 on the first pass: the file changed during the build"
+        );
+        // a tile error inside ingest's callback (the spool's write) is a tile error
+        let io = TileError::Io {
+            op: "write",
+            path: "/w/spool.tri".into(),
+            source: std::io::Error::other("disk full"),
+        };
+        let e = StageError::from(IngestError::Callback(boxed(io)));
+        assert!(
+            matches!(e, StageError::Tile(TileError::Io { op: "write", .. })),
+            "{e:?}"
+        );
+        // an ingest error inside a tile pass (a second pass's read) is an ingest error
+        let obj = IngestError::Obj {
+            path: "/m.obj".into(),
+            message: "bad".into(),
+        };
+        let e = StageError::from(TileError::Callback(boxed(obj)));
+        assert!(
+            matches!(e, StageError::Ingest(IngestError::Obj { .. })),
+            "{e:?}"
+        );
+        // anything else stays in its variant, whole
+        let e = StageError::from(TileError::Callback(boxed(std::io::Error::other("other"))));
+        let StageError::Tile(TileError::Callback(inner)) = e else {
+            panic!("{e:?}")
+        };
+        assert_eq!(
+            inner
+                .downcast::<std::io::Error>()
+                .expect("whole")
+                .to_string(),
+            "other"
+        );
+        let e = StageError::from(TileError::TooManyChunks(5));
+        assert!(
+            matches!(e, StageError::Tile(TileError::TooManyChunks(5))),
+            "{e:?}"
+        );
     }
 }

@@ -327,7 +327,6 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
         times: Vec::new(),
         warnings,
         interrupt: &system::INTERRUPTED,
-        stop: Default::default(),
     };
     match stages::run(&mut ctx) {
         Ok(built) => {

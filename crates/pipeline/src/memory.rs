@@ -6,9 +6,11 @@ use serde::Serialize;
 
 use crate::size::format_size;
 
-/// Bytes one chunk voxelizer needs: its dense 256³ u32 slot index (64 MiB) plus accumulators
-/// for the occupied voxels of one chunk (a dense surface of a 256³ chunk has a few hundred
-/// thousand voxels; 64 MiB holds well over a million accumulators).
+/// Bytes one chunk voxelizer needs: its two-level slot index (a 128 KiB table of the 32³
+/// bricks plus 2 KiB per touched brick: at most 64 MiB, far less for a surface), the
+/// accumulators of the occupied voxels of one chunk (a dense surface of a 256³ chunk has a few
+/// hundred thousand voxels) and its (triangle, voxel) pairs, at most 32 MiB
+/// (`voxelize/src/single.rs`).
 pub const VOXELIZER_BYTES: u64 = 128 << 20;
 /// Held by the LOD stage: up to eight children per level on the current Morton path, plus
 /// compressed payloads in flight.

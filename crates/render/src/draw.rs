@@ -20,6 +20,53 @@ use crate::RenderError;
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 const SAMPLES: u32 = 4;
+
+/// A pipeline of the picture's pass (the voxel faces', the source triangles'): `module`'s `vs`
+/// and `fs` entries over one vertex buffer with `layout`'s uniforms, depth tested (less) and
+/// written, into the pass's targets ([`COLOR_FORMAT`], [`DEPTH_FORMAT`], [`SAMPLES`]).
+pub(crate) fn pass_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    buffer: wgpu::VertexBufferLayout,
+    primitive: wgpu::PrimitiveState,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs"),
+            compilation_options: Default::default(),
+            buffers: &[Some(buffer)],
+        },
+        primitive,
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: wgpu::MultisampleState {
+            count: SAMPLES,
+            ..Default::default()
+        },
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: COLOR_FORMAT,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
 /// Background of the picture (light grey); covered pixels have alpha 255, the rest 0.
 pub const BACKGROUND: [u8; 3] = [236, 238, 242];
 
@@ -126,51 +173,24 @@ impl Renderer {
         let attributes = wgpu::vertex_attr_array![
             0 => Float32x3, 1 => Float32, 2 => Uint32, 3 => Uint32, 4 => Uint32
         ];
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("voxel faces"),
-            layout: Some(&pl),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<FaceInstance>() as u64,
-                    step_mode: wgpu::VertexStepMode::Instance,
-                    attributes: &attributes,
-                })],
+        let pipeline = pass_pipeline(
+            device,
+            "voxel faces",
+            &pl,
+            &module,
+            wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<FaceInstance>() as u64,
+                step_mode: wgpu::VertexStepMode::Instance,
+                attributes: &attributes,
             },
-            primitive: wgpu::PrimitiveState {
+            wgpu::PrimitiveState {
                 topology: wgpu::PrimitiveTopology::TriangleList,
                 front_face: wgpu::FrontFace::Ccw,
                 cull_mode: Some(wgpu::Face::Back),
                 ..Default::default()
             },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: wgpu::MultisampleState {
-                count: SAMPLES,
-                ..Default::default()
-            },
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: COLOR_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let source_pipeline =
-            source_draw::pipeline(device, &pl, (COLOR_FORMAT, DEPTH_FORMAT, SAMPLES));
+        );
+        let source_pipeline = source_draw::pipeline(device, &pl);
         let r = Renderer {
             gpu,
             pipeline,
@@ -231,6 +251,7 @@ impl Renderer {
         shot: &Shot,
         color: ColorBy,
     ) -> Result<Picture, RenderError> {
+        // Reads best whole: one picture: cull, upload, draw both kinds of geometry.
         let centre = shot.target;
         let tris = source_draw::gather(reader, source, centre, color)?;
         let mut faces: Vec<FaceInstance> = Vec::new();
@@ -337,6 +358,7 @@ impl Renderer {
         batches: &[Batch],
         source: Option<SourceBatch>,
     ) -> Result<(u32, u32, Vec<u8>), RenderError> {
+        // Reads best whole: one wgpu frame: targets, uniforms, pass, read-back.
         let centre = origin;
         let (w, h) = (shot.width, shot.height);
         let max_dim = self.gpu.device.limits().max_texture_dimension_2d;

@@ -42,3 +42,14 @@ pub enum RenderError {
         reason: String,
     },
 }
+
+impl RenderError {
+    /// `Io` for `op` on `path`, as a `map_err` argument.
+    pub(crate) fn io(
+        op: &'static str,
+        path: &std::path::Path,
+    ) -> impl FnOnce(std::io::Error) -> RenderError {
+        let path = path.to_path_buf();
+        move |source| RenderError::Io { path, op, source }
+    }
+}

@@ -52,6 +52,7 @@ pub fn export_ply_with(
     path: &Path,
     before_write: &mut dyn FnMut(&ExportSummary) -> Result<(), RenderError>,
 ) -> Result<ExportSummary, RenderError> {
+    // Reads best whole: two passes (count, write) over the same nodes.
     let nodes = level_nodes(reader, level)?;
     let mut buf = Vec::new();
     let mut quads = 0u64;
@@ -96,13 +97,7 @@ pub fn export_ply_with(
         bytes: header.len() as u64 + vertices * vertex_bytes + quads * FACE_BYTES,
     };
     before_write(&summary)?;
-    let io = |op: &'static str| {
-        move |source| RenderError::Io {
-            path: path.to_owned(),
-            op,
-            source,
-        }
-    };
+    let io = |op| RenderError::io(op, path);
     let file = File::create(path).map_err(io("creating"))?;
     let mut w = BufWriter::with_capacity(1 << 20, file);
     w.write_all(header.as_bytes()).map_err(io("writing"))?;

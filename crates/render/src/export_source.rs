@@ -97,13 +97,7 @@ pub fn export_source_ply(
         bytes: header.len() as u64 + vertices * vertex_bytes + triangles * face_bytes,
     };
     before_write(&summary)?;
-    let io = |op: &'static str| {
-        move |source| RenderError::Io {
-            path: path.to_owned(),
-            op,
-            source,
-        }
-    };
+    let io = |op| RenderError::io(op, path);
     let mut w = BufWriter::with_capacity(1 << 20, File::create(path).map_err(io("creating"))?);
     w.write_all(header.as_bytes()).map_err(io("writing"))?;
     // pass 2: vertices of every leaf, then the faces with their offsets

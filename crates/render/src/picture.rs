@@ -41,11 +41,7 @@ impl Picture {
 
     /// Writes the picture as an 8-bit RGB PNG (alpha dropped: the background is opaque).
     pub fn write_png(&self, path: &Path) -> Result<(), RenderError> {
-        let file = File::create(path).map_err(|source| RenderError::Io {
-            path: path.to_owned(),
-            op: "creating",
-            source,
-        })?;
+        let file = File::create(path).map_err(RenderError::io("creating", path))?;
         let png_err = |e: png::EncodingError| RenderError::Png {
             path: path.to_owned(),
             reason: e.to_string(),

@@ -11,6 +11,7 @@ use glam::DVec3;
 use voxlod_format::triangles::oct_decode;
 use voxlod_format::Reader;
 
+use crate::draw::pass_pipeline;
 use crate::export_source::source_world_position;
 use crate::faces::{material_color, ColorBy};
 use crate::RenderError;
@@ -112,55 +113,27 @@ pub(crate) fn gather(
 pub(crate) fn pipeline(
     device: &wgpu::Device,
     layout: &wgpu::PipelineLayout,
-    targets: (wgpu::TextureFormat, wgpu::TextureFormat, u32),
 ) -> wgpu::RenderPipeline {
-    let (color, depth, samples) = targets;
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("source triangles"),
         source: wgpu::ShaderSource::Wgsl(include_str!("source.wgsl").into()),
     });
     let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Uint32];
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("source triangles"),
-        layout: Some(layout),
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<SourceVertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &attributes,
-            })],
+    pass_pipeline(
+        device,
+        "source triangles",
+        layout,
+        &module,
+        wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<SourceVertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &attributes,
         },
         // scanned meshes are not reliably wound or closed: both sides are drawn
-        primitive: wgpu::PrimitiveState {
+        wgpu::PrimitiveState {
             topology: wgpu::PrimitiveTopology::TriangleList,
             cull_mode: None,
             ..Default::default()
         },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: depth,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: wgpu::MultisampleState {
-            count: samples,
-            ..Default::default()
-        },
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: color,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    )
 }

@@ -185,6 +185,7 @@ struct Element {
 /// `x y z` by name among any scalar vertex properties; the face element's `vertex_indices`
 /// (or `vertex_index`) list; other elements skipped. Panics on anything else (a test helper).
 pub fn read_ply(path: &Path) -> Indexed {
+    // Reads best whole: test support: an independent PLY reader kept in one piece, as a reference.
     let d = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     // the header may end its lines with \r\n (bun_zipper.ply does)
     let at = d

@@ -381,10 +381,11 @@ impl<'g> Scatter<'g> {
                 return Ok(());
             }
             let n = self.n as usize;
-            return Err(TileError::Callback(format!(
-                "chunk {:?} received a triangle but none was counted: the input changed between passes",
-                [li % n, li / n % n, li / (n * n)]
-            )));
+            return Err(TileError::CountChanged {
+                coord: [li % n, li / n % n, li / (n * n)].map(|c| c as u32),
+                received: 1,
+                counted: 0,
+            });
         }
         let s = s as usize;
         let at = (self.slice_start[s] + self.slice_len[s] as u64) as usize * rec;
@@ -404,12 +405,11 @@ impl<'g> Scatter<'g> {
         }
         let c = &self.chunks[s];
         if self.written[s] + n > c.count {
-            return Err(TileError::Callback(format!(
-                "chunk {:?} received more triangles than counted ({} > {}): the input changed between passes",
-                c.coord,
-                self.written[s] + n,
-                c.count
-            )));
+            return Err(TileError::CountChanged {
+                coord: c.coord,
+                received: self.written[s] + n,
+                counted: c.count,
+            });
         }
         let rec = self.layout.bytes() as u64;
         let from = (self.slice_start[s] * rec) as usize;
@@ -430,10 +430,11 @@ impl<'g> Scatter<'g> {
         }
         for (i, c) in self.chunks.iter().enumerate() {
             if self.written[i] != c.count {
-                return Err(TileError::Callback(format!(
-                    "chunk {:?} received {} triangles but {} were counted: the input changed between passes",
-                    c.coord, self.written[i], c.count
-                )));
+                return Err(TileError::CountChanged {
+                    coord: c.coord,
+                    received: self.written[i],
+                    counted: c.count,
+                });
             }
         }
         self.file
@@ -684,5 +685,62 @@ mod tests {
             e.to_string().contains("not the expected whole number"),
             "{e}"
         );
+    }
+
+    /// Counts that do not match the scattered triangles (the input changed between the count
+    /// and the scatter pass) end the scatter with `CountChanged` naming the chunk: a chunk
+    /// counted empty, one with fewer triangles counted than it gets, one with more.
+    #[test]
+    fn counts_that_do_not_match_are_a_typed_error() {
+        let dir = tempfile::tempdir().unwrap();
+        // 8 small triangles near each of two opposite corners: chunks [0,0,0] and [1,1,1] at 512³
+        let mut tris = Vec::new();
+        for (corner, step) in [(0.0f32, 0.1f32), (10.0, -0.1)] {
+            for i in 0..8 {
+                let c = [corner + step * i as f32; 3];
+                let t = [c, [c[0] + 0.05, c[1], c[2]], [c[0], c[1] + 0.05, c[2]]];
+                tris.push(Triangle::new(t));
+            }
+        }
+        let layout = RecordLayout {
+            normals: false,
+            colors: false,
+            texcoords: false,
+        };
+        let mut sp = Spooler::create(&dir.path().join("spool"), layout).unwrap();
+        sp.push(&tris).unwrap();
+        let spool = sp.finish().unwrap();
+        let grid = Grid::fit(&spool.bounds, 512).unwrap();
+        let scatter_with = |counted: &[Triangle]| {
+            let mut counts = ChunkCounts::new(&grid).unwrap();
+            counts.add_triangles(counted);
+            let path = dir.path().join("bins");
+            scatter(
+                &spool,
+                &grid,
+                &counts,
+                &path,
+                layout,
+                1 << 20,
+                &mut |_, _| {},
+            )
+        };
+        let mismatch = |counted: &[Triangle]| match scatter_with(counted).err() {
+            Some(TileError::CountChanged {
+                coord,
+                received,
+                counted,
+            }) => (coord, received, counted),
+            other => panic!("expected CountChanged, got {other:?}"),
+        };
+        // the second corner's chunk counted empty: its first triangle is found at once
+        assert_eq!(mismatch(&tris[..8]), ([1, 1, 1], 1, 0));
+        // one triangle fewer counted than it gets, and one more
+        assert_eq!(mismatch(&tris[..15]), ([1, 1, 1], 8, 7));
+        let more: Vec<Triangle> = tris.iter().chain(&tris[15..]).copied().collect();
+        assert_eq!(mismatch(&more), ([1, 1, 1], 8, 9));
+        // the counts of the triangles themselves scatter
+        let bins = scatter_with(&tris).unwrap();
+        assert_eq!(bins.total(), 16);
     }
 }

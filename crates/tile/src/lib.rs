@@ -118,9 +118,27 @@ pub enum TileError {
     #[error("the grid has {0} chunks; at most 2^32 are supported")]
     /// The grid has more chunks than a `u32` index holds.
     TooManyChunks(u64),
-    #[error("{0}")]
-    /// An error from the caller's callback, as text.
-    Callback(String),
+    #[error("chunk {coord:?} received {received} triangles but {counted} were counted: the input changed between passes")]
+    /// The scatter pass put more or fewer triangles into a chunk than the count pass counted
+    /// for it: the passes did not yield the same triangles. (`received` is what the chunk had
+    /// when the difference was found: the first triangle of a chunk counted empty, the first
+    /// batch past its count, or all of them at the end of the pass.)
+    CountChanged {
+        /// The chunk's coordinates in the grid of chunks.
+        coord: [u32; 3],
+        /// Triangles the scatter pass gave it.
+        received: u64,
+        /// Triangles the count pass counted for it.
+        counted: u64,
+    },
+    #[error("a triangle has {0} but the temporary records were laid out without them (ingest reported the mesh's attributes wrongly)")]
+    /// A triangle carries an attribute (`vertex normals`, `texture coordinates`, `colours`)
+    /// that the [`RecordLayout`] has no room for, so encoding it would lose it.
+    LostAttribute(&'static str),
+    #[error(transparent)]
+    /// The error with which the caller's callback or its [`Passes`] stopped a pass, kept whole:
+    /// the caller takes its own type back with `downcast`.
+    Callback(Box<dyn std::error::Error + Send + Sync>),
 }
 
 impl TileError {

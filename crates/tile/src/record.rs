@@ -66,16 +66,13 @@ impl RecordLayout {
         let lost_normals = !self.normals && t.n != [[0.0; 3]; 3];
         let lost_uv = !self.texcoords && t.uv != [[0.0; 2]; 3];
         if lost_normals || lost_uv || !self.colors && t.c != [DEFAULT_COLOR; 3] {
-            return Err(TileError::Callback(format!(
-                "a triangle has {} but the temporary records were laid out without them (ingest reported the mesh's attributes wrongly)",
-                if lost_normals {
-                    "vertex normals"
-                } else if lost_uv {
-                    "texture coordinates"
-                } else {
-                    "colours"
-                }
-            )));
+            return Err(TileError::LostAttribute(if lost_normals {
+                "vertex normals"
+            } else if lost_uv {
+                "texture coordinates"
+            } else {
+                "colours"
+            }));
         }
         out[..36].copy_from_slice(bytemuck::bytes_of(&t.v));
         out[36..40].copy_from_slice(&t.flags.to_le_bytes());
@@ -182,6 +179,10 @@ mod tests {
             texcoords: true,
         };
         let e = l.encode(&full(), &mut buf).unwrap_err();
+        assert!(
+            matches!(e, TileError::LostAttribute("vertex normals")),
+            "{e:?}"
+        );
         assert!(e.to_string().contains("vertex normals"), "{e}");
         let l = RecordLayout {
             normals: true,
@@ -189,6 +190,7 @@ mod tests {
             texcoords: true,
         };
         let e = l.encode(&full(), &mut buf).unwrap_err();
+        assert!(matches!(e, TileError::LostAttribute("colours")), "{e:?}");
         assert!(e.to_string().contains("colours"), "{e}");
         let l = RecordLayout {
             normals: true,
@@ -196,6 +198,10 @@ mod tests {
             texcoords: false,
         };
         let e = l.encode(&full(), &mut buf).unwrap_err();
+        assert!(
+            matches!(e, TileError::LostAttribute("texture coordinates")),
+            "{e:?}"
+        );
         assert!(e.to_string().contains("texture coordinates"), "{e}");
     }
 }

@@ -376,6 +376,7 @@ impl ChunkVoxelizer {
     /// contribution comes from a triangle with flat attributes gets weight 1 and that triangle's
     /// values, without clipping; every other pair is clipped as before.
     fn accumulate(&mut self, skip: bool) {
+        // Reads best whole: one loop over the marked pairs.
         let ChunkVoxelizer {
             mode,
             origin,

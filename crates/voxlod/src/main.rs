@@ -320,7 +320,8 @@ fn load_config(path: &Path) -> Result<BuildSettings> {
     toml::from_str(&text).with_context(|| format!("settings file {}", path.display()))
 }
 
-/// The settings of `build` and `plan`: the settings file, then the flags.
+/// The settings of `build` and `plan`: the settings file's (or the defaults), each flag given
+/// on top, checked; a bad value is an error naming the flag or the settings file it came from.
 fn settings(a: &SettingsArgs) -> Result<BuildSettings> {
     let mut s = match &a.config {
         Some(p) => load_config(p)?,
@@ -382,7 +383,6 @@ fn run_build(a: BuildArgs) -> Result<()> {
     s.progress = !a.quiet;
     s.force = a.force;
     s.interrupt_after_chunks = a.debug_interrupt_after_chunks;
-
     install_ctrlc();
 
     // Without an input, build the bundled sample, written once to a fixed place so that an

@@ -228,13 +228,13 @@ fn read_input(
             ctx.source.stream_prepared(
                 &prepare,
                 &mut |tris, (b, k)| {
-                    if ctx.check_interrupt().is_err() {
-                        return Err(IngestError::Callback(ctx.stop.set(ctx.interrupted())));
+                    if let Err(e) = ctx.check_interrupt() {
+                        return Err(IngestError::Callback(Box::new(e)));
                     }
                     match &mut spooler {
                         Some(sp) => sp
                             .push(tris)
-                            .map_err(|e| IngestError::Callback(e.to_string())),
+                            .map_err(|e| IngestError::Callback(Box::new(e))),
                         None => {
                             count += tris.len() as u64;
                             bounds.merge(&b);
@@ -248,7 +248,7 @@ fn read_input(
                 &mut |done, total| bar.set(done, total),
             )
         })
-        .map_err(|e| ctx.stop.lift(e))?;
+        .map_err(StageError::from)?;
     if let Some(sp) = spooler {
         let spool = sp.finish()?;
         (count, bounds) = (spool.count, spool.bounds);

@@ -179,9 +179,7 @@ fn write_leaves<W: NodeSink>(
     std::thread::scope(|scope| -> Result<(), StageError> {
         scope.spawn(|| {
             let r = leaf_log::read_log(&leaves, &mut |h, payload| {
-                if let Err(e) = ctx.check_interrupt() {
-                    return Err(anyhow::anyhow!(ctx.stop.set(e)));
-                }
+                ctx.check_interrupt()?;
                 let mut leaf = split_leaf(h, payload, materials)?;
                 if let Some(log) = &mut sources {
                     leaf.5 = crate::stages::source::leaf_channel(log, h)?;
@@ -191,7 +189,9 @@ fn write_leaves<W: NodeSink>(
                     .map_err(|_| anyhow::anyhow!("the octree writer stopped"))
             });
             if let Err(e) = r {
-                let _ = tx.send(Err(ctx.stop.lift(e)));
+                // an interrupt comes back as itself
+                let e = e.downcast::<StageError>().unwrap_or_else(StageError::Other);
+                let _ = tx.send(Err(e));
             }
             drop(tx);
         });

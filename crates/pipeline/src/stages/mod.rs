@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use voxlod_ingest::MeshSource;
 
-use crate::error::{StageError, StopReason};
+use crate::error::StageError;
 use crate::memory::MemoryPlan;
 use crate::output::OutputGuard;
 use crate::work::WorkDir;
@@ -48,8 +48,6 @@ pub(crate) struct BuildContext<'a> {
     pub warnings: Vec<String>,
     /// Set by Ctrl-C; checked between batches.
     pub interrupt: &'static AtomicBool,
-    /// The typed reason a callback of another crate's loop stopped it.
-    pub stop: StopReason,
 }
 
 impl BuildContext<'_> {
@@ -66,6 +64,17 @@ impl BuildContext<'_> {
             return Err(self.interrupted());
         }
         Ok(())
+    }
+
+    /// Chunk `i` of `total` is in a stage's log (leaf or source log): shows it on `bar`, and
+    /// requests an interrupt once `interrupt_after_chunks` chunks are logged (the resume
+    /// tests' hook).
+    pub(crate) fn chunk_logged(&self, bar: &crate::progress::Stage, i: usize, total: usize) {
+        bar.set(i as u64 + 1, total as u64);
+        let after = self.settings.interrupt_after_chunks;
+        if after.is_some_and(|n| i as u64 + 1 >= n) {
+            self.interrupt.store(true, Ordering::SeqCst);
+        }
     }
 
     /// Records a stage's time, started at `t`; `resumed` if its artifact came from the work
@@ -227,7 +236,6 @@ mod tests {
                 times: Vec::new(),
                 warnings: Vec::new(),
                 interrupt,
-                stop: StopReason::default(),
             }
         }
     }
@@ -362,17 +370,39 @@ mod tests {
         done.send(()).unwrap();
     }
 
-    /// An interrupt stops a stage with the typed error naming the work folder.
+    /// An interrupt stops each stage with the typed error naming the work folder, also where
+    /// it is noticed inside another crate's loop: ingest's batch stream, the tile passes
+    /// (`Interruptible`), the leaf log reader of the LOD + write stage.
     #[test]
     fn interrupt_is_a_typed_error() {
         let fx = fixture();
         let stop = flag();
-        stop.store(true, Ordering::SeqCst);
+        let interrupted = |e: StageError| {
+            assert!(
+                matches!(&e, StageError::Interrupted { work } if work == fx.work.path()),
+                "{e:?}"
+            );
+        };
         let mut ctx = fx.ctx(stop);
-        let e = ingest::run(&mut ctx).err().expect("interrupted");
-        assert!(
-            matches!(&e, StageError::Interrupted { work } if work == fx.work.path()),
-            "{e:?}"
+        stop.store(true, Ordering::SeqCst);
+        interrupted(ingest::run(&mut ctx).err().expect("ingest interrupted"));
+        stop.store(false, Ordering::SeqCst);
+        let mut ingested = ingest::run(&mut ctx).unwrap();
+        // the spooled fixture has no chunk counts yet: the count pass is interrupted
+        assert!(ingested.marker.spooled && ingested.early_counts.is_none());
+        stop.store(true, Ordering::SeqCst);
+        interrupted(
+            tile::run(&mut ctx, &mut ingested)
+                .err()
+                .expect("tile interrupted"),
         );
+        stop.store(false, Ordering::SeqCst);
+        let tiled = tile::run(&mut ctx, &mut ingested).unwrap();
+        let voxelized = voxelize::run(&mut ctx, tiled).unwrap();
+        stop.store(true, Ordering::SeqCst);
+        let e = lod_write::run(&mut ctx, &ingested, &voxelized).err();
+        interrupted(e.expect("lod + write interrupted"));
+        stop.store(false, Ordering::SeqCst);
+        lod_write::run(&mut ctx, &ingested, &voxelized).unwrap();
     }
 }

@@ -119,7 +119,6 @@ fn append_chunks(
     let bar = Stage::items(ctx.progress, "source", chunks.len() as u64);
     bar.set(start as u64, chunks.len() as u64);
     let zstd_level = ctx.settings.zstd_level;
-    let interrupt_after = ctx.settings.interrupt_after_chunks;
     type Built = (Vec<u8>, SourceCounts);
     let build_one = |i: usize| -> Result<Built, StageError> {
         let mut b = SourceBuilder::new(chunks[i].coord, attrs);
@@ -153,12 +152,7 @@ fn append_chunks(
             let (payload, c) = r?;
             log.append_record(i as u64, chunks[i].coord, c.stored as u32, &payload, 0)?;
             log.flush()?;
-            bar.set(i as u64 + 1, chunks.len() as u64);
-            // the resume tests' hook, as in the voxelize stage
-            if interrupt_after.is_some_and(|n| i as u64 + 1 >= n) {
-                ctx.interrupt
-                    .store(true, std::sync::atomic::Ordering::SeqCst);
-            }
+            ctx.chunk_logged(&bar, i, chunks.len());
             Ok(())
         },
         &|i, message| {

@@ -116,7 +116,6 @@ fn with_passes<R>(ctx: &BuildContext, ing: &Ingested, f: impl FnOnce(&dyn Passes
         input = InputPasses {
             source: ctx.source,
             count,
-            stop: &ctx.stop,
         };
         &input
     };
@@ -133,7 +132,7 @@ pub(crate) fn count_pass(
     let c = ctx
         .pool
         .install(|| voxlod_tile::count(src, &ing.grid, &mut |d, n| bar.set(d, n)))
-        .map_err(|e| ctx.stop.lift(e))?;
+        .map_err(StageError::from)?;
     bar.finish();
     Ok(c)
 }
@@ -177,7 +176,7 @@ fn tile(
                     &mut |d, n| bar.set(d, n),
                 )
             })
-            .map_err(|e| ctx.stop.lift(e))?;
+            .map_err(StageError::from)?;
         bar.finish();
         Ok(bins)
     })

@@ -205,7 +205,6 @@ fn append_chunks(
             skipped: r.skipped,
         })
     };
-    let interrupt_after = ctx.settings.interrupt_after_chunks;
     crate::window::ordered(
         &ctx.pool,
         ctx.plan.voxelizers,
@@ -223,11 +222,7 @@ fn append_chunks(
             });
             log.append(i as u64, chunks[i].coord, leaf.as_ref(), e.skipped)?;
             log.flush()?;
-            bar.set(i as u64 + 1, chunks.len() as u64);
-            if interrupt_after.is_some_and(|n| i as u64 + 1 >= n) {
-                ctx.interrupt
-                    .store(true, std::sync::atomic::Ordering::SeqCst);
-            }
+            ctx.chunk_logged(&bar, i, chunks.len());
             Ok(())
         },
         &|i, message| StageError::Panicked {

@@ -127,6 +127,31 @@ pub(crate) struct Drawn {
     pub index: usize,
 }
 
+/// One walk of the cut ([`Stream::visit`]): what stays the same through it (the file, the
+/// camera, the frame's tick, whether resident stand-ins are marked used) and what it collects
+/// (the nodes to draw, the uncovered nodes to request first).
+struct CutWalk<'a> {
+    reader: &'a Reader,
+    shot: &'a Shot,
+    tick: u64,
+    mark: bool,
+    out: Vec<Drawn>,
+    stand_ins: Vec<usize>,
+}
+
+impl<'a> CutWalk<'a> {
+    fn new(reader: &'a Reader, shot: &'a Shot, tick: u64, mark: bool) -> Self {
+        CutWalk {
+            reader,
+            shot,
+            tick,
+            mark,
+            out: Vec::new(),
+            stand_ins: Vec::new(),
+        }
+    }
+}
+
 impl Stream {
     /// An empty cache for `reader`'s nodes; GPU coordinates relative to `origin`.
     pub fn new(
@@ -232,18 +257,10 @@ impl Stream {
         // missing part, its coarsest uncovered ancestor is requested before everything else
         let mut drawn = Vec::new();
         if let Some(root) = reader.root() {
-            let mut stand_ins = Vec::new();
-            self.visit(
-                reader,
-                shot,
-                root,
-                tick,
-                &mut Vec::new(),
-                true,
-                false,
-                &mut stand_ins,
-            );
-            let mut first: Vec<cut::CutNode> = stand_ins
+            let mut walk = CutWalk::new(reader, shot, tick, true);
+            self.visit(&mut walk, root, false);
+            let mut first: Vec<cut::CutNode> = walk
+                .stand_ins
                 .into_iter()
                 .map(|index| cut::CutNode {
                     index,
@@ -257,18 +274,9 @@ impl Stream {
         }
         self.upload(reader, renderer, &requests, tick, &mut stats)?;
         if let Some(root) = reader.root() {
-            let mut list = Vec::new();
-            self.visit(
-                reader,
-                shot,
-                root,
-                tick,
-                &mut list,
-                false,
-                false,
-                &mut Vec::new(),
-            );
-            drawn = list;
+            let mut walk = CutWalk::new(reader, shot, tick, false);
+            self.visit(&mut walk, root, false);
+            drawn = walk.out;
         }
         stats.drawn_nodes = drawn.len();
         for d in &drawn {
@@ -303,23 +311,14 @@ impl Stream {
     }
 
     /// Walks the cut below node `i`; returns true when the subtree can be drawn completely
-    /// from resident nodes, pushing them to `out`. A refined node whose subtree is incomplete
-    /// is drawn itself if resident (its children's drawn nodes are dropped, so nothing is
-    /// drawn twice) and, with `mark`, marked used, so eviction keeps it while it stands in;
-    /// if neither it nor an ancestor is resident (`covered` false) it goes to `stand_ins`,
-    /// so a coarse node is requested to fill the gap quickly (the first frames, a sudden turn).
-    #[allow(clippy::too_many_arguments)]
-    fn visit(
-        &mut self,
-        reader: &Reader,
-        shot: &Shot,
-        i: usize,
-        tick: u64,
-        out: &mut Vec<Drawn>,
-        mark: bool,
-        covered: bool,
-        stand_ins: &mut Vec<usize>,
-    ) -> bool {
+    /// from resident nodes, pushing them to `walk.out`. A refined node whose subtree is
+    /// incomplete is drawn itself if resident (its children's drawn nodes are dropped, so
+    /// nothing is drawn twice) and, with `walk.mark`, marked used, so eviction keeps it while
+    /// it stands in; if neither it nor an ancestor is resident (`covered` false) it goes to
+    /// `walk.stand_ins`, so a coarse node is requested to fill the gap quickly (the first
+    /// frames, a sudden turn).
+    fn visit(&mut self, walk: &mut CutWalk, i: usize, covered: bool) -> bool {
+        let (reader, shot) = (walk.reader, walk.shot);
         let b = reader.node_bounds(i).expect("a node of the file");
         if !cut::in_frustum(shot, b) {
             return true;
@@ -327,32 +326,32 @@ impl Stream {
         if !cut::refines(reader, i, shot, self.config.max_error_px) {
             let here = self.resident[i].is_some();
             if here {
-                out.push(Drawn { index: i });
+                walk.out.push(Drawn { index: i });
             }
             return here;
         }
-        let start = out.len();
-        let first_stand_in = stand_ins.len();
+        let start = walk.out.len();
+        let first_stand_in = walk.stand_ins.len();
         let mut complete = true;
         let here = self.resident[i].is_some();
         for c in reader.children(i).into_iter().flatten() {
-            complete &= self.visit(reader, shot, c, tick, out, mark, covered || here, stand_ins);
+            complete &= self.visit(walk, c, covered || here);
         }
         if complete {
             return true;
         }
         if !here && !covered {
             // the coarsest uncovered node only: drop those found below it
-            stand_ins.truncate(first_stand_in);
-            stand_ins.push(i);
+            walk.stand_ins.truncate(first_stand_in);
+            walk.stand_ins.push(i);
         }
         match &mut self.resident[i] {
             Some(r) => {
-                if mark {
-                    r.last_used = tick;
+                if walk.mark {
+                    r.last_used = walk.tick;
                 }
-                out.truncate(start);
-                out.push(Drawn { index: i });
+                walk.out.truncate(start);
+                walk.out.push(Drawn { index: i });
                 true
             }
             None => false,
