@@ -407,7 +407,6 @@ pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> R
         times: Vec::new(),
         warnings,
         interrupt: &system::INTERRUPTED,
-        stop: Default::default(),
     };
     let counted = stages::ingest::run(&mut ctx).and_then(|mut ing| {
         let counts = stages::tile::counts(&ctx, &mut ing)?;
