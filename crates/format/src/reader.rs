@@ -499,6 +499,14 @@ impl Reader {
             .map_err(|what| self.node_error(index, format!("source triangles: {what}")))
     }
 
+    /// Triangles stored beside node `index` in the source-geometry channel, from the node
+    /// index alone (nothing is read; 0 without the channel or for a node without triangles).
+    pub fn node_source_triangle_count(&self, index: usize) -> u32 {
+        self.channels
+            .position(CHANNEL_TRIANGLES)
+            .map_or(0, |k| self.channels.entries[k][index].count)
+    }
+
     /// Triangles stored in the source-geometry channel over all nodes (0 without it).
     pub fn source_triangle_count(&self) -> u64 {
         self.channels.position(CHANNEL_TRIANGLES).map_or(0, |k| {

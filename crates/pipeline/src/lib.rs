@@ -191,9 +191,10 @@ pub struct SourceSummary {
     pub triangles_kept: u64,
     /// Of those, the pairs whose triangle reached past the quantization box and was clipped.
     pub triangles_clipped: u64,
-    /// Triangles built for the leaf chunks (whole ones and clipped pieces).
+    /// Triangles stored in the file (whole ones and clipped pieces), over the leaves with
+    /// voxels: a chunk that triangles touch but that gets no voxel is not written.
     pub triangles_stored: u64,
-    /// Their compressed payload bytes.
+    /// Their compressed payload bytes in the file.
     pub payload_bytes: u64,
     /// `payload_bytes / triangles_stored` (0 without triangles).
     pub bytes_per_triangle: f64,
@@ -567,13 +568,15 @@ fn summarize(ctx: BuildContext, built: Built, resumed: bool, t0: Instant) -> Bui
         written,
         source,
     } = built;
+    // stored: what the file holds (the source log also has chunks that got no voxels)
+    let stored = written.source;
     let source_geometry = source.map(|m| SourceSummary {
         triangles_kept: m.counts.kept,
         triangles_clipped: m.counts.clipped,
-        triangles_stored: m.counts.stored,
-        payload_bytes: m.payload_bytes,
-        bytes_per_triangle: if m.counts.stored > 0 {
-            m.payload_bytes as f64 / m.counts.stored as f64
+        triangles_stored: stored.triangles,
+        payload_bytes: stored.payload_bytes,
+        bytes_per_triangle: if stored.triangles > 0 {
+            stored.payload_bytes as f64 / stored.triangles as f64
         } else {
             0.0
         },

@@ -13,7 +13,8 @@ use crate::size::format_size;
 /// (`voxelize/src/single.rs`).
 pub const VOXELIZER_BYTES: u64 = 128 << 20;
 /// Held by the LOD stage: up to eight children per level on the current Morton path, plus
-/// compressed payloads in flight.
+/// compressed payloads in flight (the write queue's 64 MiB bound counts the voxels of queued
+/// merges and the source-triangle payloads of leaves queued behind them).
 pub const LOD_BYTES: u64 = 128 << 20;
 /// Fixed overhead: code, the thread pool, read buffers of the tile passes.
 pub const BASE_BYTES: u64 = 64 << 20;

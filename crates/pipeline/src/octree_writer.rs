@@ -27,9 +27,10 @@ type Encoded = (EncodedNode, Option<EncodedChannel>);
 /// (each channel only if the file has it).
 pub type StoredPayloads = (EncodedNode, Option<EncodedChannel>, Option<EncodedChannel>);
 
-/// Most nodes waiting for their encode, and most voxel bytes they hold, before the writer
-/// waits for the oldest (the LOD stage runs after the voxelizers are gone, and this stays far
-/// inside their share of the memory plan).
+/// Most nodes waiting for their encode, and most bytes they hold (voxels of merges and
+/// encodes, and leaves' source-triangle payloads queued behind them), before the writer waits
+/// for the oldest (the LOD stage runs after the voxelizers are gone, and this stays far inside
+/// their share of the memory plan).
 const QUEUE_NODES: usize = 16;
 const QUEUE_BYTES: u64 = 64 << 20;
 
@@ -73,7 +74,9 @@ struct Queued {
     coord: [u32; 3],
     child_mask: u8,
     payload: Payload,
-    /// Voxel bytes the merge and encode hold (0 for ready payloads).
+    /// Bytes the node holds while queued: the voxels its merge and encode hold, or a leaf's
+    /// source-triangle payload (counted against `QUEUE_BYTES`, so queued source payloads
+    /// stay inside the LOD share of the memory plan).
     bytes: u64,
     /// A leaf's source-triangle payload (`--source-geometry`), written after its other
     /// channels.
@@ -238,7 +241,7 @@ impl<'p, W: NodeSink> OctreeWriter<'p, W> {
             coord,
             child_mask: 0,
             payload: Payload::Ready((enc, materials)),
-            bytes: 0,
+            bytes: source.as_ref().map_or(0, |s| s.payload.len() as u64),
             source,
         };
         self.emit(node, half)
@@ -557,6 +560,23 @@ mod tests {
         w.finish(&serde_json::json!({})).unwrap();
     }
 
+    impl OctreeWriter<'_> {
+        /// A leaf with its half made here and, optionally, a source-triangle payload.
+        fn push_leaf_with_source(
+            &mut self,
+            coord: [u32; 3],
+            voxels: Vec<Voxel>,
+            enc: EncodedNode,
+            source: Option<EncodedChannel>,
+        ) {
+            let octant = (coord[0] & 1 | (coord[1] & 1) << 1 | (coord[2] & 1) << 2) as usize;
+            let mut half = Vec::new();
+            SCRATCH.with(|s| s.borrow_mut().halve(&voxels, octant, &mut half));
+            self.push_halved(coord, half, None, Some(enc), None, source)
+                .unwrap();
+        }
+    }
+
     /// Many parents (far more than the queue holds), some large enough to pass its byte bound:
     /// the pooled, queued writer gives the reference's bytes on 1 and 3 threads.
     #[test]
@@ -629,5 +649,52 @@ mod tests {
                 "{threads} threads: bytes differ from the reference"
             );
         }
+    }
+
+    /// Leaves with large source-triangle payloads queued behind parents whose encodes cannot
+    /// run yet (the only pool thread is busy): the payloads the queue holds, recounted from
+    /// its entries, never pass `QUEUE_BYTES`, so they stay inside the LOD share of the plan.
+    #[test]
+    fn queued_source_payloads_stay_within_the_queue_bound() {
+        let levels = 3; // 4³ leaf chunks: leaves of a second subtree wait behind a parent
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("source.voxlod");
+        let writer =
+            Writer::create_with_channels(&path, spec(levels), &[voxlod_format::CHANNEL_TRIANGLES])
+                .unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        pool.spawn(|| std::thread::sleep(std::time::Duration::from_millis(400)));
+        let mut ow = OctreeWriter::new(writer, levels, 1, &pool);
+        let payload = vec![7u8; 5 << 20];
+        let source = EncodedChannel {
+            payload_crc32: crc32fast::hash(&payload),
+            payload,
+            count: 1,
+            voxel_count: 0,
+        };
+        let mut most = 0u64;
+        for m in 0..24u64 {
+            let coord = voxlod_geom::demorton3(m);
+            let v = vec![Voxel::new([1, 2, 3], 1, 0, pack_color([9, 9, 9, 255]))];
+            let enc = encode_node(&v, 1).unwrap();
+            let src = (m >= 8).then(|| source.clone());
+            ow.push_leaf_with_source(coord, v, enc, src);
+            let held: u64 = ow
+                .queue
+                .iter()
+                .filter_map(|q| q.source.as_ref())
+                .map(|s| s.payload.len() as u64)
+                .sum();
+            assert!(
+                held <= QUEUE_BYTES,
+                "leaf {m}: {held} bytes of source payloads queued"
+            );
+            most = most.max(held);
+        }
+        assert!(most > QUEUE_BYTES / 2, "the queue never held much: {most}");
+        ow.finish(|_| serde_json::json!({})).unwrap();
     }
 }

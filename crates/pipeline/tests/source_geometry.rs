@@ -255,3 +255,49 @@ fn bunny_round_trip() {
     let v = voxlod_check::verify(&out);
     assert!(v.ok(), "{:?}", v.problems);
 }
+
+/// A chunk that a triangle only pokes into, by 1/80 voxel, away from the voxel centres: the
+/// source stage keeps the triangle there (it touches the chunk's box), thin voxelization gives
+/// the chunk no voxel, so the file does not store it. The summary counts what the file stores
+/// (it counted the source log's chunks before): triangles and payload bytes equal the file's.
+#[test]
+fn summary_counts_the_triangles_the_file_stores() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("poke.ply");
+    // over the bounding cube [−1, 1]³ (two tiny triangles at corners of z = −1 span it), a
+    // triangle in z = 0.1 whose vertex at x = 0.0001 reaches 0.0128 voxels past the chunk
+    // border x = 256 of the 512³ grid
+    let v = vec![
+        [-0.5, -0.5, 0.1],
+        [0.0001, 0.2, 0.1],
+        [-0.5, 0.5, 0.1],
+        [-1.0, -1.0, -1.0],
+        [-0.99, -1.0, -1.0],
+        [-1.0, -0.99, -1.0],
+        [1.0, -1.0, -1.0],
+        [0.99, -1.0, -1.0],
+        [1.0, -0.99, -1.0],
+    ];
+    write_ply(&input, &(v, vec![[0, 1, 2], [3, 4, 5], [6, 7, 8]]));
+    let out = dir.path().join("poke.voxlod");
+    let s = BuildSettings {
+        mode: voxlod_voxelize::Mode::Thin,
+        ..settings(512, 1)
+    };
+    let summary = build(&input, &out, &s).unwrap();
+    let src = summary.source_geometry.unwrap();
+    let r = Reader::open(&out).unwrap();
+    let poked = r.find(0, [1, 1, 1]);
+    assert!(poked.is_none(), "the poked chunk should get no voxel");
+    // kept: the big triangle in its three chunks, the corner triangles in theirs
+    assert_eq!(src.triangles_kept, 5);
+    assert_eq!(r.source_triangle_count(), 4);
+    assert_eq!(src.triangles_stored, r.source_triangle_count());
+    assert_eq!(
+        src.payload_bytes,
+        r.channel_payload_bytes(voxlod_format::CHANNEL_TRIANGLES)
+    );
+    let v = voxlod_check::verify(&out);
+    assert!(v.ok(), "{:?}", v.problems);
+    assert_eq!(v.source_triangles_checked, src.triangles_stored);
+}

@@ -102,9 +102,9 @@ pub(crate) const FACE_BYTES: u64 = std::mem::size_of::<FaceInstance>() as u64;
 /// Instances `range` of a vertex buffer of [`FaceInstance`]s, to be drawn.
 pub(crate) type Batch<'a> = (&'a wgpu::Buffer, Range<u32>);
 
-/// Source triangles to draw: a vertex buffer of `SourceVertex`, a `u32` index buffer and the
-/// number of indices.
-pub(crate) type SourceBatch<'a> = (&'a wgpu::Buffer, &'a wgpu::Buffer, u32);
+/// Source triangles to draw: vertices (`SourceVertex`), `u32` indices and the number of
+/// indices.
+pub(crate) type SourceBatch<'a> = (wgpu::BufferSlice<'a>, wgpu::BufferSlice<'a>, u32);
 
 /// A GPU device with the voxel-face pipeline, reusable for many pictures.
 pub struct Renderer {
@@ -315,10 +315,11 @@ impl Renderer {
                 ),
             )
         });
-        let source_batch = tri_bufs
-            .as_ref()
-            .map(|(v, i)| (v, i, tris.indices.len() as u32));
-        let (w, h, rgba) = self.draw(shot, centre, &batches, source_batch)?;
+        let source_batches: Vec<SourceBatch> = tri_bufs
+            .iter()
+            .map(|(v, i)| (v.slice(..), i.slice(..), tris.indices.len() as u32))
+            .collect();
+        let (w, h, rgba) = self.draw(shot, centre, &batches, &source_batches)?;
         Ok(Picture {
             width: w,
             height: h,
@@ -348,15 +349,15 @@ impl Renderer {
         &self.gpu.queue
     }
 
-    /// Draws `batches` of face instances (corners relative to `origin`) as seen by `shot`
-    /// and, if given, source triangles (positions relative to `origin` too) into an offscreen
-    /// picture and reads it back: width, height and RGBA rows.
+    /// Draws `batches` of face instances (corners relative to `origin`) and `sources`, batches
+    /// of source triangles (positions relative to `origin` too), as seen by `shot` into an
+    /// offscreen picture and reads it back: width, height and RGBA rows.
     pub(crate) fn draw(
         &self,
         shot: &Shot,
         origin: DVec3,
         batches: &[Batch],
-        source: Option<SourceBatch>,
+        sources: &[SourceBatch],
     ) -> Result<(u32, u32, Vec<u8>), RenderError> {
         // Reads best whole: one wgpu frame: targets, uniforms, pass, read-back.
         let centre = origin;
@@ -474,12 +475,14 @@ impl Renderer {
                 pass.set_vertex_buffer(0, vbuf.slice(..));
                 pass.draw(0..6, range.clone());
             }
-            if let Some((vbuf, ibuf, count)) = source {
+            if !sources.is_empty() {
                 pass.set_pipeline(&self.source_pipeline);
                 pass.set_bind_group(0, &bind, &[]);
-                pass.set_vertex_buffer(0, vbuf.slice(..));
-                pass.set_index_buffer(ibuf.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..count, 0, 0..1);
+            }
+            for (vertices, indices, count) in sources {
+                pass.set_vertex_buffer(0, *vertices);
+                pass.set_index_buffer(*indices, wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..*count, 0, 0..1);
             }
         }
         let row = (4 * w).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)

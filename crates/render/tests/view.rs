@@ -9,12 +9,14 @@
 //! corners, frustum planes built from the eye's basis). No adapter is a FAILURE, not a skip.
 
 mod common;
+mod viewing;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use glam::{DMat4, DVec3, DVec4};
+use viewing::{ancestors, face_bytes};
 use voxlod_format::{Aabb, Reader};
 use voxlod_render::view::{fly, FlyPath, StreamConfig, Viewer};
 use voxlod_render::{cut, Renderer, Shot, BACKGROUND};
@@ -52,15 +54,6 @@ fn fly_in() -> FlyPath {
     FlyPath::load(&p).unwrap()
 }
 
-/// Bytes of node `i`'s face buffer, from the voxels' face masks (28 bytes per active face).
-fn face_bytes(r: &Reader, i: usize) -> u64 {
-    r.read_node(i)
-        .unwrap()
-        .iter()
-        .map(|v| v.mask().count_ones() as u64 * 28)
-        .sum()
-}
-
 /// Fraction of pixels that differ from the clear colour.
 fn covered(rgba: &[u8]) -> f64 {
     let n = rgba
@@ -68,18 +61,6 @@ fn covered(rgba: &[u8]) -> f64 {
         .filter(|p| p[..3] != BACKGROUND[..])
         .count();
     n as f64 / (rgba.len() / 4) as f64
-}
-
-fn ancestors(r: &Reader, mut i: usize) -> Vec<usize> {
-    let mut out = Vec::new();
-    let root = r.root().unwrap();
-    while i != root {
-        let e = r.nodes()[i];
-        let parent_pos = e.pos().map(|p| p / 2);
-        i = r.find(e.level + 1, parent_pos).unwrap();
-        out.push(i);
-    }
-    out
 }
 
 #[test]
@@ -96,6 +77,7 @@ fn fly_in_streams_within_its_budgets() {
         cache_bytes: 150 << 20,
         upload_bytes_per_frame: 6 << 20,
         max_error_px: 1.0,
+        source: true,
     };
     assert!(config.cache_bytes < total && config.upload_bytes_per_frame < largest);
     let mut viewer = Viewer::new(&r, renderer, config).unwrap();
@@ -255,6 +237,7 @@ fn the_cut_matches_a_cpu_recomputation() {
             cache_bytes: 1 << 30,
             upload_bytes_per_frame: 1 << 30,
             max_error_px: 1.0,
+            source: true,
         },
     )
     .unwrap();

@@ -15,12 +15,17 @@ pub const EXAMPLES: &str = "\
 Examples:
   voxlod view dragon.voxlod --fly configs/fly-in.json --frames frames/
   voxlod view dragon.voxlod --fly configs/fly-in.json --frames frames/ --cache-mib 16 --upload-kib-per-frame 512
+  voxlod view bunny-src.voxlod --fly configs/close-up.json --frames close/   # built with --source-geometry
+  voxlod view bunny-src.voxlod --fly configs/close-up.json --frames close/ --no-source   # voxels only
   voxlod view dragon.voxlod                       # a window (orbit: drag; zoom: wheel; keys below)
 Window keys: left drag or A/D/Q/E orbit, wheel or W/S move in and out, arrow keys move the
 target, R resets, [ and ] halve and double the pixel error, Esc quits.
+In a file built with --source-geometry, leaves whose voxels are still coarser than --error
+pixels are streamed and drawn from their source triangles (in the same cache and upload limit).
 Each headless frame prints one JSON line: frame, cut_nodes, cut_leaf_nodes, drawn_nodes,
-drawn_leaf_nodes, faces_drawn, nodes_resident, bytes_resident, cache_budget, bytes_uploaded,
-upload_limit, cache_hits, cache_misses, evictions, pending, starved, ... (bytes are bytes).";
+drawn_leaf_nodes, source_leaves_drawn, faces_drawn, nodes_resident, bytes_resident,
+source_bytes_resident, cache_budget, bytes_uploaded, upload_limit, cache_hits, cache_misses,
+evictions, pending, starved, ... (bytes are bytes; every field in docs/JSON.md).";
 
 #[derive(Args)]
 pub struct ViewArgs {
@@ -47,6 +52,10 @@ pub struct ViewArgs {
     /// Refine a node while its voxels project to more than this many pixels.
     #[arg(long, default_value_t = 1.0)]
     error: f64,
+    /// Draw voxels everywhere, even where the file stores source triangles for leaves whose
+    /// voxels are coarser than --error pixels.
+    #[arg(long)]
+    no_source: bool,
 }
 
 #[cfg(feature = "window")]
@@ -80,6 +89,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
         cache_bytes: bytes(a.cache_mib, 1048576.0, "--cache-mib")?,
         upload_bytes_per_frame: bytes(a.upload_kib_per_frame, 1024.0, "--upload-kib-per-frame")?,
         max_error_px: a.error,
+        source: !a.no_source,
     };
     let reader = Reader::open(&a.file)?;
     let (Some(path), Some(dir)) = (a.fly, a.frames) else {

@@ -32,6 +32,17 @@ pub(crate) struct Written {
     pub bytes: u64,
     /// Nodes and voxels per level, finest first.
     pub levels: Vec<LevelStats>,
+    /// Source triangles written (`--source-geometry`: those of the leaves with voxels) and
+    /// their compressed payload bytes.
+    pub source: SourceWritten,
+}
+
+/// What the file stores of the source log: chunks without voxels are not written, so these
+/// are at most the source stage's totals.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct SourceWritten {
+    pub triangles: u64,
+    pub payload_bytes: u64,
 }
 
 /// Writes the octree file from the leaf log and renames it into place.
@@ -59,7 +70,7 @@ pub(crate) fn run(
     }
     let writer = Writer::create_with_channels(ctx.output.staged(), spec, &channels)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &ctx.pool);
-    write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
+    let source = write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
     let manifest = manifest_fields(ctx, ingested);
     let (bytes, levels) = octree.finish(|levels| {
         let mut m = manifest;
@@ -70,7 +81,11 @@ pub(crate) fn run(
         .commit()
         .map_err(|e| StageError::Output(crate::chain_text(&e)))?;
     ctx.stage_done("lod+write", t, false);
-    Ok(Written { bytes, levels })
+    Ok(Written {
+        bytes,
+        levels,
+        source,
+    })
 }
 
 /// The octree's optional channels: the material channel (its records follow each leaf's
@@ -161,13 +176,13 @@ type Leaf = (
 /// Feeds the leaf log to `octree`. The log is read and split on a second thread, one leaf
 /// ahead of the merges and parent encodes of this one (two leaves in flight at most). The
 /// leaves' payloads are not decoded: they go into the file as the voxelize stage encoded
-/// them, and their parents are made from their halves.
+/// them, and their parents are made from their halves. Returns the source triangles written.
 fn write_leaves<W: NodeSink>(
     ctx: &BuildContext,
     octree: &mut OctreeWriter<W>,
     records: u64,
     materials: bool,
-) -> Result<(), StageError> {
+) -> Result<SourceWritten, StageError> {
     let leaves = ctx.work.file(WorkFile::Leaves);
     let mut sources = ctx
         .settings
@@ -176,6 +191,7 @@ fn write_leaves<W: NodeSink>(
         .transpose()?;
     let bar = Stage::items(ctx.progress, "lod+write", records);
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Leaf, StageError>>(1);
+    let mut written = SourceWritten::default();
     std::thread::scope(|scope| -> Result<(), StageError> {
         scope.spawn(|| {
             let r = leaf_log::read_log(&leaves, &mut |h, payload| {
@@ -200,6 +216,10 @@ fn write_leaves<W: NodeSink>(
         let mut n = 0u64;
         for leaf in rx.iter() {
             let (coord, half, half_mats, enc, menc, source) = leaf?;
+            if let Some(s) = &source {
+                written.triangles += s.count as u64;
+                written.payload_bytes += s.payload.len() as u64;
+            }
             octree.push_halved(coord, half, half_mats, enc, menc, source)?;
             n += 1;
             bar.set(n, records);
@@ -207,7 +227,7 @@ fn write_leaves<W: NodeSink>(
         Ok(())
     })?;
     bar.finish();
-    Ok(())
+    Ok(written)
 }
 
 /// A leaf log record split into its parts. With `materials`, the material frame is checked

@@ -1,10 +1,12 @@
 //! The streaming viewer behind `voxlod view`: a frame loop over a [`Stream`] (the node cache
 //! with its upload limit, after Chajdas et al. 2014, Figure 14) drawing with the [`Renderer`]'s
-//! voxel-face pipeline. The headless mode ([`fly`]) renders a [`FlyPath`] to pictures; the
+//! voxel-face pipeline, and with its source-triangle pipeline the leaves whose voxels are
+//! coarser than the pixel error (section 4 of the paper; files built with `--source-geometry`). The headless mode ([`fly`]) renders a [`FlyPath`] to pictures; the
 //! interactive window (`window` feature, module `window`) runs the same [`Viewer::frame`] per
 //! redraw and copies the picture to the window.
 
 mod path;
+mod source;
 mod stream;
 #[cfg(feature = "window")]
 pub mod window;
@@ -79,15 +81,17 @@ impl<'a> Viewer<'a> {
     pub fn frame(&mut self, shot: &Shot) -> Result<Frame, RenderError> {
         let (mut stats, drawn) = self.stream.frame(self.reader, &self.renderer, shot)?;
         let (batches, all, kept) = self.stream.batches(self.reader, shot, &drawn);
+        let source = self.stream.source_batches(&drawn);
         stats.faces_resident_in_drawn = all;
         stats.faces_drawn = kept;
         let (width, height, rgba) =
             self.renderer
-                .draw(shot, self.stream.origin(), &batches, None)?;
+                .draw(shot, self.stream.origin(), &batches, &source.batches)?;
         let nodes: Vec<usize> = drawn.iter().map(|d| d.index).collect();
-        let voxels = nodes
+        let voxels = drawn
             .iter()
-            .map(|&i| self.reader.nodes()[i].voxel_count as u64)
+            .filter(|d| !d.triangles)
+            .map(|d| self.reader.nodes()[d.index].voxel_count as u64)
             .sum();
         Ok(Frame {
             picture: Picture {
@@ -98,8 +102,8 @@ impl<'a> Viewer<'a> {
                 nodes,
                 voxels,
                 faces_drawn: kept,
-                source_leaves: 0,
-                source_triangles: 0,
+                source_leaves: source.leaves,
+                source_triangles: source.triangles,
             },
             stats,
         })

@@ -11,15 +11,26 @@
 //! grouped by face direction, so a frame skips whole directions that face away from the eye
 //! (back-face culling per voxel face: a face with outward direction +a can be seen only from
 //! `eye[a]` above its plane). The CPU holds only the node being uploaded.
+//!
+//! **Source triangles** (section 4 of the paper, issue 15). In a file that stores them, a leaf
+//! of the cut whose voxels still project above the threshold ([`cut::CutNode::over`], the rule
+//! `render` draws by) is wanted as a second kind of entry: its source triangles
+//! (`source.rs`), requested after the voxel nodes, counted in the same byte budget, evicted by
+//! the same least-recently-used rule and uploaded under the same per-frame limit. Until its
+//! triangles are resident the leaf's voxels stay drawn and kept (or, where those are not
+//! resident either, an ancestor stands in as for any missing node), so no hole opens.
+//! [`StreamConfig::source`] off (`--no-source`) draws voxels everywhere; a leaf whose
+//! triangles exceed the whole budget is drawn as voxels from then on.
 
 use std::ops::Range;
 
 use glam::DVec3;
 use voxlod_format::{Aabb, Reader, Voxel};
 
+use super::source::{leaf_entry, TriangleLayout};
 use crate::camera::Shot;
 use crate::cut;
-use crate::draw::{Batch, FaceInstance, Renderer, FACE_BYTES};
+use crate::draw::{Batch, FaceInstance, Renderer, SourceBatch, FACE_BYTES};
 use crate::faces::node_faces;
 use crate::RenderError;
 
@@ -32,6 +43,9 @@ pub struct StreamConfig {
     pub upload_bytes_per_frame: u64,
     /// Refine a node while its voxels project above this many pixels.
     pub max_error_px: f64,
+    /// Draw the cut's leaves whose voxels are still coarser than `max_error_px` from their
+    /// source triangles, where the file stores them (false: voxels everywhere, `--no-source`).
+    pub source: bool,
 }
 
 /// What one frame did, printed as JSON by `voxlod view`.
@@ -44,67 +58,123 @@ pub struct FrameStats {
     /// Of them, level-0 (leaf) nodes.
     pub cut_leaf_nodes: usize,
     /// Leaves of the cut whose voxels still project above the threshold (where source
-    /// geometry would take over; not stored yet).
+    /// geometry takes over).
     pub cut_over_error: usize,
-    /// Nodes drawn (resident nodes of the cut, and parents standing in for missing children).
+    /// Of them, the leaves wanted as source triangles (they store triangles, the stream draws
+    /// them, and they fit the budget; 0 with `--no-source` or a file without the channel).
+    pub source_leaves_wanted: usize,
+    /// Nodes drawn (resident nodes of the cut, and parents standing in for missing children),
+    /// as voxels or as source triangles.
     pub drawn_nodes: usize,
     /// Of them, level-0 nodes.
     pub drawn_leaf_nodes: usize,
+    /// Of those, leaves drawn from their source triangles.
+    pub source_leaves_drawn: usize,
+    /// Triangles of those leaves.
+    pub source_triangles_drawn: u64,
+    /// Bytes of those leaves' resident triangle buffers.
+    pub source_bytes_drawn: u64,
     /// Finest (lowest) level drawn, if anything was.
     pub finest_level_drawn: Option<u32>,
     /// Face instances drawn (after the per-direction culling).
     pub faces_drawn: u64,
     /// Face instances of the drawn nodes before that culling.
     pub faces_resident_in_drawn: u64,
-    /// Nodes resident after the frame.
+    /// Nodes whose voxel faces are resident after the frame.
     pub nodes_resident: usize,
-    /// Bytes of face buffers resident after the frame (never above the budget).
+    /// Leaves whose source triangles are resident after the frame.
+    pub source_resident: usize,
+    /// Bytes resident after the frame, face and triangle buffers together (never above the
+    /// budget).
     pub bytes_resident: u64,
+    /// Of them, bytes of triangle buffers.
+    pub source_bytes_resident: u64,
     /// The cache budget, bytes.
     pub cache_budget: u64,
-    /// Bytes uploaded this frame (never above the limit).
+    /// Bytes uploaded this frame, faces and triangles (never above the limit).
     pub bytes_uploaded: u64,
+    /// Of them, bytes of triangle buffers.
+    pub source_bytes_uploaded: u64,
     /// The upload limit, bytes per frame.
     pub upload_limit: u64,
-    /// Nodes of the cut already resident at the start of the frame.
+    /// Nodes of the cut (those wanted as voxels) already resident at the start of the frame.
     pub cache_hits: usize,
-    /// Nodes of the cut not resident at the start of the frame (requested).
+    /// Nodes of the cut (those wanted as voxels) not resident at the start of the frame
+    /// (requested).
     pub cache_misses: usize,
-    /// Nodes evicted this frame.
+    /// Leaves wanted as source triangles whose triangles were resident at the start of the
+    /// frame.
+    pub source_hits: usize,
+    /// Leaves wanted as source triangles whose triangles were not (requested).
+    pub source_misses: usize,
+    /// Entries (voxel nodes and leaf triangles) evicted this frame.
     pub evictions: usize,
-    /// Nodes that became resident this frame.
+    /// Nodes whose voxel faces became resident this frame.
     pub nodes_completed: usize,
-    /// Requests still waiting after the frame (including a partly uploaded node).
+    /// Leaves whose triangles became resident this frame.
+    pub source_completed: usize,
+    /// Requests (of both kinds) still waiting after the frame (including a partly uploaded
+    /// entry).
     pub pending: usize,
-    /// The cache was full of nodes this frame needs, so a request had to wait.
+    /// The cache was full of entries this frame needs, so a request had to wait (leaf
+    /// triangles after it are still tried).
     pub starved: bool,
-    /// Nodes larger than the whole cache budget (never drawable at this budget).
+    /// Entries larger than the whole cache budget (never drawable at this budget; a leaf's
+    /// triangles that large leave it drawn as voxels).
     pub too_big: usize,
 }
 
-/// A node's face buffer: instances grouped by direction (`ranges[dir]`).
+/// The two kinds of cache entry: a node's voxel faces, a leaf's source triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Kind {
+    Faces,
+    Triangles,
+}
+
+/// What an entry's buffer holds.
+enum Layout {
+    /// Face instances grouped by direction (`ranges[dir]`).
+    Faces([Range<u32>; 6]),
+    /// Vertices, then indices.
+    Triangles(TriangleLayout),
+}
+
+/// A resident entry: its GPU buffer (none for a node without faces).
 struct Resident {
     buffer: Option<wgpu::Buffer>,
-    ranges: [Range<u32>; 6],
+    layout: Layout,
     bytes: u64,
     last_used: u64,
 }
 
-/// The node being uploaded: its faces on the CPU and how far the copy has got.
+/// The entry being uploaded: its bytes on the CPU and how far the copy has got.
 struct Upload {
+    kind: Kind,
     node: usize,
     data: Vec<u8>,
     done: u64,
     buffer: wgpu::Buffer,
-    ranges: [Range<u32>; 6],
+    layout: Layout,
 }
+
+/// A request: an entry of a node of the cut.
+type Request = (Kind, cut::CutNode);
 
 /// The node cache and upload queue of the viewer (see the module docs).
 pub struct Stream {
     config: StreamConfig,
     /// Every world position on the GPU is relative to this point (f32 precision).
     origin: DVec3,
+    /// Voxel faces per node.
     resident: Vec<Option<Resident>>,
+    /// Source triangles per node (leaves only).
+    triangles: Vec<Option<Resident>>,
+    /// Triangles stored beside each node (the file's index; 0 without the channel).
+    stored: Vec<u32>,
+    /// Leaves drawn as voxels although over the error: their triangles exceed the budget.
+    refused: Vec<bool>,
+    /// The frame tick at which each leaf was last wanted as triangles.
+    wanted: Vec<u64>,
     upload: Option<Upload>,
     bytes: u64,
     frame: u64,
@@ -125,6 +195,15 @@ impl std::fmt::Debug for Stream {
 /// A node to draw this frame.
 pub(crate) struct Drawn {
     pub index: usize,
+    /// Drawn from its source triangles instead of its voxels.
+    pub triangles: bool,
+}
+
+/// The source triangles to draw in a frame.
+pub(crate) struct SourceDraw<'a> {
+    pub batches: Vec<SourceBatch<'a>>,
+    pub leaves: u64,
+    pub triangles: u64,
 }
 
 /// One walk of the cut ([`Stream::visit`]): what stays the same through it (the file, the
@@ -175,10 +254,17 @@ impl Stream {
                 config.max_error_px
             )));
         }
+        let n = reader.nodes().len();
         Ok(Stream {
             config,
             origin,
-            resident: (0..reader.nodes().len()).map(|_| None).collect(),
+            resident: (0..n).map(|_| None).collect(),
+            triangles: (0..n).map(|_| None).collect(),
+            stored: (0..n)
+                .map(|i| reader.node_source_triangle_count(i))
+                .collect(),
+            refused: vec![false; n],
+            wanted: vec![0; n],
             upload: None,
             bytes: 0,
             frame: 0,
@@ -210,6 +296,34 @@ impl Stream {
             .collect()
     }
 
+    /// Indices of the leaves whose source triangles are resident, ascending.
+    pub fn resident_triangle_leaves(&self) -> Vec<usize> {
+        (0..self.triangles.len())
+            .filter(|&i| self.triangles[i].is_some())
+            .collect()
+    }
+
+    /// True if the cut node `c` is to be drawn from its source triangles: a leaf over the
+    /// error that stores triangles fitting the budget, with source drawing on.
+    fn by_triangles(&self, c: &cut::CutNode) -> bool {
+        self.config.source && c.over && self.stored[c.index] > 0 && !self.refused[c.index]
+    }
+
+    /// True if the entry of `kind` of node `i` is resident.
+    fn has(&self, kind: Kind, i: usize) -> bool {
+        match kind {
+            Kind::Faces => self.resident[i].is_some(),
+            Kind::Triangles => self.triangles[i].is_some(),
+        }
+    }
+
+    fn entries(&mut self, kind: Kind) -> &mut Vec<Option<Resident>> {
+        match kind {
+            Kind::Faces => &mut self.resident,
+            Kind::Triangles => &mut self.triangles,
+        }
+    }
+
     /// One frame for `shot`: find the cut, count hits and misses, upload within the limit
     /// (evicting least recently used nodes), and choose the nodes to draw.
     pub(crate) fn frame(
@@ -233,42 +347,29 @@ impl Stream {
             .iter()
             .filter(|c| reader.nodes()[c.index].level == 0)
             .count();
-        // requests: the cut's missing nodes, coarsest level first, then the largest error
-        let mut requests = Vec::new();
-        for c in &want {
-            match &mut self.resident[c.index] {
-                Some(r) => {
-                    r.last_used = tick;
-                    stats.cache_hits += 1;
-                }
-                None => {
-                    stats.cache_misses += 1;
-                    requests.push(*c);
-                }
-            }
-        }
-        requests.sort_by(|a, b| {
-            let (la, lb) = (reader.nodes()[a.index].level, reader.nodes()[b.index].level);
-            lb.cmp(&la)
-                .then(b.error.total_cmp(&a.error))
-                .then(a.index.cmp(&b.index))
-        });
+        // requests: the cut's missing entries, voxel nodes coarsest level first, then leaf
+        // triangles, each by the largest error
+        let (mut requests, triangles) = self.want(reader, &want, tick, &mut stats);
+        requests.extend(triangles);
         // parents standing in for missing children are in use too; where nothing covers a
         // missing part, its coarsest uncovered ancestor is requested before everything else
         let mut drawn = Vec::new();
         if let Some(root) = reader.root() {
             let mut walk = CutWalk::new(reader, shot, tick, true);
             self.visit(&mut walk, root, false);
-            let mut first: Vec<cut::CutNode> = walk
+            let mut first: Vec<Request> = walk
                 .stand_ins
                 .into_iter()
-                .map(|index| cut::CutNode {
-                    index,
-                    error: cut::node_error(reader, index, shot),
-                    over: false,
+                .map(|index| {
+                    let c = cut::CutNode {
+                        index,
+                        error: cut::node_error(reader, index, shot),
+                        over: false,
+                    };
+                    (Kind::Faces, c)
                 })
                 .collect();
-            first.sort_by_key(|c| (std::cmp::Reverse(reader.nodes()[c.index].level), c.index));
+            first.sort_by_key(|(_, c)| (std::cmp::Reverse(reader.nodes()[c.index].level), c.index));
             first.extend(requests);
             requests = first;
         }
@@ -286,12 +387,25 @@ impl Stream {
             }
             stats.finest_level_drawn =
                 Some(stats.finest_level_drawn.map_or(level, |l| l.min(level)));
+            if d.triangles {
+                let r = self.triangles[d.index]
+                    .as_ref()
+                    .expect("drawn, so resident");
+                let Layout::Triangles(t) = &r.layout else {
+                    unreachable!("a triangle entry")
+                };
+                stats.source_leaves_drawn += 1;
+                stats.source_triangles_drawn += t.triangles();
+                stats.source_bytes_drawn += r.bytes;
+            }
         }
         stats.nodes_resident = self.resident.iter().flatten().count();
+        stats.source_resident = self.triangles.iter().flatten().count();
         stats.bytes_resident = self.bytes;
+        stats.source_bytes_resident = self.triangles.iter().flatten().map(|r| r.bytes).sum();
         stats.pending = requests
             .iter()
-            .filter(|c| self.resident[c.index].is_none())
+            .filter(|(k, c)| !self.has(*k, c.index))
             .count();
         assert!(
             self.bytes <= self.config.cache_bytes,
@@ -303,6 +417,60 @@ impl Stream {
         );
         self.frame += 1;
         Ok((stats, drawn))
+    }
+
+    /// Hits and misses of the cut `want`: resident entries are marked used; the missing ones
+    /// are returned as requests, voxel nodes (coarsest level first, then the largest error)
+    /// and leaf triangles (the largest error first). A leaf wanted as triangles is marked for
+    /// this frame (`wanted`), and while its triangles are missing its voxels, if resident, are
+    /// marked used too: they stay drawn in its place.
+    fn want(
+        &mut self,
+        reader: &Reader,
+        want: &[cut::CutNode],
+        tick: u64,
+        stats: &mut FrameStats,
+    ) -> (Vec<Request>, Vec<Request>) {
+        let (mut faces, mut triangles) = (Vec::new(), Vec::new());
+        for c in want {
+            if self.by_triangles(c) {
+                self.wanted[c.index] = tick;
+                stats.source_leaves_wanted += 1;
+                match &mut self.triangles[c.index] {
+                    Some(r) => {
+                        r.last_used = tick;
+                        stats.source_hits += 1;
+                    }
+                    None => {
+                        stats.source_misses += 1;
+                        triangles.push((Kind::Triangles, *c));
+                        if let Some(r) = &mut self.resident[c.index] {
+                            r.last_used = tick;
+                        }
+                    }
+                }
+                continue;
+            }
+            match &mut self.resident[c.index] {
+                Some(r) => {
+                    r.last_used = tick;
+                    stats.cache_hits += 1;
+                }
+                None => {
+                    stats.cache_misses += 1;
+                    faces.push((Kind::Faces, *c));
+                }
+            }
+        }
+        let by_error = |a: &cut::CutNode, b: &cut::CutNode| {
+            b.error.total_cmp(&a.error).then(a.index.cmp(&b.index))
+        };
+        faces.sort_by(|(_, a), (_, b)| {
+            let (la, lb) = (reader.nodes()[a.index].level, reader.nodes()[b.index].level);
+            lb.cmp(&la).then(by_error(a, b))
+        });
+        triangles.sort_by(|(_, a), (_, b)| by_error(a, b));
+        (faces, triangles)
     }
 
     /// The per-frame upload limit actually used: the configured one rounded down to 4 bytes.
@@ -324,9 +492,19 @@ impl Stream {
             return true;
         }
         if !cut::refines(reader, i, shot, self.config.max_error_px) {
+            if self.wanted[i] == walk.tick && self.triangles[i].is_some() {
+                walk.out.push(Drawn {
+                    index: i,
+                    triangles: true,
+                });
+                return true;
+            }
             let here = self.resident[i].is_some();
             if here {
-                walk.out.push(Drawn { index: i });
+                walk.out.push(Drawn {
+                    index: i,
+                    triangles: false,
+                });
             }
             return here;
         }
@@ -351,7 +529,10 @@ impl Stream {
                     r.last_used = walk.tick;
                 }
                 walk.out.truncate(start);
-                walk.out.push(Drawn { index: i });
+                walk.out.push(Drawn {
+                    index: i,
+                    triangles: false,
+                });
                 true
             }
             None => false,
@@ -363,14 +544,17 @@ impl Stream {
         &mut self,
         reader: &Reader,
         renderer: &Renderer,
-        requests: &[cut::CutNode],
+        requests: &[Request],
         tick: u64,
         stats: &mut FrameStats,
     ) -> Result<(), RenderError> {
         let limit = self.upload_limit();
-        // a partly uploaded node no longer wanted is dropped (its bytes freed)
+        // a partly uploaded entry no longer wanted is dropped (its bytes freed)
         if let Some(u) = &self.upload {
-            if !requests.iter().any(|c| c.index == u.node) {
+            if !requests
+                .iter()
+                .any(|(k, c)| (*k, c.index) == (u.kind, u.node))
+            {
                 let u = self.upload.take().expect("checked");
                 self.bytes -= u.data.len() as u64;
                 u.buffer.destroy();
@@ -378,45 +562,10 @@ impl Stream {
         }
         let mut next = requests.iter();
         loop {
-            if self.upload.is_none() {
-                // start the next request that is not resident
-                let Some(c) = next.find(|c| self.resident[c.index].is_none()) else {
-                    break;
-                };
-                let (data, ranges) = self.node_instances(reader, c.index)?;
-                let size = data.len() as u64;
-                if size == 0 {
-                    self.resident[c.index] = Some(Resident {
-                        buffer: None,
-                        ranges,
-                        bytes: 0,
-                        last_used: tick,
-                    });
-                    stats.nodes_completed += 1;
-                    continue;
-                }
-                if size > self.config.cache_bytes {
-                    stats.too_big += 1;
-                    continue;
-                }
-                if !self.make_room(size, tick, stats) {
-                    stats.starved = true;
-                    break;
-                }
-                let buffer = renderer.device().create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("node faces"),
-                    size,
-                    usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                });
-                self.bytes += size;
-                self.upload = Some(Upload {
-                    node: c.index,
-                    data,
-                    done: 0,
-                    buffer,
-                    ranges,
-                });
+            if self.upload.is_none()
+                && !self.start_next(reader, renderer, &mut next, tick, stats)?
+            {
+                break;
             }
             let u = self.upload.as_mut().expect("set above");
             let room = limit - stats.bytes_uploaded;
@@ -428,36 +577,130 @@ impl Stream {
                     .write_buffer(&u.buffer, u.done, &u.data[from..from + n as usize]);
                 u.done += n;
                 stats.bytes_uploaded += n;
+                if u.kind == Kind::Triangles {
+                    stats.source_bytes_uploaded += n;
+                }
             }
             if u.done < u.data.len() as u64 {
                 break; // the limit is reached; the rest next frame
             }
             let u = self.upload.take().expect("set above");
-            self.resident[u.node] = Some(Resident {
+            match u.kind {
+                Kind::Faces => stats.nodes_completed += 1,
+                Kind::Triangles => stats.source_completed += 1,
+            }
+            self.entries(u.kind)[u.node] = Some(Resident {
                 buffer: Some(u.buffer),
-                ranges: u.ranges,
+                layout: u.layout,
                 bytes: u.data.len() as u64,
                 last_used: tick,
             });
-            stats.nodes_completed += 1;
         }
         Ok(())
     }
 
-    /// Evicts least recently used nodes not used this frame until `size` more bytes fit;
-    /// false if the nodes in use leave no room.
+    /// Starts uploading the next request of `next` that is not resident and fits: reads its
+    /// bytes, makes room for them and creates its buffer. A request for which the entries in
+    /// use leave no room waits (`starved`), and then only the leaf triangles after it are
+    /// tried. False when none is left.
+    fn start_next<'r>(
+        &mut self,
+        reader: &Reader,
+        renderer: &Renderer,
+        next: &mut impl Iterator<Item = &'r Request>,
+        tick: u64,
+        stats: &mut FrameStats,
+    ) -> Result<bool, RenderError> {
+        loop {
+            // after a request had to wait, only leaf triangles are tried (without reading the
+            // voxel nodes): far smaller than a node's faces, they should not wait behind one
+            let skip = |k: Kind| stats.starved && k == Kind::Faces;
+            let Some(&(kind, c)) = next.find(|(k, c)| !skip(*k) && !self.has(*k, c.index)) else {
+                return Ok(false);
+            };
+            let (data, layout) = match kind {
+                Kind::Faces => {
+                    let (data, ranges) = self.node_instances(reader, c.index)?;
+                    (data, Layout::Faces(ranges))
+                }
+                Kind::Triangles => match leaf_entry(reader, c.index, self.origin)? {
+                    Some((data, t)) => (data, Layout::Triangles(t)),
+                    None => {
+                        // nothing to draw after all: the leaf stays voxels
+                        self.refused[c.index] = true;
+                        continue;
+                    }
+                },
+            };
+            let size = data.len() as u64;
+            if size == 0 {
+                self.entries(kind)[c.index] = Some(Resident {
+                    buffer: None,
+                    layout,
+                    bytes: 0,
+                    last_used: tick,
+                });
+                stats.nodes_completed += 1;
+                continue;
+            }
+            if size > self.config.cache_bytes {
+                stats.too_big += 1;
+                if kind == Kind::Triangles {
+                    self.refused[c.index] = true;
+                }
+                continue;
+            }
+            if !self.make_room(size, tick, stats) {
+                // it waits; a later, smaller request (a leaf's triangles) may still fit
+                stats.starved = true;
+                continue;
+            }
+            let usage = match kind {
+                Kind::Faces => wgpu::BufferUsages::VERTEX,
+                Kind::Triangles => wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::INDEX,
+            };
+            let buffer = renderer.device().create_buffer(&wgpu::BufferDescriptor {
+                label: Some(match kind {
+                    Kind::Faces => "node faces",
+                    Kind::Triangles => "leaf triangles",
+                }),
+                size,
+                usage: usage | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            self.bytes += size;
+            self.upload = Some(Upload {
+                kind,
+                node: c.index,
+                data,
+                done: 0,
+                buffer,
+                layout,
+            });
+            return Ok(true);
+        }
+    }
+
+    /// Evicts least recently used entries not used this frame until `size` more bytes fit;
+    /// false if the entries in use leave no room.
     fn make_room(&mut self, size: u64, tick: u64, stats: &mut FrameStats) -> bool {
         while self.bytes + size > self.config.cache_bytes {
-            let victim = (0..self.resident.len())
-                .filter_map(|i| {
-                    let r = self.resident[i].as_ref()?;
-                    (r.last_used < tick).then_some((r.last_used, i))
-                })
+            let lru = |kind: Kind, entries: &[Option<Resident>]| {
+                (0..entries.len())
+                    .filter_map(|i| {
+                        let r = entries[i].as_ref()?;
+                        (r.last_used < tick).then_some((r.last_used, kind, i))
+                    })
+                    .min()
+            };
+            let victim = lru(Kind::Faces, &self.resident)
+                .into_iter()
+                .chain(lru(Kind::Triangles, &self.triangles))
                 .min();
-            let Some((_, i)) = victim else {
+            let Some((_, kind, i)) = victim else {
                 return false;
             };
-            let r = self.resident[i].take().expect("resident");
+            let r = self.entries(kind)[i].take().expect("resident");
             self.bytes -= r.bytes;
             if let Some(b) = r.buffer {
                 b.destroy();
@@ -502,14 +745,17 @@ impl Stream {
     ) -> (Vec<Batch<'a>>, u64, u64) {
         let mut out = Vec::new();
         let (mut all, mut kept) = (0u64, 0u64);
-        for d in drawn {
+        for d in drawn.iter().filter(|d| !d.triangles) {
             let r = self.resident[d.index]
                 .as_ref()
                 .expect("drawn nodes are resident");
             let Some(buffer) = &r.buffer else { continue };
+            let Layout::Faces(ranges) = &r.layout else {
+                unreachable!("a face entry")
+            };
             let b: Aabb = reader.node_bounds(d.index).expect("a node of the file");
             for dir in 0..6usize {
-                let range = r.ranges[dir].clone();
+                let range = ranges[dir].clone();
                 all += range.len() as u64;
                 let a = dir >> 1;
                 let seen = if dir & 1 == 0 {
@@ -524,5 +770,26 @@ impl Stream {
             }
         }
         (out, all, kept)
+    }
+
+    /// The source triangles to draw for `drawn` (the leaves drawn as triangles).
+    pub(crate) fn source_batches<'a>(&'a self, drawn: &[Drawn]) -> SourceDraw<'a> {
+        let mut out = SourceDraw {
+            batches: Vec::new(),
+            leaves: 0,
+            triangles: 0,
+        };
+        for d in drawn.iter().filter(|d| d.triangles) {
+            let r = self.triangles[d.index]
+                .as_ref()
+                .expect("drawn triangles are resident");
+            let (Some(buffer), Layout::Triangles(t)) = (&r.buffer, &r.layout) else {
+                unreachable!("a triangle entry has a buffer")
+            };
+            out.batches.push(t.batch(buffer));
+            out.leaves += 1;
+            out.triangles += t.triangles();
+        }
+        out
     }
 }
