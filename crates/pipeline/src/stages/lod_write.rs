@@ -122,14 +122,18 @@ fn write_shard(
     let sink = ShardWriter::create(ctx.output.staged(), header)?;
     let mut octree = OctreeWriter::new(sink, scope.levels, ctx.settings.zstd_level, &ctx.pool)
         .with_top(scope.split_level);
-    write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
+    let source = write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
     let (sink, levels) = octree.finish_sink()?;
     let bytes = sink.finish()?;
     ctx.output
         .commit()
         .map_err(|e| StageError::Output(crate::chain_text(&e)))?;
     ctx.stage_done("lod+write", t, false);
-    Ok(Written { bytes, levels })
+    Ok(Written {
+        bytes,
+        levels,
+        source,
+    })
 }
 
 /// The file holds every leaf payload: refuses before writing if the output's folder cannot
