@@ -425,22 +425,12 @@ pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> R
     let levels = ingested.grid.levels();
     let (split_level, ranges, balance) = plan::choose_split(&leaves, levels, shards as usize);
     let mut warnings = ctx.warnings.clone();
-    if !balance.balanced {
-        warnings.push(format!(
-            "the plan is not balanced: the largest of {shards} shards holds {:.2}× the mean binned triangles ({} subtrees at level {split_level}; the best any split level allows)",
-            balance.ratio, balance.subtrees
-        ));
-    }
+    warnings.extend(plan::balance_warning(shards, split_level, &balance));
     let p = Plan {
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,
         tool_version: env!("CARGO_PKG_VERSION").into(),
-        input: PlanInput {
-            path: input
-                .canonicalize()
-                .with_context(|| format!("{}: cannot resolve the path", input.display()))?,
-            fingerprint,
-        },
+        input: PlanInput::of(input, fingerprint)?,
         settings: s.clone(),
         grid: ingested.grid.into(),
         levels,

@@ -99,6 +99,16 @@ pub struct PlanInput {
     pub fingerprint: Fingerprint,
 }
 
+impl PlanInput {
+    /// `input` by its absolute path, with its fingerprint.
+    pub(crate) fn of(input: &Path, fingerprint: Fingerprint) -> Result<PlanInput> {
+        let path = input
+            .canonicalize()
+            .with_context(|| format!("{}: cannot resolve the path", input.display()))?;
+        Ok(PlanInput { path, fingerprint })
+    }
+}
+
 /// One shard: a contiguous range of level-`split_level` Morton codes.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -443,6 +453,14 @@ pub(crate) fn shards_at(
         subtrees: trees.len() as u64,
     };
     (shards, balance)
+}
+
+/// The warning for a plan whose largest shard is over the balance bound, if it is.
+pub(crate) fn balance_warning(shards: u32, split_level: u32, balance: &Balance) -> Option<String> {
+    (!balance.balanced).then(|| format!(
+        "the plan is not balanced: the largest of {shards} shards holds {:.2}× the mean binned triangles ({} subtrees at level {split_level}; the best any split level allows)",
+        balance.ratio, balance.subtrees
+    ))
 }
 
 /// The split level by the rule at the top of this file, its shards and their balance.

@@ -50,6 +50,29 @@ struct Source<'a> {
     wrap: [Wrap; 2],
 }
 
+/// The distinct texture sources of `materials`, as `TextureSet::load` dedups them (same path
+/// and wrap modes), and each material's source.
+fn distinct_sources(materials: &[Material]) -> (Vec<Source<'_>>, Vec<Option<usize>>) {
+    let mut sources: Vec<Source> = Vec::new();
+    let mut of_material = Vec::with_capacity(materials.len());
+    for m in materials {
+        of_material.push(m.texture.as_deref().map(|path| {
+            let found = sources
+                .iter()
+                .position(|s| s.path == path && s.wrap == m.wrap);
+            found.unwrap_or_else(|| {
+                sources.push(Source {
+                    m,
+                    path,
+                    wrap: m.wrap,
+                });
+                sources.len() - 1
+            })
+        }));
+    }
+    (sources, of_material)
+}
+
 /// FNV-1a, 64 bit (stable across Rust releases, unlike std's hasher).
 fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
     for b in bytes {
@@ -126,24 +149,7 @@ impl TextureSet {
         tile_file: &Path,
     ) -> Result<TextureSet, String> {
         assert!(share >= MIN_CAPACITY, "a texture share of {share} bytes");
-        // the distinct sources, as `load` dedups them, with each material's source
-        let mut sources: Vec<Source> = Vec::new();
-        let mut of_material = Vec::with_capacity(materials.len());
-        for m in materials {
-            of_material.push(m.texture.as_deref().map(|path| {
-                let found = sources
-                    .iter()
-                    .position(|s| s.path == path && s.wrap == m.wrap);
-                found.unwrap_or_else(|| {
-                    sources.push(Source {
-                        m,
-                        path,
-                        wrap: m.wrap,
-                    });
-                    sources.len() - 1
-                })
-            }));
-        }
+        let (sources, of_material) = distinct_sources(materials);
         let mut warnings = Vec::new();
         let mut sizes = Vec::with_capacity(sources.len());
         for s in &sources {

@@ -455,6 +455,7 @@ fn warn_extension(output: &Path, ext: &str, quiet: bool) {
 }
 
 fn print_summary(s: &BuildSummary, input: &str) {
+    // Reads best whole: one printed line per summary field, in the order the reader sees them.
     println!("wrote {}", s.output.display());
     println!("  input        {input} ({})", s.input_format);
     println!(

@@ -198,18 +198,13 @@ fn read_input(
 ) -> Result<(SpoolMarker, Option<ChunkCounts>), StageError> {
     let input_len = std::fs::metadata(ctx.input).map(|m| m.len()).unwrap_or(0);
     let bar = Stage::bytes(ctx.progress, "ingest", input_len);
-    let mut spooler = if spooled {
-        Some(Spooler::create(&ctx.work.file(WorkFile::Spool), layout)?)
-    } else {
-        None
-    };
-    let mut count = 0u64;
-    let mut bounds = Bounds::default();
-    let mut early_counts = if !spooled && may_count {
-        vertex_grid_counts(ctx)
-    } else {
-        None
-    };
+    let mut spooler = spooled
+        .then(|| Spooler::create(&ctx.work.file(WorkFile::Spool), layout))
+        .transpose()?;
+    let (mut count, mut bounds) = (0u64, Bounds::default());
+    let mut early_counts = (!spooled && may_count)
+        .then(|| vertex_grid_counts(ctx))
+        .flatten();
     // Inside the pool: a mapped binary PLY is decoded on its threads, and each batch's bounds
     // and chunk keys are taken there too (`prepare`); the callback, on this thread, only adds
     // them up (or spools the batch).
@@ -254,13 +249,16 @@ fn read_input(
         (count, bounds) = (spool.count, spool.bounds);
     }
     bar.finish();
-    let warnings = match stats.degenerate_skipped {
-        0 => vec![],
-        n => vec![format!(
-            "{}: {n} degenerate (zero-area) triangles skipped",
-            ctx.input.display()
-        )],
-    };
+    let warnings = (stats.degenerate_skipped > 0)
+        .then(|| {
+            let n = stats.degenerate_skipped;
+            format!(
+                "{}: {n} degenerate (zero-area) triangles skipped",
+                ctx.input.display()
+            )
+        })
+        .into_iter()
+        .collect();
     let marker = SpoolMarker {
         spooled,
         count,
