@@ -77,15 +77,15 @@ pub(crate) fn run(
         m["levels"] = serde_json::json!(levels);
         m
     })?;
-    ctx.output
-        .commit()
-        .map_err(|e| StageError::Output(crate::chain_text(&e)))?;
-    ctx.stage_done("lod+write", t, false);
-    Ok(Written {
-        bytes,
-        levels,
-        source,
-    })
+    committed(
+        ctx,
+        t,
+        Written {
+            bytes,
+            levels,
+            source,
+        },
+    )
 }
 
 /// The octree's optional channels: the material channel (its records follow each leaf's
@@ -125,15 +125,24 @@ fn write_shard(
     let source = write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
     let (sink, levels) = octree.finish_sink()?;
     let bytes = sink.finish()?;
+    committed(
+        ctx,
+        t,
+        Written {
+            bytes,
+            levels,
+            source,
+        },
+    )
+}
+
+/// Renames the written file (octree or shard) into place and ends the stage.
+fn committed(ctx: &mut BuildContext, t: Instant, written: Written) -> Result<Written, StageError> {
     ctx.output
         .commit()
         .map_err(|e| StageError::Output(crate::chain_text(&e)))?;
     ctx.stage_done("lod+write", t, false);
-    Ok(Written {
-        bytes,
-        levels,
-        source,
-    })
+    Ok(written)
 }
 
 /// The file holds every leaf payload: refuses before writing if the output's folder cannot
