@@ -308,6 +308,72 @@ fn bad_shards_and_inputs_are_refused() {
     assert!(e.contains("-r"), "{e}");
 }
 
+/// A byte changed in the middle of the input, with its size and modification time restored
+/// (so the plan's fingerprint of size, time and first and last MiB still matches): the shard
+/// refuses during its pass, naming the input and the plan, and leaves no shard file and no
+/// work folder; with the byte restored it builds again. A plan whose chunk list was edited is
+/// refused too.
+#[test]
+fn a_shard_refuses_an_input_whose_content_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // over 2 MiB, so that the fingerprint does not hash the whole file
+    let gen = gen_mesh(d, "150000");
+    let len = std::fs::metadata(&gen).unwrap().len();
+    assert!(len > 3 << 20, "{len} bytes");
+    let (p, v) = plan(&gen, d, 2, &["-r", "256", "--backend", "cpu"]);
+    let xxh3 = v["input"]["content_xxh3"].as_str().unwrap().to_string();
+    assert_eq!(xxh3.len(), 16, "{xxh3}");
+    let pdir = p.parent().unwrap();
+    let shard0 = pdir.join("shard-0000.vlshard");
+    ok(build_shard(&p, 0, &[]));
+    let good = std::fs::read(&shard0).unwrap();
+    std::fs::remove_file(&shard0).unwrap();
+    // one byte in the middle, then the old modification time back
+    let mtime = std::fs::metadata(&gen).unwrap().modified().unwrap();
+    let mut bytes = std::fs::read(&gen).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 1;
+    std::fs::write(&gen, &bytes).unwrap();
+    let set_mtime = |t| {
+        let f = std::fs::File::options().write(true).open(&gen).unwrap();
+        f.set_times(std::fs::FileTimes::new().set_modified(t))
+            .unwrap();
+    };
+    set_mtime(mtime);
+    assert_eq!(std::fs::metadata(&gen).unwrap().modified().unwrap(), mtime);
+    let e = err(build_shard(&p, 0, &[]));
+    let input = s(&gen.canonicalize().unwrap());
+    assert!(
+        e.contains(&format!("{input}: its content changed since {}", s(&p)))
+            && e.contains(&format!("the plan has {xxh3}")),
+        "{e}"
+    );
+    assert!(!shard0.exists(), "a refused shard left its file");
+    let left: Vec<_> = std::fs::read_dir(pdir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with(".voxlod-"))
+        .collect();
+    assert!(left.is_empty(), "a refused shard left {left:?}");
+    // restored: the same shard again
+    bytes[mid] ^= 1;
+    std::fs::write(&gen, &bytes).unwrap();
+    set_mtime(mtime);
+    ok(build_shard(&p, 0, &[]));
+    assert!(std::fs::read(&shard0).unwrap() == good, "shard 0 differs");
+    // a plan whose per-chunk counts were edited
+    let mut edited = v.clone();
+    let c = edited["chunks"][0][1].as_u64().unwrap();
+    edited["chunks"][0][1] = (c + 1).into();
+    std::fs::write(&p, serde_json::to_vec_pretty(&edited).unwrap()).unwrap();
+    let e = err(build_shard(&p, 0, &[]));
+    assert!(
+        e.contains(&s(&p)) && e.contains("its chunks add up to"),
+        "{e}"
+    );
+}
+
 /// A shard interrupted after some chunks resumes to the bytes of an uninterrupted run of the
 /// same shard (which a second uninterrupted run repeats), and the merge is still the single
 /// build.

@@ -27,6 +27,19 @@ pub enum StageError {
         /// Triangles of the first pass.
         first: u64,
     },
+    /// A sharded build's input has other bytes than when its plan was made (the XXH3-64 of
+    /// its content differs), though its size, time and first and last MiB may be the same.
+    #[error("{}: its content changed since {} was planned (XXH3-64 {now}, the plan has {planned}): plan again", .path.display(), .plan.display())]
+    ContentChanged {
+        /// The input file.
+        path: PathBuf,
+        /// The plan file.
+        plan: PathBuf,
+        /// The checksum now, hex.
+        now: String,
+        /// The plan's checksum, hex.
+        planned: String,
+    },
     /// An operation on a file failed.
     #[error("{what} {}", .path.display())]
     Io {

@@ -14,6 +14,7 @@
 //! ```
 
 mod backend;
+mod content_hash;
 mod error;
 mod leaf_log;
 mod memory;
@@ -40,8 +41,8 @@ pub use merge::{merge, MergeSummary};
 pub use octree_writer::{LevelStats, NodeSink, OctreeWriter, StoredPayloads};
 pub use output::{OutputGuard, OutputKind};
 pub use plan::{
-    Balance, Fingerprint, LoadedPlan, Plan, PlanGrid, PlanInput, PlanSummary, ShardRange,
-    ShardScope, PLAN_FORMAT, PLAN_VERSION,
+    Balance, Fingerprint, LoadedPlan, Plan, PlanGrid, PlanIngest, PlanInput, PlanSummary,
+    ShardRange, ShardScope, PLAN_FORMAT, PLAN_VERSION,
 };
 pub use size::{format_size, parse_size};
 pub use system::{interrupted, peak_rss, request_interrupt};
@@ -409,13 +410,22 @@ pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> R
         warnings,
         interrupt: &system::INTERRUPTED,
     };
-    let counted = stages::ingest::run(&mut ctx).and_then(|mut ing| {
-        let counts = stages::tile::counts(&ctx, &mut ing)?;
-        Ok((ing, counts))
+    // the content checksum on a thread of its own beside the passes
+    let (counted, xxh3) = content_hash::beside(input, &system::INTERRUPTED, || {
+        stages::ingest::run(&mut ctx).and_then(|mut ing| {
+            let counts = stages::tile::counts(&ctx, &mut ing)?;
+            Ok((ing, counts))
+        })
     });
-    let (ingested, counts) = match counted {
-        Ok(r) => r,
-        Err(e) => return Err(failed(e, work)),
+    let (ingested, counts, xxh3) = match (counted, xxh3) {
+        (Ok((i, c)), Ok(Some(h))) => (i, c, h),
+        (Err(e), _) | (_, Err(e)) => return Err(failed(e, work)),
+        (Ok(_), Ok(None)) => {
+            let e = StageError::Interrupted {
+                work: work.path().to_path_buf(),
+            };
+            return Err(failed(e, work));
+        }
     };
     let leaves: Vec<(u64, u64)> = counts
         .layout()
@@ -430,9 +440,11 @@ pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> R
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,
         tool_version: env!("CARGO_PKG_VERSION").into(),
-        input: PlanInput::of(input, fingerprint)?,
+        input: PlanInput::of(input, fingerprint, xxh3)?,
         settings: s.clone(),
         grid: ingested.grid.into(),
+        ingest: stages::ingest::planned(&ingested.marker),
+        chunks: leaves.iter().map(|&(m, c)| [m, c]).collect(),
         levels,
         manifest: stages::lod_write::manifest_fields(&ctx, &ingested),
         channels: stages::lod_write::channels(&ctx),

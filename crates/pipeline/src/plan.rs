@@ -26,8 +26,10 @@ use crate::BuildSettings;
 
 /// The plan file's `format` value.
 pub const PLAN_FORMAT: &str = "voxlod-plan";
-/// Version of the plan file (and of the shard files made from it).
-pub const PLAN_VERSION: u32 = 1;
+/// Version of the plan file. 2: the input's content checksum (`input.content_xxh3`), the
+/// ingest pass's findings (`ingest`) and the per-chunk counts (`chunks`), so that a shard reads
+/// the input once.
+pub const PLAN_VERSION: u32 = 2;
 /// Bytes hashed at each end of the input for its fingerprint.
 const FINGERPRINT_SPAN: u64 = 1 << 20;
 /// A shard may hold at most this many times the mean (as the fraction 3/2).
@@ -95,18 +97,45 @@ pub(crate) fn hex(bytes: &[u8]) -> String {
 pub struct PlanInput {
     /// Absolute path of the input (shards read it from a shared filesystem).
     pub path: PathBuf,
-    /// Its identity when planned: a shard refuses an input whose fingerprint differs.
+    /// Its identity when planned: a shard refuses, before any work, an input whose
+    /// fingerprint differs.
     pub fingerprint: Fingerprint,
+    /// XXH3-64 of every byte of the input, 16 hex digits (`content_hash.rs`): a shard takes it
+    /// again during its pass and refuses an input whose content differs.
+    pub content_xxh3: String,
 }
 
 impl PlanInput {
-    /// `input` by its absolute path, with its fingerprint.
-    pub(crate) fn of(input: &Path, fingerprint: Fingerprint) -> Result<PlanInput> {
+    /// `input` by its absolute path, with its fingerprint and content checksum.
+    pub(crate) fn of(input: &Path, fingerprint: Fingerprint, xxh3: u64) -> Result<PlanInput> {
         let path = input
             .canonicalize()
             .with_context(|| format!("{}: cannot resolve the path", input.display()))?;
-        Ok(PlanInput { path, fingerprint })
+        Ok(PlanInput {
+            path,
+            fingerprint,
+            content_xxh3: crate::content_hash::hex64(xxh3),
+        })
     }
+}
+
+/// What the plan's pass over the input found (the ingest stage's findings), which a shard
+/// takes instead of reading the input for them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanIngest {
+    /// Triangles read, degenerate ones included.
+    pub triangles: u64,
+    /// Zero-area triangles skipped.
+    pub degenerate_skipped: u64,
+    /// Non-degenerate triangles: those binned, and what the shard's pass must yield.
+    pub nondegenerate: u64,
+    /// The triangles' bounds (world coordinates), minimum corner.
+    pub min: [f64; 3],
+    /// 〃 maximum corner.
+    pub max: [f64; 3],
+    /// The ingest pass's warnings (degenerate triangles skipped).
+    pub warnings: Vec<String>,
 }
 
 /// One shard: a contiguous range of level-`split_level` Morton codes.
@@ -156,8 +185,13 @@ pub struct Plan {
     /// The build settings (threads, memory and the temporary folder may be overridden per
     /// shard; nothing else changes the bytes).
     pub settings: BuildSettings,
-    /// The grid every shard must find (from the input's bounds).
+    /// The grid of the input's bounds (`Grid::fit` of `ingest`'s bounds).
     pub grid: PlanGrid,
+    /// What the pass over the input found.
+    pub ingest: PlanIngest,
+    /// Every non-empty leaf chunk, in Morton order: `[Morton code, binned triangles]` (the
+    /// tile stage's counts, which size a shard's bins exactly).
+    pub chunks: Vec<[u64; 2]>,
     /// The octree's levels.
     pub levels: u32,
     /// The output's manifest without its `levels` (they are summed by the merge).
@@ -268,11 +302,17 @@ impl LoadedPlan {
                 plan.split_level
             );
         }
+        check_chunks(&plan).with_context(|| format!("{}: edited by hand?", path.display()))?;
         Ok(LoadedPlan {
             sha256: Sha256::digest(&bytes).into(),
             plan,
             path: path.to_path_buf(),
         })
+    }
+
+    /// The level-`split_level` Morton code of leaf chunk code `m`.
+    fn subtree_of(&self, m: u64) -> u64 {
+        m >> (3 * self.plan.split_level)
     }
 
     /// The name of shard `index`'s file: `shard-IIII.vlshard`.
@@ -306,8 +346,49 @@ impl LoadedPlan {
             plan_sha256: self.sha256,
             grid: self.plan.grid.into(),
             channels: self.plan.channels.clone(),
+            plan_path: self.path.clone(),
+            content_xxh3: self.plan.input.content_xxh3.clone(),
+            ingest: self.plan.ingest.clone(),
+            chunks: self
+                .plan
+                .chunks
+                .iter()
+                .filter(|c| (r.morton_start..r.morton_end).contains(&self.subtree_of(c[0])))
+                .copied()
+                .collect(),
         })
     }
+}
+
+/// The plan's chunk list is in strictly increasing Morton order inside the grid, without
+/// empty chunks, and each shard's chunks add up to its `triangles`.
+fn check_chunks(plan: &Plan) -> Result<()> {
+    let leaves = 1u64 << (3 * (plan.levels - 1));
+    if !plan.chunks.windows(2).all(|w| w[0][0] < w[1][0])
+        || plan.chunks.iter().any(|c| c[0] >= leaves || c[1] == 0)
+    {
+        bail!(
+            "the chunk list is not in increasing Morton order of non-empty chunks inside the grid"
+        );
+    }
+    let mut sums = vec![0u64; plan.shards.len()];
+    for c in &plan.chunks {
+        let code = c[0] >> (3 * plan.split_level);
+        let i = plan.shards.partition_point(|r| r.morton_end <= code);
+        if let Some(s) = sums.get_mut(i) {
+            *s = s.saturating_add(c[1]);
+        }
+    }
+    for (r, sum) in plan.shards.iter().zip(sums) {
+        if r.triangles != sum {
+            bail!(
+                "shard {} lists {} binned triangles, its chunks add up to {sum}",
+                r.index,
+                r.triangles
+            );
+        }
+    }
+    Ok(())
 }
 
 /// What a sharded build restricts itself to (from its plan).
@@ -331,6 +412,14 @@ pub struct ShardScope {
     pub grid: Grid,
     /// The octree's channels.
     pub channels: Vec<u32>,
+    /// The plan file (named by errors).
+    pub plan_path: PathBuf,
+    /// The plan's XXH3-64 of the input's bytes, hex.
+    pub content_xxh3: String,
+    /// What the plan's pass over the input found.
+    pub ingest: PlanIngest,
+    /// The shard's non-empty leaf chunks, `[Morton code, binned triangles]` in Morton order.
+    pub chunks: Vec<[u64; 2]>,
 }
 
 impl ShardScope {

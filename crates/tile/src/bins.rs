@@ -51,8 +51,12 @@ pub fn scatter(
     let keys = counts.keys();
     let mut done = 0u64;
     let total = src.count();
-    // the move to the grid and the chunk ranges where the triangles are read, the binning here
+    // the move to the grid and the chunk ranges where the triangles are read, the binning here;
+    // with dropped chunks, a triangle in none of the kept ones is rejected there, unmoved
     let prepare = |tris: &mut [Triangle]| {
+        if !counts.dropped.is_empty() {
+            return tris.iter_mut().map(|t| counts.keep_key(keys, t)).collect();
+        }
         for t in tris.iter_mut() {
             // `to_grid` in place
             for v in &mut t.v {
@@ -171,6 +175,39 @@ impl ChunkCounts {
         }
     }
 
+    /// Sets chunk `c`'s count (counts taken elsewhere, e.g. a sharded build's from its plan).
+    pub fn set(&mut self, c: [u32; 3], count: u64) {
+        let i = self.index(c);
+        self.counts[i] = count;
+    }
+
+    /// For a scatter with dropped chunks (precondition): [`DROPPED`] if no chunk of triangle `t`'s range
+    /// (world coordinates) is kept, else its key ([`ChunkKeys::of_grid`]) with `t` moved to
+    /// the grid. The range is [`Grid::world_chunk_range`], the one of the moved triangle.
+    #[inline]
+    fn keep_key(&self, keys: ChunkKeys, t: &mut Triangle) -> u32 {
+        debug_assert!(!self.dropped.is_empty(), "no chunk was dropped");
+        let Some((lo, hi)) = self.grid.world_chunk_range(t) else {
+            return DROPPED;
+        };
+        let key = keys.key(Some((lo, hi)));
+        let kept = if key != SPANS {
+            !self.dropped[key as usize]
+        } else {
+            (lo[2]..=hi[2]).any(|z| {
+                (lo[1]..=hi[1])
+                    .any(|y| (lo[0]..=hi[0]).any(|x| !self.dropped[self.index([x, y, z])]))
+            })
+        };
+        if !kept {
+            return DROPPED;
+        }
+        for v in &mut t.v {
+            *v = self.grid.to_grid(*v);
+        }
+        key
+    }
+
     /// Triangles binned into chunk `c`.
     pub fn get(&self, c: [u32; 3]) -> u64 {
         self.counts[self.index(c)]
@@ -214,6 +251,11 @@ impl ChunkCounts {
 /// none: such a triangle's range is worked out again where the key is used (rare: most
 /// triangles lie in one chunk).
 pub const SPANS: u32 = u32::MAX;
+
+/// The key of a triangle that lies in none of the kept chunks of a scatter with dropped chunks
+/// ([`ChunkCounts::retain`]): it is skipped without being moved to the grid or encoded. Never
+/// a chunk's index (a grid has at most 2³⁰ chunks: `n³` with `n` a power of two below 2¹¹).
+pub const DROPPED: u32 = u32::MAX - 1;
 
 /// A triangle's chunk range as one number, worked out where the triangles are read (in a
 /// pass's prepare step, see [`Passes::for_each_prepared`]) and used where they are counted or
@@ -351,6 +393,9 @@ impl<'g> Scatter<'g> {
     pub(crate) fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
         assert_eq!(tris.len(), keys.len(), "one key per triangle");
         for (t, &k) in tris.iter().zip(keys) {
+            if k == DROPPED {
+                continue;
+            }
             if k != SPANS {
                 self.put(t, k as usize)?;
                 continue;
@@ -670,6 +715,113 @@ mod tests {
         }
     }
 
+    /// `tris` spooled as positions only in `dir`, and the grid of resolution `r` fitted to
+    /// them.
+    fn positions_spool(
+        dir: &Path,
+        tris: &[Triangle],
+        r: u32,
+    ) -> (crate::Spool, Grid, RecordLayout) {
+        let layout = RecordLayout {
+            normals: false,
+            colors: false,
+            texcoords: false,
+        };
+        let mut sp = Spooler::create(&dir.join("spool"), layout).unwrap();
+        sp.push(tris).unwrap();
+        let spool = sp.finish().unwrap();
+        let grid = Grid::fit(&spool.bounds, r).unwrap();
+        (spool, grid, layout)
+    }
+
+    /// A scatter that keeps some chunks only (a sharded build's) writes exactly the kept
+    /// chunks' bins of the full scatter (same triangles, same order), with the triangles of
+    /// no kept chunk rejected before binning and those across a kept and a dropped chunk
+    /// binned into the kept one.
+    #[test]
+    fn a_scatter_keeping_some_chunks_writes_their_bins_of_the_full_scatter() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut s = 11u64;
+        let mut tris = Vec::new();
+        for i in 0..4000 {
+            let c = [lcg(&mut s) * 10.0, lcg(&mut s) * 10.0, lcg(&mut s) * 10.0];
+            let r = if i % 40 == 0 { 4.0 } else { 0.2 };
+            let t = [
+                c,
+                [c[0] + r, c[1], c[2] + r * lcg(&mut s)],
+                [c[0], c[1] + r, c[2]],
+            ];
+            tris.push(Triangle::new(t));
+        }
+        let (spool, grid, layout) = positions_spool(dir.path(), &tris, 1024);
+        let read = |bins: &Bins, i: usize| {
+            let mut got = Vec::new();
+            bins.read_chunk(i, 64, &mut |b| {
+                got.extend_from_slice(b);
+                Ok(())
+            })
+            .unwrap();
+            got
+        };
+        let full_counts = count(&spool, &grid, &mut |_, _| {}).unwrap();
+        let full = scatter(
+            &spool,
+            &grid,
+            &full_counts,
+            &dir.path().join("full"),
+            layout,
+            1 << 20,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let keep = |c: [u32; 3]| (c[0] + 2 * c[1] + c[2]) % 3 == 0;
+        let mut counts = count(&spool, &grid, &mut |_, _| {}).unwrap();
+        counts.retain(keep);
+        let part = scatter(
+            &spool,
+            &grid,
+            &counts,
+            &dir.path().join("part"),
+            layout,
+            40 * 100,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let kept: Vec<usize> = (0..full.chunks().len())
+            .filter(|&i| keep(full.chunks()[i].coord))
+            .collect();
+        assert!(kept.len() >= 5 && kept.len() < full.chunks().len());
+        assert_eq!(part.chunks().len(), kept.len());
+        for (j, &i) in kept.iter().enumerate() {
+            assert_eq!(part.chunks()[j].coord, full.chunks()[i].coord);
+            assert_eq!(read(&part, j), read(&full, i), "chunk {i}");
+        }
+        // some triangles were rejected whole, and some spanned a kept and a dropped chunk
+        let keys = counts.keys();
+        let (mut rejected, mut mixed) = (0, 0);
+        for t in &tris {
+            let (lo, hi) = grid.world_chunk_range(t).unwrap();
+            let mut cs = Vec::new();
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        cs.push(keep([x, y, z]));
+                    }
+                }
+            }
+            rejected += (!cs.contains(&true)) as u32;
+            mixed += (cs.contains(&true) && cs.contains(&false)) as u32;
+            assert_eq!(
+                counts.keep_key(keys, &mut t.clone()) == DROPPED,
+                !cs.contains(&true)
+            );
+        }
+        assert!(
+            rejected > 1000 && mixed > 20,
+            "{rejected} rejected, {mixed} mixed"
+        );
+    }
+
     #[test]
     fn truncated_spool_is_an_error() {
         let dir = tempfile::tempdir().unwrap();
@@ -702,15 +854,7 @@ mod tests {
                 tris.push(Triangle::new(t));
             }
         }
-        let layout = RecordLayout {
-            normals: false,
-            colors: false,
-            texcoords: false,
-        };
-        let mut sp = Spooler::create(&dir.path().join("spool"), layout).unwrap();
-        sp.push(&tris).unwrap();
-        let spool = sp.finish().unwrap();
-        let grid = Grid::fit(&spool.bounds, 512).unwrap();
+        let (spool, grid, layout) = positions_spool(dir.path(), &tris, 512);
         let scatter_with = |counted: &[Triangle]| {
             let mut counts = ChunkCounts::new(&grid).unwrap();
             counts.add_triangles(counted);

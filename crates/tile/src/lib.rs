@@ -46,7 +46,7 @@ mod bins;
 mod record;
 mod spool;
 
-pub use bins::{count, scatter, Bins, ChunkBin, ChunkCounts, ChunkKeys, SPANS};
+pub use bins::{count, scatter, Bins, ChunkBin, ChunkCounts, ChunkKeys, DROPPED, SPANS};
 pub use record::RecordLayout;
 pub use spool::{Spool, Spooler};
 

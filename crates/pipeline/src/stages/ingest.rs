@@ -9,13 +9,14 @@ use std::time::Instant;
 
 use anyhow::Context;
 use serde::{Deserialize, Serialize};
-use voxlod_geom::{Bounds, Grid, Triangle};
+use voxlod_geom::{demorton3, Bounds, Grid, Triangle};
 use voxlod_ingest::IngestError;
 use voxlod_tile::{ChunkCounts, RecordLayout, Spooler};
 
 use super::voxelize::LeavesMarker;
 use super::BuildContext;
 use crate::error::StageError;
+use crate::plan::{PlanIngest, ShardScope};
 use crate::progress::Stage;
 use crate::size::format_size;
 use crate::stages::tile::BinsMarker;
@@ -83,9 +84,16 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
         colors: info.has_colors,
         texcoords: info.has_texcoords,
     };
-    let spooled = !ctx.source.rereadable();
+    // a shard reads the input once, in the tile stage's scatter pass, whatever its format
+    let spooled = !ctx.source.rereadable() && ctx.settings.shard.is_none();
     let temp_disk = check_temp_disk(ctx, layout, spooled)?;
     let t = Instant::now();
+    let settings = ctx.settings;
+    if let Some(scope) = &settings.shard {
+        let ingested = from_plan(ctx, scope, layout, temp_disk)?;
+        ctx.stage_done("ingest", t, false);
+        return Ok(ingested);
+    }
     // a later stage's marker: the spool is not needed again, nor are counts
     let later_done =
         ctx.work.marker::<LeavesMarker>().is_some() || ctx.work.marker::<BinsMarker>().is_some();
@@ -126,6 +134,65 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
         grid,
         counted_during_ingest: early_counts.is_some(),
         early_counts,
+        temp_disk,
+    })
+}
+
+/// What the plan's pass found (bounds, counts, warnings), for the plan file.
+pub(crate) fn planned(m: &SpoolMarker) -> PlanIngest {
+    PlanIngest {
+        triangles: m.triangles,
+        degenerate_skipped: m.degenerate_skipped,
+        nondegenerate: m.count,
+        min: m.min,
+        max: m.max,
+        warnings: m.warnings.clone(),
+    }
+}
+
+/// A sharded build's ingest stage: what the plan's pass found, without reading the input. The
+/// grid is fitted to the plan's bounds, and the chunk counts are the plan's counts of the
+/// shard's chunks (the tile stage drops the others), so the tile stage's scatter pass is the
+/// shard's only pass over the input.
+fn from_plan(
+    ctx: &mut BuildContext,
+    scope: &ShardScope,
+    layout: RecordLayout,
+    temp_disk: u64,
+) -> Result<Ingested, StageError> {
+    let p = &scope.ingest;
+    let marker = SpoolMarker {
+        spooled: false,
+        count: p.nondegenerate,
+        min: p.min,
+        max: p.max,
+        triangles: p.triangles,
+        degenerate_skipped: p.degenerate_skipped,
+        warnings: p.warnings.clone(),
+    };
+    ctx.warnings.extend(marker.warnings.iter().cloned());
+    let plan = scope.plan_path.display();
+    let bounds = Bounds {
+        min: p.min,
+        max: p.max,
+    };
+    let grid = Grid::fit(&bounds, ctx.settings.resolution)
+        .with_context(|| format!("{plan}: fitting the grid to the plan's bounds"))?;
+    let mut counts = ChunkCounts::new(&grid)?;
+    let n = grid.chunks_per_axis();
+    for &[m, c] in &scope.chunks {
+        let coord = demorton3(m);
+        if coord.iter().any(|&a| a >= n) {
+            return Err(anyhow::anyhow!("{plan}: chunk {m} lies outside the grid").into());
+        }
+        counts.set(coord, c);
+    }
+    Ok(Ingested {
+        marker,
+        layout,
+        grid,
+        early_counts: Some(counts),
+        counted_during_ingest: true,
         temp_disk,
     })
 }

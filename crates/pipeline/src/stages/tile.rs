@@ -146,7 +146,7 @@ pub(crate) fn counts(ctx: &BuildContext, ing: &mut Ingested) -> Result<ChunkCoun
 }
 
 /// The count pass (unless `counts` are given) and the scatter pass. A sharded build keeps
-/// the chunks of its own subtrees only.
+/// the chunks of its own subtrees only, and checks the input's content during the pass.
 fn tile(
     ctx: &BuildContext,
     ing: &Ingested,
@@ -163,20 +163,26 @@ fn tile(
         ctx.check_interrupt()?;
         check_bins_space(ctx, &counts, ing.layout)?;
         let bar = Stage::items(ctx.progress, "scatter", ing.marker.count);
-        let bins = ctx
-            .pool
-            .install(|| {
-                voxlod_tile::scatter(
-                    src,
-                    &ing.grid,
-                    &counts,
-                    &ctx.work.file(WorkFile::Bins),
-                    ing.layout,
-                    ctx.plan.scatter_buffer,
-                    &mut |d, n| bar.set(d, n),
-                )
-            })
-            .map_err(StageError::from)?;
+        let scatter = || {
+            ctx.pool
+                .install(|| {
+                    voxlod_tile::scatter(
+                        src,
+                        &ing.grid,
+                        &counts,
+                        &ctx.work.file(WorkFile::Bins),
+                        ing.layout,
+                        ctx.plan.scatter_buffer,
+                        &mut |d, n| bar.set(d, n),
+                    )
+                })
+                .map_err(StageError::from)
+        };
+        // a shard's only pass over the input: its content must be the plan's
+        let bins = match &ctx.settings.shard {
+            Some(scope) => crate::content_hash::checked(ctx, scope, scatter)?,
+            None => scatter()?,
+        };
         bar.finish();
         Ok(bins)
     })
