@@ -320,7 +320,7 @@ fn a_shard_refuses_an_input_whose_content_changed() {
     // over 2 MiB, so that the fingerprint does not hash the whole file
     let gen = gen_mesh(d, "150000");
     let len = std::fs::metadata(&gen).unwrap().len();
-    assert!(len > 3 << 20, "{len} bytes");
+    assert!(len > 2 << 20, "{len} bytes");
     let (p, v) = plan(&gen, d, 2, &["-r", "256", "--backend", "cpu"]);
     let xxh3 = v["input"]["content_xxh3"].as_str().unwrap().to_string();
     assert_eq!(xxh3.len(), 16, "{xxh3}");

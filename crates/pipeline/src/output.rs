@@ -95,6 +95,7 @@ pub struct OutputGuard {
     staged: PathBuf,
     lock_path: PathBuf,
     lock: File,
+    kind: OutputKind,
 }
 
 /// The output's folder (`.` for a bare file name).
@@ -122,6 +123,11 @@ pub(crate) fn os_text(e: &std::io::Error) -> String {
 }
 
 impl OutputGuard {
+    /// What is written.
+    pub(crate) fn kind(&self) -> OutputKind {
+        self.kind
+    }
+
     /// Runs the up-front checks for writing `output` from `inputs` and takes the output's lock.
     /// Errors name the output (or its folder) once and say what to do.
     pub fn acquire(
@@ -147,6 +153,7 @@ impl OutputGuard {
             )),
             lock_path,
             lock,
+            kind,
         };
         check_free_space(output, dir)?;
         remove_leftovers(dir, &name);

@@ -124,12 +124,11 @@ impl PlanInput {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PlanIngest {
-    /// Triangles read, degenerate ones included.
+    /// Triangles the pass yielded (degenerate ones are skipped): those binned, and what the
+    /// shard's pass must yield again.
     pub triangles: u64,
     /// Zero-area triangles skipped.
     pub degenerate_skipped: u64,
-    /// Non-degenerate triangles: those binned, and what the shard's pass must yield.
-    pub nondegenerate: u64,
     /// The triangles' bounds (world coordinates), minimum corner.
     pub min: [f64; 3],
     /// 〃 maximum corner.

@@ -16,6 +16,7 @@ use voxlod_tile::{ChunkCounts, RecordLayout, Spooler};
 use super::voxelize::LeavesMarker;
 use super::BuildContext;
 use crate::error::StageError;
+use crate::output::OutputKind;
 use crate::plan::{PlanIngest, ShardScope};
 use crate::progress::Stage;
 use crate::size::format_size;
@@ -86,14 +87,16 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
     };
     // a shard reads the input once, in the tile stage's scatter pass, whatever its format
     let spooled = !ctx.source.rereadable() && ctx.settings.shard.is_none();
-    let temp_disk = check_temp_disk(ctx, layout, spooled)?;
     let t = Instant::now();
     let settings = ctx.settings;
     if let Some(scope) = &settings.shard {
-        let ingested = from_plan(ctx, scope, layout, temp_disk)?;
+        // the bins of its own chunks, exactly; the tile stage checks them against the free space
+        let bins: u64 = scope.chunks.iter().map(|c| c[1]).sum();
+        let ingested = from_plan(ctx, scope, layout, bins * layout.bytes() as u64)?;
         ctx.stage_done("ingest", t, false);
         return Ok(ingested);
     }
+    let temp_disk = check_temp_disk(ctx, layout, spooled)?;
     // a later stage's marker: the spool is not needed again, nor are counts
     let later_done =
         ctx.work.marker::<LeavesMarker>().is_some() || ctx.work.marker::<BinsMarker>().is_some();
@@ -140,10 +143,10 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
 
 /// What the plan's pass found (bounds, counts, warnings), for the plan file.
 pub(crate) fn planned(m: &SpoolMarker) -> PlanIngest {
+    debug_assert_eq!(m.count, m.triangles, "the pass's count is what it yielded");
     PlanIngest {
-        triangles: m.triangles,
+        triangles: m.count,
         degenerate_skipped: m.degenerate_skipped,
-        nondegenerate: m.count,
         min: m.min,
         max: m.max,
         warnings: m.warnings.clone(),
@@ -163,7 +166,7 @@ fn from_plan(
     let p = &scope.ingest;
     let marker = SpoolMarker {
         spooled: false,
-        count: p.nondegenerate,
+        count: p.triangles,
         min: p.min,
         max: p.max,
         triangles: p.triangles,
@@ -208,6 +211,11 @@ fn check_temp_disk(
     layout: RecordLayout,
     spooled: bool,
 ) -> Result<u64, StageError> {
+    // `voxlod plan` writes no bins, only the spool if there is one
+    let bins = ctx.output.kind() != OutputKind::Plan;
+    if !bins && !spooled {
+        return Ok(0);
+    }
     let rec = layout.bytes() as u64;
     let faces = ctx.source.info().faces;
     let input_len = std::fs::metadata(ctx.input).map(|m| m.len()).unwrap_or(0);
@@ -216,8 +224,10 @@ fn check_temp_disk(
     } else {
         (input_len / 12, input_len / 50)
     };
-    let temp_disk = est_triangles * rec * if spooled { 5 } else { 3 } / 2;
-    let min_disk = min_triangles * rec * if spooled { 2 } else { 1 };
+    // halves: the spool is 2 of them, the bins (1.5x for straddles) 3
+    let halves = 2 * spooled as u64 + 3 * bins as u64;
+    let temp_disk = est_triangles * rec * halves / 2;
+    let min_disk = min_triangles * rec * (spooled as u64 + bins as u64);
     let work = ctx.work.path();
     let Some(free) = crate::system::free_disk(work) else {
         return Ok(temp_disk);
@@ -229,10 +239,10 @@ fn check_temp_disk(
             work.display(),
             format_size(free),
             rec,
-            if spooled {
-                ", spool and bins"
-            } else {
-                ", bins only: the mapped input is read again"
+            match (spooled, bins) {
+                (true, true) => ", spool and bins",
+                (true, false) => ", the spool only: a plan writes no bins",
+                _ => ", bins only: the mapped input is read again",
             }
         );
     }
