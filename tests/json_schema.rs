@@ -1,6 +1,7 @@
-//! The `--json` output of `build`, `inspect`, `verify` and `diff` against the JSON Schemas in
-//! docs/schema/ (documented field by field in docs/JSON.md). The validator below implements
-//! the subset of JSON Schema (2020-12) those files use: `type` (one or a list),
+//! The `--json` output of `build` (and `build --plan --shard`), `inspect`, `verify`, `diff`,
+//! `plan` and `merge`, and the plan file, against the JSON Schemas in docs/schema/
+//! (documented field by field in docs/JSON.md; the plan file in docs/FORMAT.md 15.1). The
+//! validator below implements the subset of JSON Schema (2020-12) those files use: `type` (one or a list),
 //! `properties`, `required`, `additionalProperties: false`, `items`, `enum`, `const`,
 //! `minimum`, `minItems`, `maxItems`; any other keyword in a schema fails the test, so the
 //! schemas cannot silently use something unchecked. The validator itself is tested on
@@ -133,10 +134,10 @@ fn check(name: &str, doc: &Value) {
 }
 
 /// Every field the schema lists (recursively, where the document has one) has a description,
-/// and docs/JSON.md names it.
-fn documented(name: &str) {
-    let md = std::fs::read_to_string(Path::new(REPO).join("docs/JSON.md")).unwrap();
-    fn walk(s: &Value, path: &str, md: &str) {
+/// and `doc` (docs/JSON.md, or docs/FORMAT.md for the plan file) names it.
+fn documented(name: &str, doc: &str) {
+    let md = std::fs::read_to_string(Path::new(REPO).join(doc)).unwrap();
+    fn walk(s: &Value, path: &str, md: &str, doc: &str) {
         if let Some(p) = s.get("properties").and_then(|p| p.as_object()) {
             for (k, sub) in p {
                 assert!(
@@ -145,16 +146,16 @@ fn documented(name: &str) {
                 );
                 assert!(
                     md.contains(&format!("`{k}`")),
-                    "docs/JSON.md does not name `{k}` ({path})"
+                    "{doc} does not name `{k}` ({path})"
                 );
-                walk(sub, &format!("{path}.{k}"), md);
+                walk(sub, &format!("{path}.{k}"), md, doc);
             }
         }
         if let Some(i) = s.get("items") {
-            walk(i, &format!("{path}[]"), md);
+            walk(i, &format!("{path}[]"), md, doc);
         }
     }
-    walk(&schema(name), name, &md);
+    walk(&schema(name), name, &md, doc);
 }
 
 fn run(args: &[&str], cwd: &Path) -> Output {
@@ -300,9 +301,59 @@ fn json_output_of_each_command_matches_its_schema() {
     );
 }
 
+/// A sharded build of the bundled bunny: `plan --json`, the plan file, each `build --plan
+/// --shard --json` (the build summary: docs/schema/build.json) and `merge --json` against their
+/// schemas, and their figures against each other.
+#[test]
+fn sharded_build_json_and_the_plan_file_match_their_schemas() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let bunny = Path::new(REPO).join("data/bunny.ply");
+    let ok = |o: Output| {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        json_of(&o)
+    };
+    let set = ["-r", "512", "--backend", "cpu", "-q", "--json"];
+    let mut args = vec!["plan", bunny.to_str().unwrap(), "-o", "plan.json"];
+    args.extend(["--shards", "2"]);
+    args.extend(set);
+    let plan = ok(run(&args, d));
+    check("plan", &plan);
+    let file: Value = serde_json::from_slice(&std::fs::read(d.join("plan.json")).unwrap()).unwrap();
+    check("plan-file", &file);
+    assert_eq!(plan["triangles"], file["ingest"]["triangles"]);
+    assert_eq!(plan["shards"], file["shards"]);
+    assert_eq!(plan["chunks"], file["chunks"].as_array().unwrap().len());
+    let mut binned = 0;
+    for i in ["0", "1"] {
+        let shard = ok(run(
+            &["build", "--plan", "plan.json", "--shard", i, "-q", "--json"],
+            d,
+        ));
+        check("build", &shard);
+        binned += shard["binned_triangles"].as_u64().unwrap();
+    }
+    let total: u64 = file["chunks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c[1].as_u64().unwrap())
+        .sum();
+    assert_eq!(binned, total, "the shards binned what the plan counted");
+    let merge = ok(run(
+        &["merge", "plan.json", "-o", "m.voxlod", "-q", "--json"],
+        d,
+    ));
+    check("merge", &merge);
+    assert_eq!(merge["shards"], 2);
+    let len = std::fs::metadata(d.join("m.voxlod")).unwrap().len();
+    assert_eq!(merge["bytes"], len);
+}
+
 #[test]
 fn every_schema_field_is_described_and_in_json_md() {
-    for name in ["build", "inspect", "verify", "diff"] {
-        documented(name);
+    for name in ["build", "inspect", "verify", "diff", "plan", "merge"] {
+        documented(name, "docs/JSON.md");
     }
+    documented("plan-file", "docs/FORMAT.md");
 }
