@@ -218,10 +218,11 @@ impl WorkDir {
 
     /// Removes the folder and everything in it.
     ///
-    /// `remove_dir_all` lists the folder and then removes what it listed; on some filesystems
-    /// (seen under gVisor, once in eight Slurm test runs) the listing can miss an entry and the
-    /// final rmdir fails with "Directory not empty". A few retries remove what was missed; a
-    /// folder that still cannot be removed is an error naming it.
+    /// `remove_dir_all` lists the folder and then removes what it listed; a file created
+    /// meanwhile makes the final rmdir fail with "Directory not empty" (seen once in eight
+    /// Slurm test runs; the likely cause: another shard's search for stale folders created a
+    /// lock file in this one, which [`find_work_folders`] no longer does). A few retries remove such a late
+    /// file; a folder that still cannot be removed is an error naming it.
     pub(crate) fn remove(self) -> Result<()> {
         let mut tries = 0;
         loop {
@@ -286,12 +287,7 @@ pub fn find_work_folders(dir: &Path) -> Result<Vec<WorkFolder>> {
             continue;
         }
         let path = entry.path();
-        let in_use_by = match crate::output::lock_or_name_holder(&path.join("lock")) {
-            Ok(_lock) => None, // released here
-            Err(crate::output::LockError::Held(pid)) => Some(pid),
-            // unreadable or not ours to lock: count it as in use, never remove it
-            Err(crate::output::LockError::Io(_)) => Some(None),
-        };
+        let in_use_by = holder(&path);
         let age_seconds = entry
             .metadata()
             .ok()
@@ -307,6 +303,29 @@ pub fn find_work_folders(dir: &Path) -> Result<Vec<WorkFolder>> {
     }
     found.sort_by(|a, b| a.path.cmp(&b.path));
     Ok(found)
+}
+
+/// Whether a running build holds the lock of the work folder at `path`: `None` if none does
+/// (stale), else `Some` of its pid when it has written it. Probed with a non-blocking `flock`
+/// on the lock file opened *without creating it*: a build that finished removes its folder
+/// while others in the same parent look for stale folders (two shards of one plan ending
+/// together), and a lock file created by the probe inside a folder being removed made that
+/// removal fail with "Directory not empty". A folder without a lock file is being created or
+/// removed, so in use; an unreadable one counts as in use too (never removed).
+fn holder(path: &Path) -> Option<Option<u32>> {
+    use std::os::fd::AsRawFd;
+    let lock = path.join("lock");
+    let Ok(f) = std::fs::OpenOptions::new().read(true).open(&lock) else {
+        return Some(None);
+    };
+    // SAFETY: flock on a descriptor we own; the lock is released when `f` is dropped.
+    if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+        return None;
+    }
+    let pid = std::fs::read_to_string(&lock)
+        .ok()
+        .and_then(|s| s.trim().parse::<u32>().ok());
+    Some(pid)
 }
 
 /// Removes a stale work folder, holding its lock while it does so that a build starting on
@@ -356,6 +375,34 @@ fn tree_bytes(path: &Path) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Looking for stale folders creates nothing inside a folder whose lock file is gone (a
+    /// build removing its folder at that moment), and counts it as in use; a folder whose lock
+    /// a live handle holds is in use, one whose lock nobody holds is stale.
+    #[test]
+    fn probing_for_stale_folders_creates_no_lock_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let removing = dir.path().join(format!("{WORK_PREFIX}a-1"));
+        std::fs::create_dir(&removing).unwrap();
+        std::fs::write(removing.join("leaves.json"), b"{}").unwrap();
+        let held = dir.path().join(format!("{WORK_PREFIX}b-2"));
+        std::fs::create_dir(&held).unwrap();
+        let _lock = crate::output::lock_or_name_holder(&held.join("lock")).unwrap();
+        let stale = dir.path().join(format!("{WORK_PREFIX}c-3"));
+        std::fs::create_dir(&stale).unwrap();
+        drop(crate::output::lock_or_name_holder(&stale.join("lock")).unwrap());
+        let found = find_work_folders(dir.path()).unwrap();
+        let state: Vec<_> = found.iter().map(|f| f.in_use_by).collect();
+        assert_eq!(
+            state,
+            vec![Some(None), Some(Some(std::process::id())), None]
+        );
+        assert!(
+            !removing.join("lock").exists(),
+            "the probe created a lock file in a folder being removed"
+        );
+        std::fs::remove_dir_all(&removing).unwrap();
+    }
 
     /// A resumed build recomputes its grid from the bounds in a marker, so the marker must give
     /// back every f64 bit for bit (serde_json's default float parser is off by one ulp on some
