@@ -30,6 +30,24 @@ pub const DEFER_BYTES: usize = 32 << 20;
 const BRICKS: usize = 32 * 32 * 32;
 const BRICK: usize = 512;
 
+/// The position inside its brick of each in-brick Morton code (`demorton3` of 0..512).
+static IN_BRICK: [[u8; 3]; BRICK] = {
+    let mut t = [[0u8; 3]; BRICK];
+    let mut v = 0;
+    while v < BRICK {
+        let mut b = 0;
+        while b < 3 {
+            // bit 3i + a of the code is bit i of axis a
+            t[v][0] |= (((v >> (3 * b)) & 1) << b) as u8;
+            t[v][1] |= (((v >> (3 * b + 1)) & 1) << b) as u8;
+            t[v][2] |= (((v >> (3 * b + 2)) & 1) << b) as u8;
+            b += 1;
+        }
+        v += 1;
+    }
+    t
+};
+
 /// The sums of one voxel: `s = [Σ w·n_x, Σ w·n_y, Σ w·n_z, Σ w, Σ w·r, Σ w·g, Σ w·b, Σ w·a]`
 /// in f32, in triangle order, and the number of contributions `k`.
 ///
@@ -56,31 +74,26 @@ const BRICK: usize = 512;
 ///
 /// `tests/attributes.rs` checks these bounds against sums of the f64 reference
 /// ([`crate::clipped_area`] and the barycentric interpolation of the crate docs).
-/// The top bit of [`Acc::k`]: the voxel's record words are already in the voxelizer's `words`
-/// (a voxel skipped by [`crate::single`], encoded once per triangle); its sums are not kept.
-const ENCODED: u32 = 1 << 31;
-
+///
+/// The count `k` lives apart from the sums, in [`Slots::k`] (4 bytes per voxel): the marking
+/// pass and the skip's test touch only the counts, and the sums are made (zero) when the
+/// attribute pass starts.
 #[derive(Clone, Copy, Debug)]
 struct Acc {
     s: [f32; 8],
-    /// Morton code of the in-chunk position
-    idx: u32,
-    k: u32,
 }
 
+/// The top bit of a voxel's count ([`Slots::k`]): the voxel's record words are already in the
+/// voxelizer's `words` (a voxel skipped by [`crate::single`], encoded once per triangle); its
+/// sums are not used.
+const ENCODED: u32 = 1 << 31;
+
 impl Acc {
-    /// A voxel the marking pass found, with its first contribution counted and no sums yet.
-    #[inline]
-    fn marked(idx: u32) -> Acc {
-        Acc {
-            s: [0.0; 8],
-            idx,
-            k: 1,
-        }
-    }
+    /// No contribution yet.
+    const ZERO: Acc = Acc { s: [0.0; 8] };
 
     /// Adds one contribution of weight `w` and values `x` (`x[3] = 1`) to the sums (the
-    /// marking pass has counted it in `k` already).
+    /// marking pass has counted it in the voxel's `k` already).
     #[inline]
     fn add(&mut self, w: f32, x: [f32; 8]) {
         if self.s[3] > 0.0 {
@@ -184,6 +197,7 @@ impl ChunkVoxelizer {
                 bricks: vec![0u32; BRICKS],
                 blocks: Vec::new(),
                 touched: Vec::new(),
+                k: Vec::new(),
                 acc: Vec::new(),
             },
             marked: Vec::new(),
@@ -394,7 +408,10 @@ impl ChunkVoxelizer {
         let textures = textures.as_deref();
         let skip = skip && *single_skip && textures.is_none();
         let o = origin.map(|c| c as i64);
-        let acc = &mut slots.acc;
+        // the sums of the voxels marked since the last call start at zero (`eager` chunks call
+        // this after every batch)
+        let (acc, counts) = (&mut slots.acc, &mut slots.k);
+        acc.resize(counts.len(), Acc::ZERO);
         // the records of the skipped voxels, encoded once per triangle (`finish` encodes the rest)
         words.clear();
         if skip {
@@ -407,32 +424,36 @@ impl ChunkVoxelizer {
             let mut mats = materials.as_mut().map(|ms| ms.set_triangle(t.material()));
             // one contribution: weight `w` and values `x` into the sums, or, for a voxel the
             // skip leaves unclipped (weight 1), its record's words
-            let mut add =
-                |acc: &mut [Acc], slot: u32, w: f32, x: [f32; 8], rec: Option<[u32; 2]>| {
-                    match rec {
-                        Some(r) => {
-                            *unclipped += 1;
-                            acc[slot as usize].k |= ENCODED;
-                            words[slot as usize] = r;
-                        }
-                        None => acc[slot as usize].add(w, x),
+            let mut add = |acc: &mut [Acc],
+                           counts: &mut [u32],
+                           slot: u32,
+                           w: f32,
+                           x: [f32; 8],
+                           rec: Option<[u32; 2]>| {
+                match rec {
+                    Some(r) => {
+                        *unclipped += 1;
+                        counts[slot as usize] |= ENCODED;
+                        words[slot as usize] = r;
                     }
-                    if let Some(ms) = mats.as_deref_mut() {
-                        ms.add(slot as usize, w);
-                    }
-                };
+                    None => acc[slot as usize].add(w, x),
+                }
+                if let Some(ms) = mats.as_deref_mut() {
+                    ms.add(slot as usize, w);
+                }
+            };
             if m.interior {
                 let (w, x) = interior_contribution(t, textures);
-                add(acc, pairs[0].slot, w, x, None);
+                add(acc, counts, pairs[0].slot, w, x, None);
                 continue;
             }
             let flat = skip && single::is_flat(t);
             let xflat = flat.then(|| single::flat_values(t));
             let record = xflat.map(|x| (x, record_words(&x)));
             if let Some((x, r)) = record {
-                if pairs.iter().all(|p| acc[p.slot as usize].k == 1) {
+                if pairs.iter().all(|p| counts[p.slot as usize] == 1) {
                     for p in pairs {
-                        add(acc, p.slot, 1.0, x, Some(r));
+                        add(acc, counts, p.slot, 1.0, x, Some(r));
                     }
                     continue;
                 }
@@ -443,8 +464,8 @@ impl ChunkVoxelizer {
             cols.set(&s);
             let mut column = u32::MAX;
             for p in pairs {
-                if let (Some((x, r)), 1) = (record, acc[p.slot as usize].k) {
-                    add(acc, p.slot, 1.0, x, Some(r));
+                if let (Some((x, r)), 1) = (record, counts[p.slot as usize]) {
+                    add(acc, counts, p.slot, 1.0, x, Some(r));
                     continue;
                 }
                 let [x, y, z] = [p.swz & 255, p.swz >> 8 & 255, p.swz >> 16];
@@ -452,16 +473,18 @@ impl ChunkVoxelizer {
                     column = p.swz & 0xffff;
                     cols.begin((x as i64 + o_s[0]) as f64, (y as i64 + o_s[1]) as f64);
                 }
-                let (w, c) = cols.voxel((z as i64 + o_s[2]) as f64);
-                let x = match (&ip, xflat) {
+                let z = (z as i64 + o_s[2]) as f64;
+                let (w, x) = match (&ip, xflat) {
                     (Some(ip), _) => {
+                        let (w, c) = cols.voxel(z);
                         let q = c.map_or(ip.centroid, |c| [c[0], c[1]]);
-                        ip.at(q[0], q[1], w)
+                        (w, ip.at(q[0], q[1], w))
                     }
-                    (None, Some(x)) => x,
+                    // flat values: the area alone (bit for bit the clipped path's weight)
+                    (None, Some(x)) => (cols.voxel_area(z), x),
                     (None, None) => unreachable!("a triangle is flat or interpolated"),
                 };
-                add(acc, p.slot, w as f32, x, None);
+                add(acc, counts, p.slot, w as f32, x, None);
             }
         }
     }
@@ -469,35 +492,35 @@ impl ChunkVoxelizer {
     /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
     /// with normal, colour and face mask. Resets for the next `begin`.
     ///
-    /// The accumulators are encoded in the order they were made (a sequential read) and each
-    /// record is stored at its rank in Morton order, which the occupancy bits give without a
-    /// sort: the voxels of the bricks before its brick (in Morton order) plus those before it
-    /// in its brick.
+    /// The accumulators are encoded in the order they were made (a sequential read); the
+    /// records are then written in Morton order, walking the touched bricks in Morton order and
+    /// each brick's occupancy bits ([`ChunkVoxelizer::in_morton_order`]): a sequential write,
+    /// no sort of the voxels and no scattered stores.
     pub fn finish(&mut self) -> Vec<Voxel> {
         self.accumulate(!self.eager);
-        let mut out = vec![Voxel::default(); self.slots.acc.len()];
-        // per accumulator (made in slot order: `ranked` passes it as `i`) its material
+        let mut out = Vec::with_capacity(self.slots.acc.len());
+        // per accumulator (made in slot order: `in_morton_order` passes it as `slot`) its material
         let winners: Option<Vec<u32>> = self
             .materials
             .as_ref()
             .map(|m| (0..m.len()).map(|i| m.winner(i)).collect());
-        let mut mats = vec![0u32; winners.as_ref().map_or(0, Vec::len)];
+        let mut mats = Vec::with_capacity(winners.as_ref().map_or(0, Vec::len));
         if self.textures.is_some() {
-            self.ranked(|r, i, pos, a| {
-                out[r] = encode(pos, a, true);
+            self.in_morton_order(|slot, pos, acc, k| {
+                out.push(encode(pos, &acc[slot], k[slot], true));
                 if let Some(w) = &winners {
-                    mats[r] = w[i];
+                    mats.push(w[slot]);
                 }
             });
         } else {
             let mut words = std::mem::take(&mut self.words);
-            encode_words(&self.slots.acc, &mut words);
-            self.ranked(|r, i, pos, _| {
-                let [normal, color] = words[i];
+            encode_words(&self.slots.acc, &self.slots.k, &mut words);
+            self.in_morton_order(|slot, pos, _, _| {
+                let [normal, color] = words[slot];
                 let mask = face_mask(normal) | border_caps(pos);
-                out[r] = Voxel::new(pos, mask, normal, color);
+                out.push(Voxel::new(pos, mask, normal, color));
                 if let Some(w) = &winners {
-                    mats[r] = w[i];
+                    mats.push(w[slot]);
                 }
             });
             self.words = words;
@@ -511,26 +534,31 @@ impl ChunkVoxelizer {
     /// Every pair is clipped here (no [`crate::single`] skip): `w` is the summed clipped area.
     pub fn finish_sums(&mut self) -> Vec<VoxelSums> {
         self.accumulate(false);
-        let mut out = vec![VoxelSums::default(); self.slots.acc.len()];
-        self.ranked(|r, _, pos, a| {
-            out[r] = VoxelSums {
+        let mut out = Vec::with_capacity(self.slots.acc.len());
+        self.in_morton_order(|slot, pos, acc, k| {
+            let a = &acc[slot];
+            out.push(VoxelSums {
                 pos,
-                k: a.k,
+                k: k[slot],
                 w: a.s[3],
                 n: [a.s[0], a.s[1], a.s[2]],
                 c: [a.s[4], a.s[5], a.s[6], a.s[7]],
-            }
+            })
         });
         out
     }
 
-    /// Calls `f(rank, index, position, sums)` for every accumulator, in the order they were made
-    /// (`index`), with its rank in Morton order; then resets.
+    /// Calls `f(slot, position, sums, counts)` for every occupied voxel in Morton order of its
+    /// in-chunk position; then resets. The order is the touched bricks sorted by brick Morton
+    /// code (a few thousand keys, not the voxels), and inside a brick its occupancy bits from
+    /// the lowest: global Morton code = brick code · 512 + code inside the brick. A voxel's slot
+    /// is read from its brick's block, its position is the brick's corner plus [`IN_BRICK`].
     #[inline]
-    fn ranked(&mut self, mut f: impl FnMut(usize, usize, [u8; 3], &Acc)) {
+    fn in_morton_order(&mut self, mut f: impl FnMut(usize, [u8; 3], &[Acc], &[u32])) {
         let Slots {
-            bricks,
+            blocks,
             touched,
+            k,
             acc,
             ..
         } = &self.slots;
@@ -540,25 +568,23 @@ impl ChunkVoxelizer {
             .map(|(i, &(b, _))| (b, i as u32))
             .collect();
         order.sort_unstable();
-        // rank of the first voxel of each occupancy word of each touched brick
-        let mut first = vec![[0u32; 8]; touched.len()];
-        let mut rank = 0u32;
-        for &(_, i) in &order {
-            let occ = &touched[i as usize].1;
-            for (f, w) in first[i as usize].iter_mut().zip(occ) {
-                *f = rank;
-                rank += w.count_ones();
+        let mut seen = 0usize;
+        for &(b, i) in &order {
+            let corner = demorton3(b as u64).map(|c| (c * 8) as u8);
+            let block = &blocks[i as usize * BRICK..(i as usize + 1) * BRICK];
+            for (w, &bits) in touched[i as usize].1.iter().enumerate() {
+                let mut bits = bits;
+                while bits != 0 {
+                    let v = w * 64 + bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    let d = IN_BRICK[v];
+                    let pos = [corner[0] | d[0], corner[1] | d[1], corner[2] | d[2]];
+                    f(block[v] as usize - 1, pos, acc, k);
+                    seen += 1;
+                }
             }
         }
-        debug_assert_eq!(rank as usize, acc.len());
-        for (i, a) in acc.iter().enumerate() {
-            let b = bricks[(a.idx >> 9) as usize] as usize - 1;
-            let v = a.idx as usize & (BRICK - 1);
-            let below = touched[b].1[v >> 6] & ((1u64 << (v & 63)) - 1);
-            let r = first[b][v >> 6] + below.count_ones();
-            let pos = demorton3(a.idx as u64).map(|c| c as u8);
-            f(r as usize, i, pos, a);
-        }
+        debug_assert_eq!(seen, k.len());
         self.reset();
     }
 
@@ -582,7 +608,10 @@ struct Slots {
     blocks: Vec<u32>,
     /// per touched brick: its brick index and the occupancy bits of its 512 voxels
     touched: Vec<(u32, [u64; 8])>,
-    /// per occupied voxel, in the order of first touch
+    /// per occupied voxel (its slot), in the order of first touch: the number of contributions
+    /// the marking pass counted, and [`ENCODED`]
+    k: Vec<u32>,
+    /// the sums per slot, made by the attribute pass (`ChunkVoxelizer::accumulate`)
     acc: Vec<Acc>,
 }
 
@@ -594,6 +623,7 @@ impl Slots {
         }
         self.touched.clear();
         self.blocks.clear();
+        self.k.clear();
         self.acc.clear();
     }
 
@@ -613,11 +643,11 @@ impl Slots {
         let v = idx as usize & (BRICK - 1);
         let sl = &mut self.blocks[(b - 1) * BRICK + v];
         if *sl == 0 {
-            self.acc.push(Acc::marked(idx));
-            *sl = self.acc.len() as u32;
+            self.k.push(1);
+            *sl = self.k.len() as u32;
             self.touched[b - 1].1[v >> 6] |= 1 << (v & 63);
         } else {
-            self.acc[*sl as usize - 1].k += 1;
+            self.k[*sl as usize - 1] += 1;
         }
         *sl - 1
     }
@@ -664,11 +694,11 @@ fn interior_contribution(t: &Triangle, textures: Option<&TextureSet>) -> (f32, [
 /// The normal is packed from the sum itself (packing normalizes, and `N / W` has the direction
 /// of `N`), in f64 so that tiny sums neither underflow nor lose digits.
 #[inline]
-fn encode(pos: [u8; 3], a: &Acc, linear: bool) -> Voxel {
+fn encode(pos: [u8; 3], a: &Acc, k: u32, linear: bool) -> Voxel {
     let s = &a.s;
     let normal = pack_normal_f64([s[0] as f64, s[1] as f64, s[2] as f64]);
     let mask = face_mask(normal) | border_caps(pos);
-    let inv = 1.0 / if s[3] > 0.0 { s[3] } else { a.k as f32 };
+    let inv = 1.0 / if s[3] > 0.0 { s[3] } else { k as f32 };
     let c = |k: usize| {
         let m = s[k] * inv;
         let m = if linear && k < 7 {
@@ -694,10 +724,11 @@ const LANES: usize = 64;
 /// scalar [`encode`]; `tests` below compares the two). A zero or non-finite normal sum computes
 /// garbage in its lane (NaN, saturating conversions) and is then replaced by 0, as
 /// [`pack_normal_f64`] returns.
-fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
+fn encode_words(acc: &[Acc], k: &[u32], out: &mut Vec<[u32; 2]>) {
+    debug_assert_eq!(acc.len(), k.len());
     out.resize(acc.len(), [0; 2]);
     let todo: Vec<u32> = (0..acc.len() as u32)
-        .filter(|&i| acc[i as usize].k & ENCODED == 0)
+        .filter(|&i| k[i as usize] & ENCODED == 0)
         .collect();
     let mut n = [[0f64; LANES]; 3];
     let mut w = [0f32; LANES];
@@ -710,7 +741,11 @@ fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
             for k in 0..3 {
                 n[k][i] = a.s[k] as f64;
             }
-            w[i] = if a.s[3] > 0.0 { a.s[3] } else { a.k as f32 };
+            w[i] = if a.s[3] > 0.0 {
+                a.s[3]
+            } else {
+                k[j as usize] as f32
+            };
             for k in 0..4 {
                 c[k][i] = a.s[4 + k];
             }
@@ -740,15 +775,7 @@ fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
 /// The normal and colour words of a voxel whose only contribution has values `x` and weight 1
 /// (what [`encode`] gives it; see [`crate::single`]).
 fn record_words(x: &[f32; 8]) -> [u32; 2] {
-    let v = encode(
-        [0; 3],
-        &Acc {
-            s: *x,
-            idx: 0,
-            k: 1,
-        },
-        false,
-    );
+    let v = encode([0; 3], &Acc { s: *x }, 1, false);
     [v.normal, v.color]
 }
 
@@ -764,6 +791,7 @@ mod tests {
     fn encode_words_is_encode() {
         let mut rng = Rng(13);
         let mut accs = Vec::new();
+        let mut ks = Vec::new();
         let specials = [
             0.0f32, -0.0, 1e-30, -1e-38, 1e-45, 3e38, -3e38, 0.5, 1.5, 254.5, 255.5,
         ];
@@ -785,24 +813,24 @@ mod tests {
                     s[k] = s[3] * ((rng.next_u64() % 512) as f32 * 0.5);
                 }
             }
-            let k = 1 + (rng.next_u64() % 9) as u32;
-            accs.push(Acc { s, idx: i, k });
+            accs.push(Acc { s });
+            ks.push(1 + (rng.next_u64() % 9) as u32);
         }
         let mut words = Vec::new();
-        encode_words(&accs, &mut words);
+        encode_words(&accs, &ks, &mut words);
         assert_eq!(words.len(), accs.len());
-        for (a, w) in accs.iter().zip(&words) {
-            let v = encode([1, 2, 3], a, false);
-            assert_eq!([v.normal, v.color], *w, "sums {:?}, k {}", a.s, a.k);
+        for ((a, &k), w) in accs.iter().zip(&ks).zip(&words) {
+            let v = encode([1, 2, 3], a, k, false);
+            assert_eq!([v.normal, v.color], *w, "sums {:?}, k {k}", a.s);
         }
         // accumulators marked ENCODED keep the words they have; the others are computed
         let mut marked = vec![[7u32, 9]; accs.len()];
-        for (i, a) in accs.iter_mut().enumerate() {
+        for (i, k) in ks.iter_mut().enumerate() {
             if i % 3 == 0 {
-                a.k |= ENCODED;
+                *k |= ENCODED;
             }
         }
-        encode_words(&accs, &mut marked);
+        encode_words(&accs, &ks, &mut marked);
         for (i, (m, w)) in marked.iter().zip(&words).enumerate() {
             assert_eq!(*m, if i % 3 == 0 { [7, 9] } else { *w });
         }
