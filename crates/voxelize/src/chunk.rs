@@ -30,24 +30,6 @@ pub const DEFER_BYTES: usize = 32 << 20;
 const BRICKS: usize = 32 * 32 * 32;
 const BRICK: usize = 512;
 
-/// The position inside its brick of each in-brick Morton code (`demorton3` of 0..512).
-static IN_BRICK: [[u8; 3]; BRICK] = {
-    let mut t = [[0u8; 3]; BRICK];
-    let mut v = 0;
-    while v < BRICK {
-        let mut b = 0;
-        while b < 3 {
-            // bit 3i + a of the code is bit i of axis a
-            t[v][0] |= (((v >> (3 * b)) & 1) << b) as u8;
-            t[v][1] |= (((v >> (3 * b + 1)) & 1) << b) as u8;
-            t[v][2] |= (((v >> (3 * b + 2)) & 1) << b) as u8;
-            b += 1;
-        }
-        v += 1;
-    }
-    t
-};
-
 /// The sums of one voxel: `s = [Σ w·n_x, Σ w·n_y, Σ w·n_z, Σ w, Σ w·r, Σ w·g, Σ w·b, Σ w·a]`
 /// in f32, in triangle order, and the number of contributions `k`.
 ///
@@ -76,8 +58,9 @@ static IN_BRICK: [[u8; 3]; BRICK] = {
 /// ([`crate::clipped_area`] and the barycentric interpolation of the crate docs).
 ///
 /// The count `k` lives apart from the sums, in [`Slots::k`] (4 bytes per voxel): the marking
-/// pass and the skip's test touch only the counts, and the sums are made (zero) when the
-/// attribute pass starts.
+/// pass and the skip's test touch only the counts, and a voxel's sums are made (zero) when
+/// its first contribution is added ([`Slots::at`]), so the voxels the skip encodes directly
+/// have none.
 #[derive(Clone, Copy, Debug)]
 struct Acc {
     s: [f32; 8],
@@ -197,8 +180,11 @@ impl ChunkVoxelizer {
                 bricks: vec![0u32; BRICKS],
                 blocks: Vec::new(),
                 touched: Vec::new(),
+                last: NO_BRICK,
+                idx: Vec::new(),
                 k: Vec::new(),
-                acc: Vec::new(),
+                at: Vec::new(),
+                sums: Vec::new(),
             },
             marked: Vec::new(),
             pairs: Vec::new(),
@@ -408,14 +394,19 @@ impl ChunkVoxelizer {
         let textures = textures.as_deref();
         let skip = skip && *single_skip && textures.is_none();
         let o = origin.map(|c| c as i64);
-        // the sums of the voxels marked since the last call start at zero (`eager` chunks call
-        // this after every batch)
-        let (acc, counts) = (&mut slots.acc, &mut slots.k);
-        acc.resize(counts.len(), Acc::ZERO);
+        // the voxels marked since the last call have no sums yet (`eager` chunks call this
+        // after every batch)
+        let Slots {
+            k: counts,
+            at,
+            sums,
+            ..
+        } = slots;
+        at.resize(counts.len(), NO_SUMS);
         // the records of the skipped voxels, encoded once per triangle (`finish` encodes the rest)
         words.clear();
         if skip {
-            words.resize(acc.len(), [0; 2]);
+            words.resize(counts.len(), [0; 2]);
         }
         for (i, m) in marked.iter().enumerate() {
             let end = marked.get(i + 1).map_or(pairs.len(), |n| n.first as usize);
@@ -424,27 +415,30 @@ impl ChunkVoxelizer {
             let mut mats = materials.as_mut().map(|ms| ms.set_triangle(t.material()));
             // one contribution: weight `w` and values `x` into the sums, or, for a voxel the
             // skip leaves unclipped (weight 1), its record's words
-            let mut add = |acc: &mut [Acc],
-                           counts: &mut [u32],
-                           slot: u32,
-                           w: f32,
-                           x: [f32; 8],
-                           rec: Option<[u32; 2]>| {
-                match rec {
-                    Some(r) => {
-                        *unclipped += 1;
-                        counts[slot as usize] |= ENCODED;
-                        words[slot as usize] = r;
+            let mut add =
+                |counts: &mut [u32], slot: u32, w: f32, x: [f32; 8], rec: Option<[u32; 2]>| {
+                    match rec {
+                        Some(r) => {
+                            *unclipped += 1;
+                            counts[slot as usize] |= ENCODED;
+                            words[slot as usize] = r;
+                        }
+                        None => {
+                            let j = &mut at[slot as usize];
+                            if *j == NO_SUMS {
+                                *j = sums.len() as u32;
+                                sums.push(Acc::ZERO);
+                            }
+                            sums[*j as usize].add(w, x);
+                        }
                     }
-                    None => acc[slot as usize].add(w, x),
-                }
-                if let Some(ms) = mats.as_deref_mut() {
-                    ms.add(slot as usize, w);
-                }
-            };
+                    if let Some(ms) = mats.as_deref_mut() {
+                        ms.add(slot as usize, w);
+                    }
+                };
             if m.interior {
                 let (w, x) = interior_contribution(t, textures);
-                add(acc, counts, pairs[0].slot, w, x, None);
+                add(counts, pairs[0].slot, w, x, None);
                 continue;
             }
             let flat = skip && single::is_flat(t);
@@ -453,7 +447,7 @@ impl ChunkVoxelizer {
             if let Some((x, r)) = record {
                 if pairs.iter().all(|p| counts[p.slot as usize] == 1) {
                     for p in pairs {
-                        add(acc, counts, p.slot, 1.0, x, Some(r));
+                        add(counts, p.slot, 1.0, x, Some(r));
                     }
                     continue;
                 }
@@ -465,7 +459,7 @@ impl ChunkVoxelizer {
             let mut column = u32::MAX;
             for p in pairs {
                 if let (Some((x, r)), 1) = (record, counts[p.slot as usize]) {
-                    add(acc, counts, p.slot, 1.0, x, Some(r));
+                    add(counts, p.slot, 1.0, x, Some(r));
                     continue;
                 }
                 let [x, y, z] = [p.swz & 255, p.swz >> 8 & 255, p.swz >> 16];
@@ -484,7 +478,7 @@ impl ChunkVoxelizer {
                     (None, Some(x)) => (cols.voxel_area(z), x),
                     (None, None) => unreachable!("a triangle is flat or interpolated"),
                 };
-                add(acc, counts, p.slot, w as f32, x, None);
+                add(counts, p.slot, w as f32, x, None);
             }
         }
     }
@@ -492,35 +486,34 @@ impl ChunkVoxelizer {
     /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
     /// with normal, colour and face mask. Resets for the next `begin`.
     ///
-    /// The accumulators are encoded in the order they were made (a sequential read); the
-    /// records are then written in Morton order, walking the touched bricks in Morton order and
-    /// each brick's occupancy bits ([`ChunkVoxelizer::in_morton_order`]): a sequential write,
-    /// no sort of the voxels and no scattered stores.
+    /// The voxels are encoded in slot order (a sequential read) and each record is stored at
+    /// its rank in Morton order, which the occupancy bits give without a sort: the voxels of
+    /// the bricks before its brick (in Morton order) plus those before it in its brick.
     pub fn finish(&mut self) -> Vec<Voxel> {
         self.accumulate(!self.eager);
-        let mut out = Vec::with_capacity(self.slots.acc.len());
-        // per accumulator (made in slot order: `in_morton_order` passes it as `slot`) its material
+        let mut out = vec![Voxel::default(); self.slots.k.len()];
+        // per slot (`ranked` passes it as `i`) its material
         let winners: Option<Vec<u32>> = self
             .materials
             .as_ref()
             .map(|m| (0..m.len()).map(|i| m.winner(i)).collect());
-        let mut mats = Vec::with_capacity(winners.as_ref().map_or(0, Vec::len));
+        let mut mats = vec![0u32; winners.as_ref().map_or(0, Vec::len)];
         if self.textures.is_some() {
-            self.in_morton_order(|slot, pos, acc, k| {
-                out.push(encode(pos, &acc[slot], k[slot], true));
+            self.ranked(|r, i, pos, sl| {
+                out[r] = encode(pos, sl.sums_of(i), sl.k[i], true);
                 if let Some(w) = &winners {
-                    mats.push(w[slot]);
+                    mats[r] = w[i];
                 }
             });
         } else {
             let mut words = std::mem::take(&mut self.words);
-            encode_words(&self.slots.acc, &self.slots.k, &mut words);
-            self.in_morton_order(|slot, pos, _, _| {
-                let [normal, color] = words[slot];
+            encode_words(&self.slots, &mut words);
+            self.ranked(|r, i, pos, _| {
+                let [normal, color] = words[i];
                 let mask = face_mask(normal) | border_caps(pos);
-                out.push(Voxel::new(pos, mask, normal, color));
+                out[r] = Voxel::new(pos, mask, normal, color);
                 if let Some(w) = &winners {
-                    mats.push(w[slot]);
+                    mats[r] = w[i];
                 }
             });
             self.words = words;
@@ -534,57 +527,51 @@ impl ChunkVoxelizer {
     /// Every pair is clipped here (no [`crate::single`] skip): `w` is the summed clipped area.
     pub fn finish_sums(&mut self) -> Vec<VoxelSums> {
         self.accumulate(false);
-        let mut out = Vec::with_capacity(self.slots.acc.len());
-        self.in_morton_order(|slot, pos, acc, k| {
-            let a = &acc[slot];
-            out.push(VoxelSums {
+        let mut out = vec![VoxelSums::default(); self.slots.k.len()];
+        self.ranked(|r, i, pos, sl| {
+            let a = sl.sums_of(i);
+            out[r] = VoxelSums {
                 pos,
-                k: k[slot],
+                k: sl.k[i],
                 w: a.s[3],
                 n: [a.s[0], a.s[1], a.s[2]],
                 c: [a.s[4], a.s[5], a.s[6], a.s[7]],
-            })
+            }
         });
         out
     }
 
-    /// Calls `f(slot, position, sums, counts)` for every occupied voxel in Morton order of its
-    /// in-chunk position; then resets. The order is the touched bricks sorted by brick Morton
-    /// code (a few thousand keys, not the voxels), and inside a brick its occupancy bits from
-    /// the lowest: global Morton code = brick code · 512 + code inside the brick. A voxel's slot
-    /// is read from its brick's block, its position is the brick's corner plus [`IN_BRICK`].
+    /// Calls `f(rank, slot, position, slots)` for every voxel, in slot order (the order they
+    /// were marked), with its rank in Morton order; then resets.
     #[inline]
-    fn in_morton_order(&mut self, mut f: impl FnMut(usize, [u8; 3], &[Acc], &[u32])) {
-        let Slots {
-            blocks,
-            touched,
-            k,
-            acc,
-            ..
-        } = &self.slots;
-        let mut order: Vec<(u32, u32)> = touched
+    fn ranked(&mut self, mut f: impl FnMut(usize, usize, [u8; 3], &Slots)) {
+        let sl = &self.slots;
+        let mut order: Vec<(u32, u32)> = sl
+            .touched
             .iter()
             .enumerate()
             .map(|(i, &(b, _))| (b, i as u32))
             .collect();
         order.sort_unstable();
-        let mut seen = 0usize;
-        for &(b, i) in &order {
-            let corner = demorton3(b as u64).map(|c| (c * 8) as u8);
-            let block = &blocks[i as usize * BRICK..(i as usize + 1) * BRICK];
-            for (w, &bits) in touched[i as usize].1.iter().enumerate() {
-                let mut bits = bits;
-                while bits != 0 {
-                    let v = w * 64 + bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let d = IN_BRICK[v];
-                    let pos = [corner[0] | d[0], corner[1] | d[1], corner[2] | d[2]];
-                    f(block[v] as usize - 1, pos, acc, k);
-                    seen += 1;
-                }
+        // rank of the first voxel of each occupancy word of each touched brick
+        let mut first = vec![[0u32; 8]; sl.touched.len()];
+        let mut rank = 0u32;
+        for &(_, i) in &order {
+            let occ = &sl.touched[i as usize].1;
+            for (f, w) in first[i as usize].iter_mut().zip(occ) {
+                *f = rank;
+                rank += w.count_ones();
             }
         }
-        debug_assert_eq!(seen, k.len());
+        debug_assert_eq!(rank as usize, sl.idx.len());
+        for (i, &idx) in sl.idx.iter().enumerate() {
+            let b = sl.bricks[(idx >> 9) as usize] as usize - 1;
+            let v = idx as usize & (BRICK - 1);
+            let below = sl.touched[b].1[v >> 6] & ((1u64 << (v & 63)) - 1);
+            let r = first[b][v >> 6] + below.count_ones();
+            let pos = demorton3(idx as u64).map(|c| c as u8);
+            f(r as usize, i, pos, sl);
+        }
         self.reset();
     }
 
@@ -608,12 +595,25 @@ struct Slots {
     blocks: Vec<u32>,
     /// per touched brick: its brick index and the occupancy bits of its 512 voxels
     touched: Vec<(u32, [u64; 8])>,
-    /// per occupied voxel (its slot), in the order of first touch: the number of contributions
-    /// the marking pass counted, and [`ENCODED`]
+    /// the brick index and block + 1 of the last voxel marked ([`NO_BRICK`]: none)
+    last: (u32, u32),
+    /// per occupied voxel (its slot), in the order of first touch: the Morton code of its
+    /// in-chunk position
+    idx: Vec<u32>,
+    /// per slot: the number of contributions the marking pass counted, and [`ENCODED`]
     k: Vec<u32>,
-    /// the sums per slot, made by the attribute pass (`ChunkVoxelizer::accumulate`)
-    acc: Vec<Acc>,
+    /// per slot: its sums in `sums`, [`NO_SUMS`] until the attribute pass adds its first
+    /// contribution (`ChunkVoxelizer::accumulate`)
+    at: Vec<u32>,
+    /// the sums of the voxels with contributions added, in the order of the first one
+    sums: Vec<Acc>,
 }
+
+/// No brick ([`Slots::last`]).
+const NO_BRICK: (u32, u32) = (u32::MAX, 0);
+
+/// A slot without sums ([`Slots::at`]).
+const NO_SUMS: u32 = u32::MAX;
 
 impl Slots {
     /// Forgets every voxel (a new chunk); keeps the allocations.
@@ -622,9 +622,18 @@ impl Slots {
             self.bricks[b as usize] = 0;
         }
         self.touched.clear();
+        self.last = NO_BRICK;
         self.blocks.clear();
+        self.idx.clear();
         self.k.clear();
-        self.acc.clear();
+        self.at.clear();
+        self.sums.clear();
+    }
+
+    /// The sums of `slot` (which has had a contribution added).
+    #[inline]
+    fn sums_of(&self, slot: usize) -> &Acc {
+        &self.sums[self.at[slot] as usize]
     }
 
     /// Counts one contribution to the voxel at in-chunk position `local` and returns its slot,
@@ -632,17 +641,25 @@ impl Slots {
     #[inline]
     fn mark(&mut self, local: [u32; 3]) -> u32 {
         let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
-        let bi = (idx >> 9) as usize;
-        let mut b = self.bricks[bi] as usize;
-        if b == 0 {
-            self.blocks.resize(self.blocks.len() + BRICK, 0);
-            self.touched.push((bi as u32, [0; 8]));
-            b = self.touched.len();
-            self.bricks[bi] = b as u32;
-        }
+        let bi = idx >> 9;
+        // a column's voxels and a triangle's neighbouring columns mostly stay in one brick
+        let b = if bi == self.last.0 {
+            self.last.1 as usize
+        } else {
+            let mut b = self.bricks[bi as usize] as usize;
+            if b == 0 {
+                self.blocks.resize(self.blocks.len() + BRICK, 0);
+                self.touched.push((bi, [0; 8]));
+                b = self.touched.len();
+                self.bricks[bi as usize] = b as u32;
+            }
+            self.last = (bi, b as u32);
+            b
+        };
         let v = idx as usize & (BRICK - 1);
         let sl = &mut self.blocks[(b - 1) * BRICK + v];
         if *sl == 0 {
+            self.idx.push(idx);
             self.k.push(1);
             *sl = self.k.len() as u32;
             self.touched[b - 1].1[v >> 6] |= 1 << (v & 63);
@@ -714,9 +731,9 @@ fn encode(pos: [u8; 3], a: &Acc, k: u32, linear: bool) -> Voxel {
 /// Voxels per batch of [`encode_words`].
 const LANES: usize = 64;
 
-/// The normal and colour words of [`encode`] (plain colours, `linear == false`) for every
-/// accumulator of `acc` not marked [`ENCODED`], in order, bit for bit, into `out` (resized to
-/// `acc.len()`; the words of marked accumulators are left as they are).
+/// The normal and colour words of [`encode`] (plain colours, `linear == false`) for every slot
+/// of `sl` not marked [`ENCODED`], in slot order, bit for bit, into `out` (resized to the
+/// number of slots; the words of marked slots are left as they are).
 ///
 /// The sums are transposed into batches of [`LANES`] voxels and each word is computed by a loop
 /// without branches, so that the compiler runs the square roots, divisions, roundings and
@@ -724,11 +741,11 @@ const LANES: usize = 64;
 /// scalar [`encode`]; `tests` below compares the two). A zero or non-finite normal sum computes
 /// garbage in its lane (NaN, saturating conversions) and is then replaced by 0, as
 /// [`pack_normal_f64`] returns.
-fn encode_words(acc: &[Acc], k: &[u32], out: &mut Vec<[u32; 2]>) {
-    debug_assert_eq!(acc.len(), k.len());
-    out.resize(acc.len(), [0; 2]);
-    let todo: Vec<u32> = (0..acc.len() as u32)
-        .filter(|&i| k[i as usize] & ENCODED == 0)
+fn encode_words(sl: &Slots, out: &mut Vec<[u32; 2]>) {
+    let counts = &sl.k;
+    out.resize(counts.len(), [0; 2]);
+    let todo: Vec<u32> = (0..counts.len() as u32)
+        .filter(|&i| counts[i as usize] & ENCODED == 0)
         .collect();
     let mut n = [[0f64; LANES]; 3];
     let mut w = [0f32; LANES];
@@ -737,14 +754,14 @@ fn encode_words(acc: &[Acc], k: &[u32], out: &mut Vec<[u32; 2]>) {
     let mut cw = [0u32; LANES];
     for batch in todo.chunks(LANES) {
         for (i, &j) in batch.iter().enumerate() {
-            let a = &acc[j as usize];
+            let a = sl.sums_of(j as usize);
             for k in 0..3 {
                 n[k][i] = a.s[k] as f64;
             }
             w[i] = if a.s[3] > 0.0 {
                 a.s[3]
             } else {
-                k[j as usize] as f32
+                counts[j as usize] as f32
             };
             for k in 0..4 {
                 c[k][i] = a.s[4 + k];
@@ -816,8 +833,19 @@ mod tests {
             accs.push(Acc { s });
             ks.push(1 + (rng.next_u64() % 9) as u32);
         }
+        // the sums of slot i at i
+        let mut slots = Slots {
+            bricks: Vec::new(),
+            blocks: Vec::new(),
+            touched: Vec::new(),
+            last: NO_BRICK,
+            idx: Vec::new(),
+            k: ks.clone(),
+            at: (0..accs.len() as u32).collect(),
+            sums: accs.clone(),
+        };
         let mut words = Vec::new();
-        encode_words(&accs, &ks, &mut words);
+        encode_words(&slots, &mut words);
         assert_eq!(words.len(), accs.len());
         for ((a, &k), w) in accs.iter().zip(&ks).zip(&words) {
             let v = encode([1, 2, 3], a, k, false);
@@ -825,12 +853,12 @@ mod tests {
         }
         // accumulators marked ENCODED keep the words they have; the others are computed
         let mut marked = vec![[7u32, 9]; accs.len()];
-        for (i, k) in ks.iter_mut().enumerate() {
+        for (i, k) in slots.k.iter_mut().enumerate() {
             if i % 3 == 0 {
                 *k |= ENCODED;
             }
         }
-        encode_words(&accs, &ks, &mut marked);
+        encode_words(&slots, &mut marked);
         for (i, (m, w)) in marked.iter().zip(&words).enumerate() {
             assert_eq!(*m, if i % 3 == 0 { [7, 9] } else { *w });
         }
