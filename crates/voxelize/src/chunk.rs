@@ -57,16 +57,16 @@ const BRICK: usize = 512;
 /// `tests/attributes.rs` checks these bounds against sums of the f64 reference
 /// ([`crate::clipped_area`] and the barycentric interpolation of the crate docs).
 ///
-/// The count `k` lives apart from the sums, in [`Slots::k`] (4 bytes per voxel): the marking
-/// pass and the skip's test touch only the counts, and a voxel's sums are made (zero) when
-/// its first contribution is added ([`Slots::at`]), so the voxels the skip encodes directly
-/// have none.
+/// The count `k` lives apart from the sums, in [`Slots::count`] (8 bytes per voxel with the
+/// index of its sums): the marking pass and the skip's test touch only the counts, and a
+/// voxel's sums are made (zero) when its first contribution is added ([`Count::at`]), so the
+/// voxels the skip encodes directly have none.
 #[derive(Clone, Copy, Debug)]
 struct Acc {
     s: [f32; 8],
 }
 
-/// The top bit of a voxel's count ([`Slots::k`]): the voxel's record words are already in the
+/// The top bit of a voxel's count ([`Count::k`]): the voxel's record words are already in the
 /// voxelizer's `words` (a voxel skipped by [`crate::single`], encoded once per triangle); its
 /// sums are not used.
 const ENCODED: u32 = 1 << 31;
@@ -182,8 +182,7 @@ impl ChunkVoxelizer {
                 touched: Vec::new(),
                 last: NO_BRICK,
                 idx: Vec::new(),
-                k: Vec::new(),
-                at: Vec::new(),
+                count: Vec::new(),
                 sums: Vec::new(),
             },
             marked: Vec::new(),
@@ -394,19 +393,11 @@ impl ChunkVoxelizer {
         let textures = textures.as_deref();
         let skip = skip && *single_skip && textures.is_none();
         let o = origin.map(|c| c as i64);
-        // the voxels marked since the last call have no sums yet (`eager` chunks call this
-        // after every batch)
-        let Slots {
-            k: counts,
-            at,
-            sums,
-            ..
-        } = slots;
-        at.resize(counts.len(), NO_SUMS);
+        let Slots { count, sums, .. } = slots;
         // the records of the skipped voxels, encoded once per triangle (`finish` encodes the rest)
         words.clear();
         if skip {
-            words.resize(counts.len(), [0; 2]);
+            words.resize(count.len(), [0; 2]);
         }
         for (i, m) in marked.iter().enumerate() {
             let end = marked.get(i + 1).map_or(pairs.len(), |n| n.first as usize);
@@ -416,15 +407,15 @@ impl ChunkVoxelizer {
             // one contribution: weight `w` and values `x` into the sums, or, for a voxel the
             // skip leaves unclipped (weight 1), its record's words
             let mut add =
-                |counts: &mut [u32], slot: u32, w: f32, x: [f32; 8], rec: Option<[u32; 2]>| {
+                |count: &mut [Count], slot: u32, w: f32, x: [f32; 8], rec: Option<[u32; 2]>| {
                     match rec {
                         Some(r) => {
                             *unclipped += 1;
-                            counts[slot as usize] |= ENCODED;
+                            count[slot as usize].k |= ENCODED;
                             words[slot as usize] = r;
                         }
                         None => {
-                            let j = &mut at[slot as usize];
+                            let j = &mut count[slot as usize].at;
                             if *j == NO_SUMS {
                                 *j = sums.len() as u32;
                                 sums.push(Acc::ZERO);
@@ -438,16 +429,16 @@ impl ChunkVoxelizer {
                 };
             if m.interior {
                 let (w, x) = interior_contribution(t, textures);
-                add(counts, pairs[0].slot, w, x, None);
+                add(count, pairs[0].slot, w, x, None);
                 continue;
             }
             let flat = skip && single::is_flat(t);
             let xflat = flat.then(|| single::flat_values(t));
             let record = xflat.map(|x| (x, record_words(&x)));
             if let Some((x, r)) = record {
-                if pairs.iter().all(|p| counts[p.slot as usize] == 1) {
+                if pairs.iter().all(|p| count[p.slot as usize].k == 1) {
                     for p in pairs {
-                        add(counts, p.slot, 1.0, x, Some(r));
+                        add(count, p.slot, 1.0, x, Some(r));
                     }
                     continue;
                 }
@@ -458,8 +449,8 @@ impl ChunkVoxelizer {
             cols.set(&s);
             let mut column = u32::MAX;
             for p in pairs {
-                if let (Some((x, r)), 1) = (record, counts[p.slot as usize]) {
-                    add(counts, p.slot, 1.0, x, Some(r));
+                if let (Some((x, r)), 1) = (record, count[p.slot as usize].k) {
+                    add(count, p.slot, 1.0, x, Some(r));
                     continue;
                 }
                 let [x, y, z] = [p.swz & 255, p.swz >> 8 & 255, p.swz >> 16];
@@ -478,7 +469,7 @@ impl ChunkVoxelizer {
                     (None, Some(x)) => (cols.voxel_area(z), x),
                     (None, None) => unreachable!("a triangle is flat or interpolated"),
                 };
-                add(counts, p.slot, w as f32, x, None);
+                add(count, p.slot, w as f32, x, None);
             }
         }
     }
@@ -491,7 +482,7 @@ impl ChunkVoxelizer {
     /// the bricks before its brick (in Morton order) plus those before it in its brick.
     pub fn finish(&mut self) -> Vec<Voxel> {
         self.accumulate(!self.eager);
-        let mut out = vec![Voxel::default(); self.slots.k.len()];
+        let mut out = vec![Voxel::default(); self.slots.count.len()];
         // per slot (`ranked` passes it as `i`) its material
         let winners: Option<Vec<u32>> = self
             .materials
@@ -500,7 +491,7 @@ impl ChunkVoxelizer {
         let mut mats = vec![0u32; winners.as_ref().map_or(0, Vec::len)];
         if self.textures.is_some() {
             self.ranked(|r, i, pos, sl| {
-                out[r] = encode(pos, sl.sums_of(i), sl.k[i], true);
+                out[r] = encode(pos, sl.sums_of(i), sl.count[i].k, true);
                 if let Some(w) = &winners {
                     mats[r] = w[i];
                 }
@@ -527,12 +518,12 @@ impl ChunkVoxelizer {
     /// Every pair is clipped here (no [`crate::single`] skip): `w` is the summed clipped area.
     pub fn finish_sums(&mut self) -> Vec<VoxelSums> {
         self.accumulate(false);
-        let mut out = vec![VoxelSums::default(); self.slots.k.len()];
+        let mut out = vec![VoxelSums::default(); self.slots.count.len()];
         self.ranked(|r, i, pos, sl| {
             let a = sl.sums_of(i);
             out[r] = VoxelSums {
                 pos,
-                k: sl.k[i],
+                k: sl.count[i].k,
                 w: a.s[3],
                 n: [a.s[0], a.s[1], a.s[2]],
                 c: [a.s[4], a.s[5], a.s[6], a.s[7]],
@@ -600,11 +591,8 @@ struct Slots {
     /// per occupied voxel (its slot), in the order of first touch: the Morton code of its
     /// in-chunk position
     idx: Vec<u32>,
-    /// per slot: the number of contributions the marking pass counted, and [`ENCODED`]
-    k: Vec<u32>,
-    /// per slot: its sums in `sums`, [`NO_SUMS`] until the attribute pass adds its first
-    /// contribution (`ChunkVoxelizer::accumulate`)
-    at: Vec<u32>,
+    /// per slot: its count and where its sums are
+    count: Vec<Count>,
     /// the sums of the voxels with contributions added, in the order of the first one
     sums: Vec<Acc>,
 }
@@ -612,7 +600,18 @@ struct Slots {
 /// No brick ([`Slots::last`]).
 const NO_BRICK: (u32, u32) = (u32::MAX, 0);
 
-/// A slot without sums ([`Slots::at`]).
+/// A voxel's count and where its sums are, side by side so that the attribute pass's test of
+/// the count and its step to the sums read one cache line.
+#[derive(Clone, Copy, Debug)]
+struct Count {
+    /// the number of contributions the marking pass counted, and [`ENCODED`]
+    k: u32,
+    /// its sums in [`Slots::sums`], [`NO_SUMS`] until the attribute pass adds its first
+    /// contribution (`ChunkVoxelizer::accumulate`)
+    at: u32,
+}
+
+/// A slot without sums ([`Count::at`]).
 const NO_SUMS: u32 = u32::MAX;
 
 impl Slots {
@@ -625,15 +624,14 @@ impl Slots {
         self.last = NO_BRICK;
         self.blocks.clear();
         self.idx.clear();
-        self.k.clear();
-        self.at.clear();
+        self.count.clear();
         self.sums.clear();
     }
 
     /// The sums of `slot` (which has had a contribution added).
     #[inline]
     fn sums_of(&self, slot: usize) -> &Acc {
-        &self.sums[self.at[slot] as usize]
+        &self.sums[self.count[slot].at as usize]
     }
 
     /// Counts one contribution to the voxel at in-chunk position `local` and returns its slot,
@@ -660,11 +658,11 @@ impl Slots {
         let sl = &mut self.blocks[(b - 1) * BRICK + v];
         if *sl == 0 {
             self.idx.push(idx);
-            self.k.push(1);
-            *sl = self.k.len() as u32;
+            self.count.push(Count { k: 1, at: NO_SUMS });
+            *sl = self.count.len() as u32;
             self.touched[b - 1].1[v >> 6] |= 1 << (v & 63);
         } else {
-            self.k[*sl as usize - 1] += 1;
+            self.count[*sl as usize - 1].k += 1;
         }
         *sl - 1
     }
@@ -742,10 +740,10 @@ const LANES: usize = 64;
 /// garbage in its lane (NaN, saturating conversions) and is then replaced by 0, as
 /// [`pack_normal_f64`] returns.
 fn encode_words(sl: &Slots, out: &mut Vec<[u32; 2]>) {
-    let counts = &sl.k;
-    out.resize(counts.len(), [0; 2]);
-    let todo: Vec<u32> = (0..counts.len() as u32)
-        .filter(|&i| counts[i as usize] & ENCODED == 0)
+    let count = &sl.count;
+    out.resize(count.len(), [0; 2]);
+    let todo: Vec<u32> = (0..count.len() as u32)
+        .filter(|&i| count[i as usize].k & ENCODED == 0)
         .collect();
     let mut n = [[0f64; LANES]; 3];
     let mut w = [0f32; LANES];
@@ -761,7 +759,7 @@ fn encode_words(sl: &Slots, out: &mut Vec<[u32; 2]>) {
             w[i] = if a.s[3] > 0.0 {
                 a.s[3]
             } else {
-                counts[j as usize] as f32
+                count[j as usize].k as f32
             };
             for k in 0..4 {
                 c[k][i] = a.s[4 + k];
@@ -840,8 +838,12 @@ mod tests {
             touched: Vec::new(),
             last: NO_BRICK,
             idx: Vec::new(),
-            k: ks.clone(),
-            at: (0..accs.len() as u32).collect(),
+            count: (0..accs.len())
+                .map(|i| Count {
+                    k: ks[i],
+                    at: i as u32,
+                })
+                .collect(),
             sums: accs.clone(),
         };
         let mut words = Vec::new();
@@ -853,9 +855,9 @@ mod tests {
         }
         // accumulators marked ENCODED keep the words they have; the others are computed
         let mut marked = vec![[7u32, 9]; accs.len()];
-        for (i, k) in slots.k.iter_mut().enumerate() {
+        for (i, c) in slots.count.iter_mut().enumerate() {
             if i % 3 == 0 {
-                *k |= ENCODED;
+                c.k |= ENCODED;
             }
         }
         encode_words(&slots, &mut marked);
