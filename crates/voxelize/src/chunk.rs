@@ -11,7 +11,7 @@ use std::sync::Arc;
 use voxlod_format::voxel::{
     border_caps, face_mask, morton8, pack_color, pack_normal_f64, Voxel, NORMAL_SCALE,
 };
-use voxlod_geom::{demorton3, Triangle, CHUNK, TRI_HAS_NORMALS};
+use voxlod_geom::{Triangle, CHUNK, TRI_HAS_NORMALS};
 use voxlod_texture::{linear_to_srgb, TextureSet};
 
 use crate::column::Columns;
@@ -25,6 +25,39 @@ use crate::{scanline, single, Method, Mode};
 /// ([`crate::single`]); a chunk with more clips every pair instead (a mesh with very many
 /// triangles per chunk, e.g. a fine scan at a coarse resolution).
 pub const DEFER_BYTES: usize = 32 << 20;
+
+/// The position of an in-chunk Morton code (24 bits), by three table lookups: for byte `b` of
+/// the code and each of its values, the coordinate bits it holds as `x | y << 8 | z << 16`.
+#[inline]
+fn unmorton8(m: u32) -> [u8; 3] {
+    let w = UNMORTON[0][(m & 0xff) as usize]
+        | UNMORTON[1][(m >> 8 & 0xff) as usize]
+        | UNMORTON[2][(m >> 16 & 0xff) as usize];
+    [w as u8, (w >> 8) as u8, (w >> 16) as u8]
+}
+
+/// The tables of [`unmorton8`]: Morton bit `i` (bit `j` of byte `b`, `i = 8b + j`) is bit
+/// `i / 3` of axis `i % 3`.
+static UNMORTON: [[u32; 256]; 3] = {
+    let mut t = [[0u32; 256]; 3];
+    let mut b = 0;
+    while b < 3 {
+        let mut v = 0;
+        while v < 256 {
+            let mut j = 0;
+            while j < 8 {
+                if v >> j & 1 == 1 {
+                    let i = 8 * b + j;
+                    t[b][v] |= 1 << ((i % 3) * 8 + i / 3);
+                }
+                j += 1;
+            }
+            v += 1;
+        }
+        b += 1;
+    }
+    t
+};
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
 const BRICKS: usize = 32 * 32 * 32;
@@ -56,31 +89,27 @@ const BRICK: usize = 512;
 ///
 /// `tests/attributes.rs` checks these bounds against sums of the f64 reference
 /// ([`crate::clipped_area`] and the barycentric interpolation of the crate docs).
-/// The top bit of [`Acc::k`]: the voxel's record words are already in the voxelizer's `words`
-/// (a voxel skipped by [`crate::single`], encoded once per triangle); its sums are not kept.
-const ENCODED: u32 = 1 << 31;
-
+///
+/// The count `k` lives apart from the sums, in [`Slots::count`] (8 bytes per voxel with the
+/// index of its sums): the marking pass and the skip's test touch only the counts, and a
+/// voxel's sums are made (zero) when its first contribution is added ([`Count::at`]), so the
+/// voxels the skip encodes directly have none.
 #[derive(Clone, Copy, Debug)]
 struct Acc {
     s: [f32; 8],
-    /// Morton code of the in-chunk position
-    idx: u32,
-    k: u32,
 }
 
+/// The top bit of a voxel's count ([`Count::k`]): the voxel's record words are already in the
+/// voxelizer's `words` (a voxel skipped by [`crate::single`], encoded once per triangle); its
+/// sums are not used.
+const ENCODED: u32 = 1 << 31;
+
 impl Acc {
-    /// A voxel the marking pass found, with its first contribution counted and no sums yet.
-    #[inline]
-    fn marked(idx: u32) -> Acc {
-        Acc {
-            s: [0.0; 8],
-            idx,
-            k: 1,
-        }
-    }
+    /// No contribution yet.
+    const ZERO: Acc = Acc { s: [0.0; 8] };
 
     /// Adds one contribution of weight `w` and values `x` (`x[3] = 1`) to the sums (the
-    /// marking pass has counted it in `k` already).
+    /// marking pass has counted it in the voxel's `k` already).
     #[inline]
     fn add(&mut self, w: f32, x: [f32; 8]) {
         if self.s[3] > 0.0 {
@@ -184,7 +213,10 @@ impl ChunkVoxelizer {
                 bricks: vec![0u32; BRICKS],
                 blocks: Vec::new(),
                 touched: Vec::new(),
-                acc: Vec::new(),
+                last: NO_BRICK,
+                idx: Vec::new(),
+                count: Vec::new(),
+                sums: Vec::new(),
             },
             marked: Vec::new(),
             pairs: Vec::new(),
@@ -394,11 +426,11 @@ impl ChunkVoxelizer {
         let textures = textures.as_deref();
         let skip = skip && *single_skip && textures.is_none();
         let o = origin.map(|c| c as i64);
-        let acc = &mut slots.acc;
+        let Slots { count, sums, .. } = slots;
         // the records of the skipped voxels, encoded once per triangle (`finish` encodes the rest)
         words.clear();
         if skip {
-            words.resize(acc.len(), [0; 2]);
+            words.resize(count.len(), [0; 2]);
         }
         for (i, m) in marked.iter().enumerate() {
             let end = marked.get(i + 1).map_or(pairs.len(), |n| n.first as usize);
@@ -408,14 +440,21 @@ impl ChunkVoxelizer {
             // one contribution: weight `w` and values `x` into the sums, or, for a voxel the
             // skip leaves unclipped (weight 1), its record's words
             let mut add =
-                |acc: &mut [Acc], slot: u32, w: f32, x: [f32; 8], rec: Option<[u32; 2]>| {
+                |count: &mut [Count], slot: u32, w: f32, x: [f32; 8], rec: Option<[u32; 2]>| {
                     match rec {
                         Some(r) => {
                             *unclipped += 1;
-                            acc[slot as usize].k |= ENCODED;
+                            count[slot as usize].k |= ENCODED;
                             words[slot as usize] = r;
                         }
-                        None => acc[slot as usize].add(w, x),
+                        None => {
+                            let j = &mut count[slot as usize].at;
+                            if *j == NO_SUMS {
+                                *j = sums.len() as u32;
+                                sums.push(Acc::ZERO);
+                            }
+                            sums[*j as usize].add(w, x);
+                        }
                     }
                     if let Some(ms) = mats.as_deref_mut() {
                         ms.add(slot as usize, w);
@@ -423,16 +462,16 @@ impl ChunkVoxelizer {
                 };
             if m.interior {
                 let (w, x) = interior_contribution(t, textures);
-                add(acc, pairs[0].slot, w, x, None);
+                add(count, pairs[0].slot, w, x, None);
                 continue;
             }
             let flat = skip && single::is_flat(t);
             let xflat = flat.then(|| single::flat_values(t));
             let record = xflat.map(|x| (x, record_words(&x)));
             if let Some((x, r)) = record {
-                if pairs.iter().all(|p| acc[p.slot as usize].k == 1) {
+                if pairs.iter().all(|p| count[p.slot as usize].k == 1) {
                     for p in pairs {
-                        add(acc, p.slot, 1.0, x, Some(r));
+                        add(count, p.slot, 1.0, x, Some(r));
                     }
                     continue;
                 }
@@ -443,8 +482,8 @@ impl ChunkVoxelizer {
             cols.set(&s);
             let mut column = u32::MAX;
             for p in pairs {
-                if let (Some((x, r)), 1) = (record, acc[p.slot as usize].k) {
-                    add(acc, p.slot, 1.0, x, Some(r));
+                if let (Some((x, r)), 1) = (record, count[p.slot as usize].k) {
+                    add(count, p.slot, 1.0, x, Some(r));
                     continue;
                 }
                 let [x, y, z] = [p.swz & 255, p.swz >> 8 & 255, p.swz >> 16];
@@ -452,16 +491,18 @@ impl ChunkVoxelizer {
                     column = p.swz & 0xffff;
                     cols.begin((x as i64 + o_s[0]) as f64, (y as i64 + o_s[1]) as f64);
                 }
-                let (w, c) = cols.voxel((z as i64 + o_s[2]) as f64);
-                let x = match (&ip, xflat) {
+                let z = (z as i64 + o_s[2]) as f64;
+                let (w, x) = match (&ip, xflat) {
                     (Some(ip), _) => {
+                        let (w, c) = cols.voxel(z);
                         let q = c.map_or(ip.centroid, |c| [c[0], c[1]]);
-                        ip.at(q[0], q[1], w)
+                        (w, ip.at(q[0], q[1], w))
                     }
-                    (None, Some(x)) => x,
+                    // flat values: the area alone (bit for bit the clipped path's weight)
+                    (None, Some(x)) => (cols.voxel_area(z), x),
                     (None, None) => unreachable!("a triangle is flat or interpolated"),
                 };
-                add(acc, p.slot, w as f32, x, None);
+                add(count, p.slot, w as f32, x, None);
             }
         }
     }
@@ -469,29 +510,28 @@ impl ChunkVoxelizer {
     /// Finish the chunk: encoded voxels sorted by the Morton code of their in-chunk position,
     /// with normal, colour and face mask. Resets for the next `begin`.
     ///
-    /// The accumulators are encoded in the order they were made (a sequential read) and each
-    /// record is stored at its rank in Morton order, which the occupancy bits give without a
-    /// sort: the voxels of the bricks before its brick (in Morton order) plus those before it
-    /// in its brick.
+    /// The voxels are encoded in slot order (a sequential read) and each record is stored at
+    /// its rank in Morton order, which the occupancy bits give without a sort: the voxels of
+    /// the bricks before its brick (in Morton order) plus those before it in its brick.
     pub fn finish(&mut self) -> Vec<Voxel> {
         self.accumulate(!self.eager);
-        let mut out = vec![Voxel::default(); self.slots.acc.len()];
-        // per accumulator (made in slot order: `ranked` passes it as `i`) its material
+        let mut out = vec![Voxel::default(); self.slots.count.len()];
+        // per slot (`ranked` passes it as `i`) its material
         let winners: Option<Vec<u32>> = self
             .materials
             .as_ref()
             .map(|m| (0..m.len()).map(|i| m.winner(i)).collect());
         let mut mats = vec![0u32; winners.as_ref().map_or(0, Vec::len)];
         if self.textures.is_some() {
-            self.ranked(|r, i, pos, a| {
-                out[r] = encode(pos, a, true);
+            self.ranked(|r, i, pos, sl| {
+                out[r] = encode(pos, sl.sums_of(i), sl.count[i].k, true);
                 if let Some(w) = &winners {
                     mats[r] = w[i];
                 }
             });
         } else {
             let mut words = std::mem::take(&mut self.words);
-            encode_words(&self.slots.acc, &mut words);
+            encode_words(&self.slots, &mut words);
             self.ranked(|r, i, pos, _| {
                 let [normal, color] = words[i];
                 let mask = face_mask(normal) | border_caps(pos);
@@ -511,11 +551,12 @@ impl ChunkVoxelizer {
     /// Every pair is clipped here (no [`crate::single`] skip): `w` is the summed clipped area.
     pub fn finish_sums(&mut self) -> Vec<VoxelSums> {
         self.accumulate(false);
-        let mut out = vec![VoxelSums::default(); self.slots.acc.len()];
-        self.ranked(|r, _, pos, a| {
+        let mut out = vec![VoxelSums::default(); self.slots.count.len()];
+        self.ranked(|r, i, pos, sl| {
+            let a = sl.sums_of(i);
             out[r] = VoxelSums {
                 pos,
-                k: a.k,
+                k: sl.count[i].k,
                 w: a.s[3],
                 n: [a.s[0], a.s[1], a.s[2]],
                 c: [a.s[4], a.s[5], a.s[6], a.s[7]],
@@ -524,40 +565,36 @@ impl ChunkVoxelizer {
         out
     }
 
-    /// Calls `f(rank, index, position, sums)` for every accumulator, in the order they were made
-    /// (`index`), with its rank in Morton order; then resets.
+    /// Calls `f(rank, slot, position, slots)` for every voxel, in slot order (the order they
+    /// were marked), with its rank in Morton order; then resets.
     #[inline]
-    fn ranked(&mut self, mut f: impl FnMut(usize, usize, [u8; 3], &Acc)) {
-        let Slots {
-            bricks,
-            touched,
-            acc,
-            ..
-        } = &self.slots;
-        let mut order: Vec<(u32, u32)> = touched
+    fn ranked(&mut self, mut f: impl FnMut(usize, usize, [u8; 3], &Slots)) {
+        let sl = &self.slots;
+        let mut order: Vec<(u32, u32)> = sl
+            .touched
             .iter()
             .enumerate()
             .map(|(i, &(b, _))| (b, i as u32))
             .collect();
         order.sort_unstable();
         // rank of the first voxel of each occupancy word of each touched brick
-        let mut first = vec![[0u32; 8]; touched.len()];
+        let mut first = vec![[0u32; 8]; sl.touched.len()];
         let mut rank = 0u32;
         for &(_, i) in &order {
-            let occ = &touched[i as usize].1;
+            let occ = &sl.touched[i as usize].1;
             for (f, w) in first[i as usize].iter_mut().zip(occ) {
                 *f = rank;
                 rank += w.count_ones();
             }
         }
-        debug_assert_eq!(rank as usize, acc.len());
-        for (i, a) in acc.iter().enumerate() {
-            let b = bricks[(a.idx >> 9) as usize] as usize - 1;
-            let v = a.idx as usize & (BRICK - 1);
-            let below = touched[b].1[v >> 6] & ((1u64 << (v & 63)) - 1);
+        debug_assert_eq!(rank as usize, sl.idx.len());
+        for (i, &idx) in sl.idx.iter().enumerate() {
+            let b = sl.bricks[(idx >> 9) as usize] as usize - 1;
+            let v = idx as usize & (BRICK - 1);
+            let below = sl.touched[b].1[v >> 6] & ((1u64 << (v & 63)) - 1);
             let r = first[b][v >> 6] + below.count_ones();
-            let pos = demorton3(a.idx as u64).map(|c| c as u8);
-            f(r as usize, i, pos, a);
+            let pos = unmorton8(idx);
+            f(r as usize, i, pos, sl);
         }
         self.reset();
     }
@@ -582,9 +619,33 @@ struct Slots {
     blocks: Vec<u32>,
     /// per touched brick: its brick index and the occupancy bits of its 512 voxels
     touched: Vec<(u32, [u64; 8])>,
-    /// per occupied voxel, in the order of first touch
-    acc: Vec<Acc>,
+    /// the brick index and block + 1 of the last voxel marked ([`NO_BRICK`]: none)
+    last: (u32, u32),
+    /// per occupied voxel (its slot), in the order of first touch: the Morton code of its
+    /// in-chunk position
+    idx: Vec<u32>,
+    /// per slot: its count and where its sums are
+    count: Vec<Count>,
+    /// the sums of the voxels with contributions added, in the order of the first one
+    sums: Vec<Acc>,
 }
+
+/// No brick ([`Slots::last`]).
+const NO_BRICK: (u32, u32) = (u32::MAX, 0);
+
+/// A voxel's count and where its sums are, side by side so that the attribute pass's test of
+/// the count and its step to the sums read one cache line.
+#[derive(Clone, Copy, Debug)]
+struct Count {
+    /// the number of contributions the marking pass counted, and [`ENCODED`]
+    k: u32,
+    /// its sums in [`Slots::sums`], [`NO_SUMS`] until the attribute pass adds its first
+    /// contribution (`ChunkVoxelizer::accumulate`)
+    at: u32,
+}
+
+/// A slot without sums ([`Count::at`]).
+const NO_SUMS: u32 = u32::MAX;
 
 impl Slots {
     /// Forgets every voxel (a new chunk); keeps the allocations.
@@ -593,8 +654,17 @@ impl Slots {
             self.bricks[b as usize] = 0;
         }
         self.touched.clear();
+        self.last = NO_BRICK;
         self.blocks.clear();
-        self.acc.clear();
+        self.idx.clear();
+        self.count.clear();
+        self.sums.clear();
+    }
+
+    /// The sums of `slot` (which has had a contribution added).
+    #[inline]
+    fn sums_of(&self, slot: usize) -> &Acc {
+        &self.sums[self.count[slot].at as usize]
     }
 
     /// Counts one contribution to the voxel at in-chunk position `local` and returns its slot,
@@ -602,22 +672,30 @@ impl Slots {
     #[inline]
     fn mark(&mut self, local: [u32; 3]) -> u32 {
         let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
-        let bi = (idx >> 9) as usize;
-        let mut b = self.bricks[bi] as usize;
-        if b == 0 {
-            self.blocks.resize(self.blocks.len() + BRICK, 0);
-            self.touched.push((bi as u32, [0; 8]));
-            b = self.touched.len();
-            self.bricks[bi] = b as u32;
-        }
+        let bi = idx >> 9;
+        // a column's voxels and a triangle's neighbouring columns mostly stay in one brick
+        let b = if bi == self.last.0 {
+            self.last.1 as usize
+        } else {
+            let mut b = self.bricks[bi as usize] as usize;
+            if b == 0 {
+                self.blocks.resize(self.blocks.len() + BRICK, 0);
+                self.touched.push((bi, [0; 8]));
+                b = self.touched.len();
+                self.bricks[bi as usize] = b as u32;
+            }
+            self.last = (bi, b as u32);
+            b
+        };
         let v = idx as usize & (BRICK - 1);
         let sl = &mut self.blocks[(b - 1) * BRICK + v];
         if *sl == 0 {
-            self.acc.push(Acc::marked(idx));
-            *sl = self.acc.len() as u32;
+            self.idx.push(idx);
+            self.count.push(Count { k: 1, at: NO_SUMS });
+            *sl = self.count.len() as u32;
             self.touched[b - 1].1[v >> 6] |= 1 << (v & 63);
         } else {
-            self.acc[*sl as usize - 1].k += 1;
+            self.count[*sl as usize - 1].k += 1;
         }
         *sl - 1
     }
@@ -664,11 +742,11 @@ fn interior_contribution(t: &Triangle, textures: Option<&TextureSet>) -> (f32, [
 /// The normal is packed from the sum itself (packing normalizes, and `N / W` has the direction
 /// of `N`), in f64 so that tiny sums neither underflow nor lose digits.
 #[inline]
-fn encode(pos: [u8; 3], a: &Acc, linear: bool) -> Voxel {
+fn encode(pos: [u8; 3], a: &Acc, k: u32, linear: bool) -> Voxel {
     let s = &a.s;
     let normal = pack_normal_f64([s[0] as f64, s[1] as f64, s[2] as f64]);
     let mask = face_mask(normal) | border_caps(pos);
-    let inv = 1.0 / if s[3] > 0.0 { s[3] } else { a.k as f32 };
+    let inv = 1.0 / if s[3] > 0.0 { s[3] } else { k as f32 };
     let c = |k: usize| {
         let m = s[k] * inv;
         let m = if linear && k < 7 {
@@ -684,9 +762,9 @@ fn encode(pos: [u8; 3], a: &Acc, linear: bool) -> Voxel {
 /// Voxels per batch of [`encode_words`].
 const LANES: usize = 64;
 
-/// The normal and colour words of [`encode`] (plain colours, `linear == false`) for every
-/// accumulator of `acc` not marked [`ENCODED`], in order, bit for bit, into `out` (resized to
-/// `acc.len()`; the words of marked accumulators are left as they are).
+/// The normal and colour words of [`encode`] (plain colours, `linear == false`) for every slot
+/// of `sl` not marked [`ENCODED`], in slot order, bit for bit, into `out` (resized to the
+/// number of slots; the words of marked slots are left as they are).
 ///
 /// The sums are transposed into batches of [`LANES`] voxels and each word is computed by a loop
 /// without branches, so that the compiler runs the square roots, divisions, roundings and
@@ -694,10 +772,11 @@ const LANES: usize = 64;
 /// scalar [`encode`]; `tests` below compares the two). A zero or non-finite normal sum computes
 /// garbage in its lane (NaN, saturating conversions) and is then replaced by 0, as
 /// [`pack_normal_f64`] returns.
-fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
-    out.resize(acc.len(), [0; 2]);
-    let todo: Vec<u32> = (0..acc.len() as u32)
-        .filter(|&i| acc[i as usize].k & ENCODED == 0)
+fn encode_words(sl: &Slots, out: &mut Vec<[u32; 2]>) {
+    let count = &sl.count;
+    out.resize(count.len(), [0; 2]);
+    let todo: Vec<u32> = (0..count.len() as u32)
+        .filter(|&i| count[i as usize].k & ENCODED == 0)
         .collect();
     let mut n = [[0f64; LANES]; 3];
     let mut w = [0f32; LANES];
@@ -706,11 +785,15 @@ fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
     let mut cw = [0u32; LANES];
     for batch in todo.chunks(LANES) {
         for (i, &j) in batch.iter().enumerate() {
-            let a = &acc[j as usize];
+            let a = sl.sums_of(j as usize);
             for k in 0..3 {
                 n[k][i] = a.s[k] as f64;
             }
-            w[i] = if a.s[3] > 0.0 { a.s[3] } else { a.k as f32 };
+            w[i] = if a.s[3] > 0.0 {
+                a.s[3]
+            } else {
+                count[j as usize].k as f32
+            };
             for k in 0..4 {
                 c[k][i] = a.s[4 + k];
             }
@@ -740,15 +823,7 @@ fn encode_words(acc: &[Acc], out: &mut Vec<[u32; 2]>) {
 /// The normal and colour words of a voxel whose only contribution has values `x` and weight 1
 /// (what [`encode`] gives it; see [`crate::single`]).
 fn record_words(x: &[f32; 8]) -> [u32; 2] {
-    let v = encode(
-        [0; 3],
-        &Acc {
-            s: *x,
-            idx: 0,
-            k: 1,
-        },
-        false,
-    );
+    let v = encode([0; 3], &Acc { s: *x }, 1, false);
     [v.normal, v.color]
 }
 
@@ -757,6 +832,18 @@ mod tests {
     use super::*;
     use voxlod_testkit::Rng;
 
+    /// [`unmorton8`] inverts `morton8` on every in-chunk position.
+    #[test]
+    fn unmorton8_inverts_morton8() {
+        for x in 0..=255u8 {
+            for y in 0..=255u8 {
+                for z in (0..=255u8).step_by(5).chain([255]) {
+                    assert_eq!(unmorton8(morton8(x, y, z)), [x, y, z]);
+                }
+            }
+        }
+    }
+
     /// The batched encoding equals the scalar [`encode`] bit for bit: on random sums of every
     /// scale, on zero, tiny (subnormal products) and huge sums, on colour means at rounding
     /// halves, and on zero-weight voxels (unweighted means by the count).
@@ -764,6 +851,7 @@ mod tests {
     fn encode_words_is_encode() {
         let mut rng = Rng(13);
         let mut accs = Vec::new();
+        let mut ks = Vec::new();
         let specials = [
             0.0f32, -0.0, 1e-30, -1e-38, 1e-45, 3e38, -3e38, 0.5, 1.5, 254.5, 255.5,
         ];
@@ -785,24 +873,39 @@ mod tests {
                     s[k] = s[3] * ((rng.next_u64() % 512) as f32 * 0.5);
                 }
             }
-            let k = 1 + (rng.next_u64() % 9) as u32;
-            accs.push(Acc { s, idx: i, k });
+            accs.push(Acc { s });
+            ks.push(1 + (rng.next_u64() % 9) as u32);
         }
+        // the sums of slot i at i
+        let mut slots = Slots {
+            bricks: Vec::new(),
+            blocks: Vec::new(),
+            touched: Vec::new(),
+            last: NO_BRICK,
+            idx: Vec::new(),
+            count: (0..accs.len())
+                .map(|i| Count {
+                    k: ks[i],
+                    at: i as u32,
+                })
+                .collect(),
+            sums: accs.clone(),
+        };
         let mut words = Vec::new();
-        encode_words(&accs, &mut words);
+        encode_words(&slots, &mut words);
         assert_eq!(words.len(), accs.len());
-        for (a, w) in accs.iter().zip(&words) {
-            let v = encode([1, 2, 3], a, false);
-            assert_eq!([v.normal, v.color], *w, "sums {:?}, k {}", a.s, a.k);
+        for ((a, &k), w) in accs.iter().zip(&ks).zip(&words) {
+            let v = encode([1, 2, 3], a, k, false);
+            assert_eq!([v.normal, v.color], *w, "sums {:?}, k {k}", a.s);
         }
         // accumulators marked ENCODED keep the words they have; the others are computed
         let mut marked = vec![[7u32, 9]; accs.len()];
-        for (i, a) in accs.iter_mut().enumerate() {
+        for (i, c) in slots.count.iter_mut().enumerate() {
             if i % 3 == 0 {
-                a.k |= ENCODED;
+                c.k |= ENCODED;
             }
         }
-        encode_words(&accs, &mut marked);
+        encode_words(&slots, &mut marked);
         for (i, (m, w)) in marked.iter().zip(&words).enumerate() {
             assert_eq!(*m, if i % 3 == 0 { [7, 9] } else { *w });
         }

@@ -243,6 +243,28 @@ impl Poly {
         self.clip(2, z, false).clip(2, z + 1.0, true)
     }
 
+    /// The area of [`Poly::area_centroid`] alone, bit for bit (the same shoelace fan in the same
+    /// order), without the centroid's sums and division: the weight of a contribution whose
+    /// values do not depend on the point (a triangle with flat attributes, [`crate::single`]).
+    #[inline]
+    pub fn area(&self, area_scale: f64) -> f64 {
+        if self.len == 0 {
+            return 0.0;
+        }
+        let p0 = self.p[0];
+        let mut a2 = 0.0;
+        for i in 1..self.len.saturating_sub(1) {
+            let u = [self.p[i][0] - p0[0], self.p[i][1] - p0[1]];
+            let w = [self.p[i + 1][0] - p0[0], self.p[i + 1][1] - p0[1]];
+            a2 += u[0] * w[1] - u[1] * w[0];
+        }
+        if a2 != 0.0 {
+            0.5 * a2.abs() * area_scale
+        } else {
+            0.0
+        }
+    }
+
     /// Area and centroid of the polygon, which lies in a plane whose normal `n` has `n[2] ≠ 0`:
     /// the fan `p0, p_i, p_{i+1}` is measured in the xy projection (`a_i`, shoelace) and scaled
     /// by `area_scale = |n| / |n_z|`. Centroid = `Σ a_i (p0+p_i+p_{i+1})/3 / Σ a_i`. If the area

@@ -70,7 +70,7 @@
 //!   projection with per-triangle gradients (the same barycentrics: `q` lies in the plane);
 //! * the sums `W`, `N`, `C` (or `N′`, `C′`) in **f32**, in triangle order, which makes the
 //!   result deterministic (one chunk is voxelized by one thread) and halves the accumulator
-//!   (40 bytes per voxel). Error bound (proved on `chunk::Acc`): every sum is within
+//!   (32 bytes per voxel, and a 4-byte count). Error bound (proved on `chunk::Acc`): every sum is within
 //!   `γ_{K+2} = (K+2)·2⁻²⁴/(1 − (K+2)·2⁻²⁴)` of the sum of its terms' absolute values, so the
 //!   mean colour is off by less than 0.13 for `K ≤ 4094` contributions and the normal by less
 //!   than one step wherever `|N|/W ≥ 1.06e-4·(K+2)`; `tests/attributes.rs` checks the bound
