@@ -139,6 +139,7 @@ fn main() {
             }
             let mut keys: Vec<[u32; 3]> = bins.keys().copied().collect();
             keys.sort();
+            let binned = cpu_or_wall(c0, t0);
             let mut cv = ChunkVoxelizer::new(mode);
             cv.set_fast_paths(fast);
             cv.set_small_path(small);
@@ -158,10 +159,11 @@ fn main() {
                 _ => "general",
             };
             println!(
-                "{mode:>12} chunk {name:>7}, 1 thread (cpu): {count:>10} voxels  {dt:7.3} s  {:7.2} M voxels/s  ({} chunks, {} small triangles)",
+                "{mode:>12} chunk {name:>7}, 1 thread (cpu): {count:>10} voxels  {dt:7.3} s  {:7.2} M voxels/s  ({} chunks, {} small triangles; binning {binned:.3} s, then {:.0} ns per binned triangle)",
                 count as f64 / dt / 1e6,
                 keys.len(),
-                cv.small_triangles()
+                cv.small_triangles(),
+                (dt - binned) * 1e9 / bins.values().map(Vec::len).sum::<usize>() as f64
             );
             outputs.push(out);
         }

@@ -334,7 +334,11 @@ impl ChunkVoxelizer {
         let hi = o.map(|c| (c + CHUNK as i64 - 1).min(i32::MAX as i64) as i32);
         let small = self.small_path && self.mode == Mode::Conservative && self.textures.is_none();
         for t in tris {
-            if small && small::split(&t.v, lo, hi, &mut self.small) {
+            if small && {
+                // a flat triangle needs only the areas ([`crate::single`])
+                self.small.area_only = single::is_flat(t);
+                small::split(&t.v, lo, hi, &mut self.small)
+            } {
                 self.add_small(t);
                 continue;
             }
@@ -423,12 +427,14 @@ impl ChunkVoxelizer {
             }
         };
         if sm.interior {
-            let (w, x) = interior_contribution(t, None);
+            // `face(t)` from the normal `split` computed
+            let face = sm.n.map(|c| c * (1.0 / sm.norm));
+            let (w, x) = interior_values(t, face, sm.norm, None);
             add(sm.pieces[0].voxel, w, x);
             return;
         }
-        if single::is_flat(t) {
-            let x = single::flat_values(t);
+        if sm.area_only {
+            let x = single::flat_values_of(t, sm.n, sm.norm);
             for p in sm.pieces() {
                 add(p.voxel, p.w as f32, x);
             }
@@ -716,6 +722,17 @@ fn face(t: &Triangle) -> Option<([f64; 3], f64)> {
 #[inline]
 fn interior_contribution(t: &Triangle, textures: Option<&TextureSet>) -> (f32, [f32; 8]) {
     let (face, len) = face(t).expect("an interior triangle has a normal");
+    interior_values(t, face, len, textures)
+}
+
+/// [`interior_contribution`] from the triangle's unit face normal and `|n|` ([`face`]).
+#[inline]
+fn interior_values(
+    t: &Triangle,
+    face: [f64; 3],
+    len: f64,
+    textures: Option<&TextureSet>,
+) -> (f32, [f32; 8]) {
     let normal = if t.flags & TRI_HAS_NORMALS != 0 {
         let m = [0, 1, 2].map(|k| t.n[0][k] as f64 + t.n[1][k] as f64 + t.n[2][k] as f64);
         unit_or(m, face)

@@ -72,6 +72,13 @@ pub(crate) struct Piece {
 pub(crate) struct Small {
     /// the triangle's vertices swizzled to its dominant axis (for the interpolation)
     pub sv: [[f64; 3]; 3],
+    /// its normal `(v1 − v0) × (v2 − v0)` (f64, original axes) and `|n|`, as
+    /// `chunk::face` computes them
+    pub n: [f64; 3],
+    pub norm: f64,
+    /// set by the caller: only the areas are needed (a triangle with flat attributes), not the
+    /// centroids (`Piece::q` is then `None`)
+    pub area_only: bool,
     pub interior: bool,
     pub len: usize,
     pub pieces: [Piece; 8],
@@ -123,6 +130,8 @@ pub(crate) fn split(v: &[[f32; 3]; 3], lo: [i32; 3], hi: [i32; 3], out: &mut Sma
     if !(nn > 0.0 && nn.is_finite()) {
         return false;
     }
+    out.n = n;
+    out.norm = nn.sqrt();
     let swz = swizzle(dominant_axis(n));
     let sw = |p: [f64; 3]| [p[swz[0]], p[swz[1]], p[swz[2]]];
     out.sv = [sw(o[0]), sw(o[1]), sw(o[2])];
@@ -152,7 +161,18 @@ pub(crate) fn split(v: &[[f32; 3]; 3], lo: [i32; 3], hi: [i32; 3], out: &mut Sma
     let Some(inside) = octants(&o, n, split, p) else {
         return false;
     };
-    cut(out, split, p, first, swz, area_scale(sw(n)), inside);
+    let g = Cut {
+        split,
+        p,
+        first,
+        swz,
+        scale: area_scale(sw(n)),
+        inside,
+    };
+    out.len = 0;
+    let tri = Poly::triangle(&out.sv);
+    part(out, &g, &tri, 0, 0);
+    debug_assert!(out.len >= 1, "a small triangle meets at least one voxel");
     true
 }
 
@@ -214,50 +234,92 @@ fn octants(o: &[[f64; 3]; 3], n: [f64; 3], split: [bool; 3], p: [f64; 3]) -> Opt
     Some(inside)
 }
 
-/// The clipped parts of the candidates in `inside` ([`octants`]): the swizzled triangle cut by
-/// the split planes, swizzled axis 0 first, both sides of each cut kept.
-fn cut(
-    out: &mut Small,
+/// What the cuts ([`part`]) need besides the polygon: the split axes and planes, the candidates' first
+/// voxel, the swizzle, `|n|/|n_z|` and the candidates the triangle meets.
+struct Cut {
     split: [bool; 3],
     p: [f64; 3],
     first: [i32; 3],
     swz: [usize; 3],
     scale: f64,
     inside: u8,
-) {
-    // parts with their candidate bits (original axes), at most 8
-    let mut parts = [(Poly::EMPTY, 0u8); 8];
-    parts[0] = (Poly::triangle(&out.sv), 0);
-    let mut len = 1;
-    for (m, &k) in swz.iter().enumerate() {
-        if !split[k] {
-            continue;
+}
+
+/// The clipped parts of the candidates the triangle meets ([`octants`]) into `out`: the
+/// swizzled triangle cut by the split planes, swizzled axis 0 first, both sides of each cut
+/// kept. `poly` is the part of the candidates with bits `bits` (original axes) on the swizzled
+/// axes before `m`: it is cut on the next split axis from `m`, or, past the last, added to
+/// `out` if the triangle meets its voxel.
+fn part(out: &mut Small, g: &Cut, poly: &Poly, m: usize, bits: u8) {
+    let Some(m) = (m..3).find(|&m| g.split[g.swz[m]]) else {
+        if g.inside >> bits & 1 == 1 {
+            let (w, q) = if out.area_only {
+                (area(poly, g.scale), None)
+            } else {
+                let (w, c) = poly.area_centroid(g.scale);
+                (w, c.map(|c| [c[0], c[1]]))
+            };
+            out.pieces[out.len] = Piece {
+                voxel: [0, 1, 2].map(|k| g.first[k] + (bits >> k & 1) as i32),
+                w,
+                q,
+            };
+            out.len += 1;
         }
-        for i in 0..len {
-            let (poly, bits) = parts[i];
-            let (mut a, mut b) = (Poly::EMPTY, Poly::EMPTY);
-            match m {
-                0 => poly.split_into::<0>(p[k], &mut a, &mut b),
-                1 => poly.split_into::<1>(p[k], &mut a, &mut b),
-                _ => poly.split_into::<2>(p[k], &mut a, &mut b),
+        return;
+    };
+    let k = g.swz[m];
+    let (mut lo, mut hi) = (Poly::EMPTY, Poly::EMPTY);
+    match m {
+        0 => poly.split_into::<0>(g.p[k], &mut lo, &mut hi),
+        1 => poly.split_into::<1>(g.p[k], &mut lo, &mut hi),
+        _ => poly.split_into::<2>(g.p[k], &mut lo, &mut hi),
+    }
+    part(out, g, &lo, m + 1, bits);
+    part(out, g, &hi, m + 1, bits | 1 << k);
+}
+
+/// The area of [`Poly::area_centroid`] without the centroid, bit for bit (the same fan and the
+/// same operations in the same order).
+#[inline]
+fn area(poly: &Poly, scale: f64) -> f64 {
+    if poly.len == 0 {
+        return 0.0;
+    }
+    let p0 = poly.p[0];
+    let mut a2 = 0.0;
+    for i in 1..poly.len.saturating_sub(1) {
+        let u = [poly.p[i][0] - p0[0], poly.p[i][1] - p0[1]];
+        let w = [poly.p[i + 1][0] - p0[0], poly.p[i + 1][1] - p0[1]];
+        a2 += u[0] * w[1] - u[1] * w[0];
+    }
+    if a2 != 0.0 {
+        0.5 * a2.abs() * scale
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use voxlod_testkit::Rng;
+
+    /// [`area`] is the area of [`Poly::area_centroid`] bit for bit, on random triangles and
+    /// their clipped parts.
+    #[test]
+    fn area_is_area_centroid_area() {
+        let mut rng = Rng(11);
+        for _ in 0..20_000 {
+            let v = [0, 1, 2].map(|_| rng.point(-2.0, 2.0));
+            let mut poly = Poly::triangle(&v);
+            if rng.below(2) == 0 {
+                poly = poly
+                    .clip_column(-1.0, -1.0)
+                    .clip_depth(rng.int(-2, 1) as f64);
             }
-            parts[i] = (a, bits);
-            parts[len + i] = (b, bits | 1 << k);
+            let s = rng.range(1.0, 1.8);
+            assert_eq!(area(&poly, s).to_bits(), poly.area_centroid(s).0.to_bits());
         }
-        len *= 2;
     }
-    out.len = 0;
-    for (poly, bits) in &parts[..len] {
-        if inside >> bits & 1 == 0 {
-            continue;
-        }
-        let (w, c) = poly.area_centroid(scale);
-        out.pieces[out.len] = Piece {
-            voxel: [0, 1, 2].map(|k| first[k] + (bits >> k & 1) as i32),
-            w,
-            q: c.map(|c| [c[0], c[1]]),
-        };
-        out.len += 1;
-    }
-    debug_assert!(out.len >= 1, "a small triangle meets at least one voxel");
 }
