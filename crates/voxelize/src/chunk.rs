@@ -267,8 +267,8 @@ impl ChunkVoxelizer {
     /// For tests and benchmarks: `false` sends every triangle through the marking pass (the
     /// present path kept as the reference); `true` (the default) adds the contributions of a
     /// small triangle at once, without the scan, the pair list or the column clipping
-    /// ([`crate::small`]: conservative mode without textures, a closed voxel range of at most
-    /// two voxels per axis inside the chunk). The same voxels and, per voxel, the same
+    /// ([`crate::small`]: conservative mode without textures or materials, a closed voxel range
+    /// of at most two voxels per axis inside the chunk). The same voxels and, per voxel, the same
     /// contributions (weights and centroids bit for bit those of [`crate::clipped_area`]); only
     /// the order in which a voxel's sums receive them changes, so records stay within the
     /// rounding bound of the f32 sums.
@@ -332,7 +332,11 @@ impl ChunkVoxelizer {
         let o = self.origin.map(|c| c as i64);
         let lo = o.map(|c| c.min(i32::MAX as i64) as i32);
         let hi = o.map(|c| (c + CHUNK as i64 - 1).min(i32::MAX as i64) as i32);
-        let small = self.small_path && self.mode == Mode::Conservative && self.textures.is_none();
+        // not with materials: their sums take slots in the order the attribute pass meets them
+        let small = self.small_path
+            && self.mode == Mode::Conservative
+            && self.textures.is_none()
+            && self.materials.is_none();
         for t in tris {
             if small && {
                 // a flat triangle needs only the areas ([`crate::single`])
@@ -414,17 +418,14 @@ impl ChunkVoxelizer {
         self.small_count += 1;
         let o = self.origin.map(|c| c as i64);
         let (slots, sm) = (&mut self.slots, &self.small);
-        let mut mats = self
-            .materials
-            .as_mut()
-            .map(|ms| ms.set_triangle(t.material()));
+        debug_assert!(
+            self.materials.is_none(),
+            "the small path takes no materials"
+        );
         let mut add = |voxel: [i32; 3], w: f32, x: [f32; 8]| {
             let local = [0, 1, 2].map(|k| (voxel[k] as i64 - o[k]) as u32);
             let slot = slots.mark(local);
             slots.acc[slot as usize].add(w, x);
-            if let Some(ms) = mats.as_deref_mut() {
-                ms.add(slot as usize, w);
-            }
         };
         if sm.interior {
             // `face(t)` from the normal `split` computed

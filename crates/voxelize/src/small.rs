@@ -49,7 +49,7 @@
 //! of `chunk::Acc`.
 
 use crate::clip::{area_scale, Poly};
-use crate::overlap::{cross_f64, dominant_axis, swizzle, to_f64};
+use crate::overlap::{cross_f64, dominant_axis, sign, swizzle, to_f64};
 use crate::predicates::{orient2d, plane_side};
 
 /// Unit roundoff of f64.
@@ -87,18 +87,6 @@ pub(crate) struct Small {
 impl Small {
     pub(crate) fn pieces(&self) -> &[Piece] {
         &self.pieces[..self.len]
-    }
-}
-
-/// Sign of `x` as −1, 0, 1 (in f64).
-#[inline]
-fn sign(x: f64) -> f64 {
-    if x > 0.0 {
-        1.0
-    } else if x < 0.0 {
-        -1.0
-    } else {
-        0.0
     }
 }
 

@@ -27,7 +27,7 @@ use num_bigint::BigInt;
 use num_traits::{Float, Signed, Zero};
 use std::cell::OnceCell;
 use std::collections::HashSet;
-use voxlod_geom::{Bounds, Grid, Triangle};
+use voxlod_geom::Triangle;
 use voxlod_voxelize::{voxelize_triangle, ChunkVoxelizer, Mode, TriSetup};
 
 /// `x·2¹⁵⁰` exactly, for an f32 value or a half-integer `x`.
@@ -685,23 +685,12 @@ fn chunk_sets(tris: &[[[f32; 3]; 3]], mode: Mode, origins: &[[u32; 3]]) -> HashS
 
 // ---------------------------------------------------------------- real meshes
 
-/// The triangles of a mesh in the grid coordinates the tool uses (`Grid::fit` of the bounds,
-/// `to_grid`), at `res`.
-fn mesh_in_grid(path: &std::path::Path, res: u32) -> Vec<[[f32; 3]; 3]> {
-    let src = voxlod_ingest::MeshSource::open(path).unwrap();
-    let mut tris = Vec::new();
-    src.stream(
-        &mut |b: &[Triangle]| {
-            tris.extend_from_slice(b);
-            Ok(())
-        },
-        &mut |_, _| {},
-    )
-    .unwrap();
-    let mut bounds = Bounds::default();
-    bounds.add_triangles(&tris);
-    let g = Grid::fit(&bounds, res).unwrap();
-    tris.iter().map(|t| t.v.map(|p| g.to_grid(p))).collect()
+/// The positions of a mesh's triangles in the grid coordinates the tool uses, at `res`.
+fn positions_in_grid(path: &std::path::Path, res: u32) -> Vec<[[f32; 3]; 3]> {
+    common::mesh_in_grid(path, res)
+        .iter()
+        .map(|t| t.v)
+        .collect()
 }
 
 fn real_mesh(rel: &str, resolutions: &[u32]) {
@@ -709,7 +698,7 @@ fn real_mesh(rel: &str, resolutions: &[u32]) {
         return;
     };
     for &res in resolutions {
-        let tris = mesh_in_grid(&dir.join(rel), res);
+        let tris = positions_in_grid(&dir.join(rel), res);
         for mode in [Mode::Conservative, Mode::Thin] {
             let mut want = HashSet::new();
             let mut tally = Tally::default();

