@@ -20,6 +20,8 @@
 //! corner; slivers; axis-aligned; huge and tiny coordinates) and on real meshes.
 
 mod common;
+#[path = "common/grid.rs"]
+mod grid;
 
 use common::adversarial::{adversarial, nudge};
 use common::{shared_meshes, Rng};
@@ -687,10 +689,7 @@ fn chunk_sets(tris: &[[[f32; 3]; 3]], mode: Mode, origins: &[[u32; 3]]) -> HashS
 
 /// The positions of a mesh's triangles in the grid coordinates the tool uses, at `res`.
 fn positions_in_grid(path: &std::path::Path, res: u32) -> Vec<[[f32; 3]; 3]> {
-    common::mesh_in_grid(path, res)
-        .iter()
-        .map(|t| t.v)
-        .collect()
+    grid::mesh_in_grid(path, res).iter().map(|t| t.v).collect()
 }
 
 fn real_mesh(rel: &str, resolutions: &[u32]) {

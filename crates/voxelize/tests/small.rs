@@ -14,7 +14,10 @@
 //! its 871k triangles are smaller than a voxel (as in `voxlod gen` meshes at 1024³).
 
 mod common;
+#[path = "common/grid.rs"]
+mod grid;
 use common::*;
+use grid::mesh_in_grid;
 use std::collections::HashMap;
 use voxlod_format::voxel::unpack_normal;
 use voxlod_format::Voxel;
