@@ -267,8 +267,8 @@ impl ChunkVoxelizer {
     /// For tests and benchmarks: `false` sends every triangle through the marking pass (the
     /// present path kept as the reference); `true` (the default) adds the contributions of a
     /// small triangle at once, without the scan, the pair list or the column clipping
-    /// ([`crate::small`]: conservative mode without textures or materials, a closed voxel range
-    /// of at most two voxels per axis inside the chunk). The same voxels and, per voxel, the same
+    /// ([`crate::small`]: conservative mode with an exact [`Method`], without textures or
+    /// materials, a closed voxel range of at most two voxels per axis inside the chunk). The same voxels and, per voxel, the same
     /// contributions (weights and centroids bit for bit those of [`crate::clipped_area`]); only
     /// the order in which a voxel's sums receive them changes, so records stay within the
     /// rounding bound of the f32 sums.
@@ -332,8 +332,10 @@ impl ChunkVoxelizer {
         let o = self.origin.map(|c| c as i64);
         let lo = o.map(|c| c.min(i32::MAX as i64) as i32);
         let hi = o.map(|c| (c + CHUNK as i64 - 1).min(i32::MAX as i64) as i32);
-        // not with materials: their sums take slots in the order the attribute pass meets them
+        // exact methods only (ILV's sets are its own approximation); not with materials: their
+        // sums take slots in the order the attribute pass meets them
         let small = self.small_path
+            && self.method.is_exact()
             && self.mode == Mode::Conservative
             && self.textures.is_none()
             && self.materials.is_none();
