@@ -268,10 +268,10 @@ impl ChunkVoxelizer {
     /// present path kept as the reference); `true` (the default) adds the contributions of a
     /// small triangle at once, without the scan, the pair list or the column clipping
     /// ([`crate::small`]: conservative mode with an exact [`Method`], without textures or
-    /// materials, a closed voxel range of at most two voxels per axis inside the chunk). The same voxels and, per voxel, the same
-    /// contributions (weights and centroids bit for bit those of [`crate::clipped_area`]); only
-    /// the order in which a voxel's sums receive them changes, so records stay within the
-    /// rounding bound of the f32 sums.
+    /// materials, a closed voxel range of at most two voxels per axis inside the chunk). The
+    /// same voxels and, per voxel, the same contributions (weights and centroids bit for bit
+    /// those of [`crate::clipped_area`]); only the order in which a voxel's sums receive them
+    /// changes, so records stay within the rounding bound of the f32 sums.
     pub fn set_small_path(&mut self, on: bool) {
         self.small_path = on;
     }
