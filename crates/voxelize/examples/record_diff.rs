@@ -4,6 +4,8 @@
 //! difference. `voxlod diff` reports per node; this counts records.
 //!
 //! `cargo run --release -p voxlod-voxelize --example record_diff -- A.voxlod B.voxlod`
+//!
+//! Prints the grid position of every record whose normal moved by more than one step.
 
 use std::path::Path;
 
@@ -46,6 +48,11 @@ fn main() {
                 normal_differ += 1;
                 let s = (0..3).map(|k| (na[k] - nb[k]).abs()).max().unwrap();
                 max_step = max_step.max(s);
+                if s > 1 {
+                    // grid position, for a look at its sums (`voxel_sums`)
+                    let g = [0, 1, 2].map(|k| e.pos()[k] * 256 + x.pos()[k] as u32);
+                    println!("{s} steps at voxel {} {} {}", g[0], g[1], g[2]);
+                }
                 steps[(s as usize).min(2)] += 1;
                 let fa = na.map(|c| c as f64);
                 let fb = nb.map(|c| c as f64);

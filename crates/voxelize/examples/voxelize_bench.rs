@@ -4,7 +4,8 @@
 //!
 //! With a mesh file (PLY, OBJ, STL) its triangles, fitted to the grid, replace the icosphere
 //! (`-` keeps the icosphere). A fifth argument `fast` or `general` runs only that chunk path and
-//! skips the grid driver (for profiling). A sixth argument `sums` also counts, per mode, the
+//! skips the grid driver (for profiling); `small` runs the fast path with and without the small
+//! triangle path (`ChunkVoxelizer::set_small_path`) and counts the records that differ. A sixth argument `sums` also counts, per mode, the
 //! voxels whose normal sum nearly cancels (`|N|/W < 1.06e-4·(K+2)`, where the f32 sums do not
 //! bound the normal to one step; see `chunk::Acc`), and the voxels with one contribution (whose
 //! records need no clipped area when the mesh's attributes are flat).
@@ -86,10 +87,12 @@ fn main() {
     }
     let subdiv: u32 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(6);
     let res: u32 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1024);
-    let paths: &[bool] = match args.get(4).map(|s| s.as_str()) {
-        Some("fast") => &[true],
-        Some("general") => &[false],
-        _ => &[true, false],
+    // (fast paths, small path)
+    let paths: &[(bool, bool)] = match args.get(4).map(|s| s.as_str()) {
+        Some("fast") => &[(true, true)],
+        Some("general") => &[(false, false)],
+        Some("small") => &[(true, true), (true, false)],
+        _ => &[(true, true), (false, false)],
     };
     let tris = match args.get(3).filter(|s| *s != "-") {
         Some(path) => mesh(std::path::Path::new(path), res),
@@ -118,7 +121,7 @@ fn main() {
         // full chunk voxelizer, one thread: bin, then chunk by chunk
         let mut outputs = Vec::new();
         let mut count = 0usize;
-        for &fast in paths {
+        for &(fast, small) in paths {
             let grid = Grid::new([0.0; 3], res as f64, res).expect("grid");
             let c0 = thread_cpu();
             let t0 = Instant::now();
@@ -136,8 +139,10 @@ fn main() {
             }
             let mut keys: Vec<[u32; 3]> = bins.keys().copied().collect();
             keys.sort();
+            let binned = cpu_or_wall(c0, t0);
             let mut cv = ChunkVoxelizer::new(mode);
             cv.set_fast_paths(fast);
+            cv.set_small_path(small);
             let mut out = Vec::new();
             count = 0;
             for k in &keys {
@@ -148,11 +153,17 @@ fn main() {
                 out.push(v);
             }
             let dt = cpu_or_wall(c0, t0);
-            let name = if fast { "fast" } else { "general" };
+            let name = match (fast, small) {
+                (true, true) => "fast",
+                (true, false) => "nosmall",
+                _ => "general",
+            };
             println!(
-                "{mode:>12} chunk {name:>7}, 1 thread (cpu): {count:>10} voxels  {dt:7.3} s  {:7.2} M voxels/s  ({} chunks)",
+                "{mode:>12} chunk {name:>7}, 1 thread (cpu): {count:>10} voxels  {dt:7.3} s  {:7.2} M voxels/s  ({} chunks, {} small triangles; binning {binned:.3} s, then {:.0} ns per binned triangle)",
                 count as f64 / dt / 1e6,
-                keys.len()
+                keys.len(),
+                cv.small_triangles(),
+                (dt - binned) * 1e9 / bins.values().map(Vec::len).sum::<usize>() as f64
             );
             outputs.push(out);
         }
@@ -213,8 +224,16 @@ fn main() {
                 }
             })
             .sum();
-        println!("{mode:>12} fast vs general: {differ} of {count} voxel records differ");
+        let names = if paths[1].0 {
+            "small vs nosmall"
+        } else {
+            "fast vs general"
+        };
+        println!("{mode:>12} {names}: {differ} of {count} voxel records differ");
 
+        if paths[1].0 {
+            continue;
+        }
         // parallel grid driver
         let t0 = Instant::now();
         let g = voxelize_grid(&tris, res, mode).expect("grid");

@@ -18,6 +18,7 @@ use crate::column::Columns;
 use crate::interp::{unit_or, values, Interp};
 use crate::material::MaterialSums;
 use crate::overlap::{cross_f64, interior_voxel, to_f64, TriSetup};
+use crate::small::{self, Small};
 use crate::texcolor::{linear_color, TexAt};
 use crate::{scanline, single, Method, Mode};
 
@@ -164,6 +165,12 @@ pub struct ChunkVoxelizer {
     pairs: Vec<Pair>,
     /// skip the clipping where it cannot change the record ([`Self::set_single_skip`])
     single_skip: bool,
+    /// add the contributions of small triangles at once ([`Self::set_small_path`])
+    small_path: bool,
+    /// the voxels and parts of the current small triangle
+    small: Small,
+    /// triangles added by the small path since this voxelizer was made
+    small_count: u64,
     /// this chunk's kept pairs and triangles outgrew [`DEFER_BYTES`]: the rest of the chunk is
     /// accumulated batch by batch, every pair clipped
     eager: bool,
@@ -221,6 +228,9 @@ impl ChunkVoxelizer {
             marked: Vec::new(),
             pairs: Vec::new(),
             single_skip: true,
+            small_path: true,
+            small: Small::default(),
+            small_count: 0,
             eager: false,
             defer_bytes: DEFER_BYTES,
             unclipped: 0,
@@ -283,6 +293,24 @@ impl ChunkVoxelizer {
     pub fn set_fast_paths(&mut self, on: bool) {
         self.cols = Columns::idle(on);
         self.single_skip = on;
+        self.small_path = on;
+    }
+
+    /// For tests and benchmarks: `false` sends every triangle through the marking pass (the
+    /// present path kept as the reference); `true` (the default) adds the contributions of a
+    /// small triangle at once, without the scan, the pair list or the column clipping
+    /// ([`crate::small`]: conservative mode with an exact [`Method`], without textures or
+    /// materials, a closed voxel range of at most two voxels per axis inside the chunk). The
+    /// same voxels and, per voxel, the same contributions (weights and centroids bit for bit
+    /// those of [`crate::clipped_area`]); only the order in which a voxel's sums receive them
+    /// changes, so records stay within the rounding bound of the f32 sums.
+    pub fn set_small_path(&mut self, on: bool) {
+        self.small_path = on;
+    }
+
+    /// Triangles the small path ([`Self::set_small_path`]) added since this voxelizer was made.
+    pub fn small_triangles(&self) -> u64 {
+        self.small_count
     }
 
     /// For tests and benchmarks: `false` clips every (triangle, voxel) pair, as the voxelizer
@@ -336,7 +364,22 @@ impl ChunkVoxelizer {
         let o = self.origin.map(|c| c as i64);
         let lo = o.map(|c| c.min(i32::MAX as i64) as i32);
         let hi = o.map(|c| (c + CHUNK as i64 - 1).min(i32::MAX as i64) as i32);
+        // exact methods only (ILV's sets are its own approximation); not with materials: their
+        // sums take slots in the order the attribute pass meets them
+        let small = self.small_path
+            && self.method.is_exact()
+            && self.mode == Mode::Conservative
+            && self.textures.is_none()
+            && self.materials.is_none();
         for t in tris {
+            if small && {
+                // a flat triangle needs only the areas ([`crate::single`])
+                self.small.area_only = single::is_flat(t);
+                small::split(&t.v, lo, hi, &mut self.small)
+            } {
+                self.add_small(t);
+                continue;
+            }
             // a triangle inside one voxel's interior (most of a scan's): that voxel, no overlap
             // test; its contribution is the whole triangle ([`interior_contribution`])
             if self.mode == Mode::Conservative {
@@ -399,6 +442,43 @@ impl ChunkVoxelizer {
             self.accumulate(false);
             self.marked.clear();
             self.pairs.clear();
+        }
+    }
+
+    /// A small triangle ([`crate::small`], its parts in `self.small`): marks its voxels and adds
+    /// its contributions at once (weights and interpolation points those the attribute pass
+    /// would compute; the whole triangle for one inside a voxel's interior).
+    fn add_small(&mut self, t: &Triangle) {
+        self.small_count += 1;
+        let o = self.origin.map(|c| c as i64);
+        let (slots, sm) = (&mut self.slots, &self.small);
+        debug_assert!(
+            self.materials.is_none(),
+            "the small path takes no materials"
+        );
+        let mut add = |voxel: [i32; 3], w: f32, x: [f32; 8]| {
+            let local = [0, 1, 2].map(|k| (voxel[k] as i64 - o[k]) as u32);
+            let slot = slots.mark(local);
+            slots.acc[slot as usize].add(w, x);
+        };
+        if sm.interior {
+            // `face(t)` from the normal `split` computed
+            let face = sm.n.map(|c| c * (1.0 / sm.norm));
+            let (w, x) = interior_values(t, face, sm.norm, None);
+            add(sm.pieces[0].voxel, w, x);
+            return;
+        }
+        if sm.area_only {
+            let x = single::flat_values_of(t, sm.n, sm.norm);
+            for p in sm.pieces() {
+                add(p.voxel, p.w as f32, x);
+            }
+        } else {
+            let ip = Interp::from_swizzled(t, &sm.sv, None);
+            for p in sm.pieces() {
+                let q = p.q.unwrap_or(ip.centroid);
+                add(p.voxel, p.w as f32, ip.at(q[0], q[1], p.w));
+            }
         }
     }
 
@@ -723,6 +803,17 @@ fn face(t: &Triangle) -> Option<([f64; 3], f64)> {
 #[inline]
 fn interior_contribution(t: &Triangle, textures: Option<&TextureSet>) -> (f32, [f32; 8]) {
     let (face, len) = face(t).expect("an interior triangle has a normal");
+    interior_values(t, face, len, textures)
+}
+
+/// [`interior_contribution`] from the triangle's unit face normal and `|n|` ([`face`]).
+#[inline]
+fn interior_values(
+    t: &Triangle,
+    face: [f64; 3],
+    len: f64,
+    textures: Option<&TextureSet>,
+) -> (f32, [f32; 8]) {
     let normal = if t.flags & TRI_HAS_NORMALS != 0 {
         let m = [0, 1, 2].map(|k| t.n[0][k] as f64 + t.n[1][k] as f64 + t.n[2][k] as f64);
         unit_or(m, face)

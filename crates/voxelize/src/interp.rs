@@ -35,7 +35,16 @@ pub(crate) struct Interp<'a> {
 
 impl<'a> Interp<'a> {
     pub(crate) fn new(t: &Triangle, s: &TriSetup, textures: Option<&'a TextureSet>) -> Interp<'a> {
-        let [p0, p1, p2] = s.v;
+        Self::from_swizzled(t, &s.v, textures)
+    }
+
+    /// [`Interp::new`] from the triangle's vertices swizzled to its dominant axis (`TriSetup::v`).
+    pub(crate) fn from_swizzled(
+        t: &Triangle,
+        v: &[[f64; 3]; 3],
+        textures: Option<&'a TextureSet>,
+    ) -> Interp<'a> {
+        let [p0, p1, p2] = *v;
         let e1 = [p1[0] - p0[0], p1[1] - p0[1]];
         let e2 = [p2[0] - p0[0], p2[1] - p0[1]];
         // the dominant projection's signed doubled area: never 0 for a triangle TriSetup took

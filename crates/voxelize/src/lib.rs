@@ -25,6 +25,9 @@
 //!   the 12-byte [`voxlod_format::Voxel`] records sorted by Morton code.
 //! * [`single`]: which (triangle, voxel) pairs need no clipped area (one contribution of a
 //!   triangle with flat attributes).
+//! * `small`: small triangles (a closed voxel range of at most two voxels per axis,
+//!   conservative mode): the exact set against the octants around one grid point and the
+//!   clipped areas by one cut per split axis, added at once without the scan or the pair list.
 //! * [`grid`]: [`voxelize_grid`], a whole in-memory grid, chunks in parallel.
 //! * [`texcolor`]: colour from a base colour texture (linear light, mip level of the part's
 //!   footprint; docs/TEXTURES.md).
@@ -148,6 +151,7 @@ pub mod overlap;
 pub mod predicates;
 pub mod scanline;
 pub mod single;
+mod small;
 pub mod texcolor;
 
 pub use chunk::{ChunkVoxelizer, VoxelSums};

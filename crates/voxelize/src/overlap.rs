@@ -68,7 +68,7 @@ use crate::Mode;
 
 /// `sign` with `sign(0) = 0`.
 #[inline]
-fn sign(x: f64) -> f64 {
+pub(crate) fn sign(x: f64) -> f64 {
     if x > 0.0 {
         1.0
     } else if x < 0.0 {

@@ -59,9 +59,16 @@ pub(crate) fn is_flat(t: &Triangle) -> bool {
 /// face normal `n/|n|`, computed the same way, and the colour: its gradients are zero).
 #[inline]
 pub(crate) fn flat_values(t: &Triangle) -> [f32; 8] {
-    debug_assert!(is_flat(t));
     let n = cross_f64(&to_f64(&t.v));
     let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    flat_values_of(t, n, len)
+}
+
+/// [`flat_values`] from the triangle's normal `n = (v1 − v0) × (v2 − v0)` (f64) and `|n|`,
+/// computed as there.
+#[inline]
+pub(crate) fn flat_values_of(t: &Triangle, n: [f64; 3], len: f64) -> [f32; 8] {
+    debug_assert!(is_flat(t));
     let face = n.map(|c| c / len);
     values(face, t.c[0].map(|c| c as f64))
 }

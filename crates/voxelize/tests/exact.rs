@@ -20,6 +20,8 @@
 //! corner; slivers; axis-aligned; huge and tiny coordinates) and on real meshes.
 
 mod common;
+#[path = "common/grid.rs"]
+mod grid;
 
 use common::adversarial::{adversarial, nudge};
 use common::{shared_meshes, Rng};
@@ -27,7 +29,7 @@ use num_bigint::BigInt;
 use num_traits::{Float, Signed, Zero};
 use std::cell::OnceCell;
 use std::collections::HashSet;
-use voxlod_geom::{Bounds, Grid, Triangle};
+use voxlod_geom::Triangle;
 use voxlod_voxelize::{voxelize_triangle, ChunkVoxelizer, Mode, TriSetup};
 
 /// `x·2¹⁵⁰` exactly, for an f32 value or a half-integer `x`.
@@ -685,23 +687,9 @@ fn chunk_sets(tris: &[[[f32; 3]; 3]], mode: Mode, origins: &[[u32; 3]]) -> HashS
 
 // ---------------------------------------------------------------- real meshes
 
-/// The triangles of a mesh in the grid coordinates the tool uses (`Grid::fit` of the bounds,
-/// `to_grid`), at `res`.
-fn mesh_in_grid(path: &std::path::Path, res: u32) -> Vec<[[f32; 3]; 3]> {
-    let src = voxlod_ingest::MeshSource::open(path).unwrap();
-    let mut tris = Vec::new();
-    src.stream(
-        &mut |b: &[Triangle]| {
-            tris.extend_from_slice(b);
-            Ok(())
-        },
-        &mut |_, _| {},
-    )
-    .unwrap();
-    let mut bounds = Bounds::default();
-    bounds.add_triangles(&tris);
-    let g = Grid::fit(&bounds, res).unwrap();
-    tris.iter().map(|t| t.v.map(|p| g.to_grid(p))).collect()
+/// The positions of a mesh's triangles in the grid coordinates the tool uses, at `res`.
+fn positions_in_grid(path: &std::path::Path, res: u32) -> Vec<[[f32; 3]; 3]> {
+    grid::mesh_in_grid(path, res).iter().map(|t| t.v).collect()
 }
 
 fn real_mesh(rel: &str, resolutions: &[u32]) {
@@ -709,7 +697,7 @@ fn real_mesh(rel: &str, resolutions: &[u32]) {
         return;
     };
     for &res in resolutions {
-        let tris = mesh_in_grid(&dir.join(rel), res);
+        let tris = positions_in_grid(&dir.join(rel), res);
         for mode in [Mode::Conservative, Mode::Thin] {
             let mut want = HashSet::new();
             let mut tally = Tally::default();
@@ -765,4 +753,105 @@ fn face_range_map_exact() {
 fn munich_city_exact() {
     // grid-aligned architecture: many exact ties
     real_mesh("sionna-rt-munich/munich_merged.ply", &[256]);
+}
+
+// ---------------------------------------------------------------- small triangles
+
+/// A triangle within about one voxel of the grid point `p` (so its closed voxel range spans
+/// at most two voxels per axis, the chunk voxelizer's small path): vertices on the point, on
+/// its grid lines and planes, nudged by ulps across them, a plane through the point rounded to
+/// f32, an edge through a grid line, tiny triangles at the point, and general ones.
+fn small_adversarial(rng: &mut Rng, kind: usize, p: [f64; 3]) -> [[f32; 3]; 3] {
+    let near = |rng: &mut Rng, r: f64| {
+        [0, 1, 2].map(|k| match rng.int(0, 3) {
+            0 => nudge(rng, p[k] as f32),
+            _ => {
+                let x = (p[k] + rng.range(-r, r)) as f32;
+                nudge(rng, x)
+            }
+        })
+    };
+    match kind % 5 {
+        0 => [0, 1, 2].map(|_| near(rng, 0.95)),
+        // the plane through the point, rounded to f32
+        1 => {
+            let n = rng.point(-1.0, 1.0);
+            let a = common::cross(n, rng.point(-1.0, 1.0));
+            let b = common::cross(n, a);
+            let s = 0.95 / a.iter().chain(&b).fold(1e-9f64, |m, c| m.max(c.abs()));
+            let q = |u: f64, w: f64| [0, 1, 2].map(|k| (p[k] + s * (u * a[k] + w * b[k])) as f32);
+            [0, 1, 2].map(|_| q(rng.range(-0.5, 0.5), rng.range(-0.5, 0.5)))
+        }
+        // an edge through a grid line of the point: two vertices symmetric about it
+        2 => {
+            let k = rng.int(0, 2) as usize;
+            let d = rng.point(-0.45, 0.45);
+            let mut a = [0, 1, 2].map(|j| p[j] + d[j]);
+            let mut b = [0, 1, 2].map(|j| p[j] - d[j]);
+            a[k] = p[k] + rng.range(-0.9, 0.9);
+            b[k] = p[k] + rng.range(-0.9, 0.9);
+            let c = near(rng, 0.9).map(|c| c as f64);
+            [a, b, c].map(|v| v.map(|x| nudge(rng, x as f32)))
+        }
+        // tiny, at the point
+        3 => [0, 1, 2].map(|_| near(rng, 1e-5)),
+        _ => [0, 1, 2].map(|_| near(rng, 0.5)),
+    }
+}
+
+/// The small path of the chunk voxelizer (exact decisions against the octants around one grid
+/// point, `crate::small`) against the big-integer reference, conservative mode: the same sets,
+/// on triangles built to sit on and an ulp off the point's grid lines and planes; and the same
+/// sets as the voxelizer with the small path off.
+#[test]
+fn small_triangles_sets_equal_the_reference() {
+    let mut rng = Rng(0x5a11);
+    let tris: Vec<[[f32; 3]; 3]> = (0..6000)
+        .map(|i| {
+            let p = [0, 1, 2].map(|_| rng.int(2, 250) as f64);
+            small_adversarial(&mut rng, i, p)
+        })
+        .collect();
+    let mut want = HashSet::new();
+    let mut tally = Tally::default();
+    for t in &tris {
+        tally.add(compare_triangle(
+            t,
+            Mode::Conservative,
+            Some(&mut want),
+            "small",
+        ));
+    }
+    assert_eq!((tally.missed, tally.added), (0, 0), "{tally:?}");
+    // ties and near-ties are there: the exact predicates decide
+    assert!(tally.ties > 1000 && tally.slow > 1000, "{tally:?}");
+    let tris: Vec<Triangle> = tris.iter().map(|&v| Triangle::new(v)).collect();
+    let mut sets = Vec::new();
+    for small in [true, false] {
+        let mut cv = ChunkVoxelizer::new(Mode::Conservative);
+        cv.set_small_path(small);
+        cv.begin([0; 3]);
+        cv.add(&tris);
+        let got: HashSet<[i32; 3]> = cv
+            .finish()
+            .iter()
+            .map(|v| v.pos().map(|c| c as i32))
+            .collect();
+        let small_count = cv.small_triangles();
+        eprintln!(
+            "small path {small}: {} voxels, {small_count} of {} triangles small",
+            got.len(),
+            tris.len()
+        );
+        if small {
+            // nearly all of them take the small path (the rest: zero area, uncertain signs,
+            // projections of zero area)
+            assert!(small_count as usize > tris.len() * 9 / 10, "{small_count}");
+        }
+        sets.push(got);
+    }
+    let missed = want.difference(&sets[0]).count();
+    let added = sets[0].difference(&want).count();
+    assert_eq!((missed, added), (0, 0), "small path against the reference");
+    assert_eq!(sets[0], sets[1], "small path on and off");
 }
