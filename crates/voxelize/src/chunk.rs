@@ -459,7 +459,7 @@ impl ChunkVoxelizer {
         let mut add = |voxel: [i32; 3], w: f32, x: [f32; 8]| {
             let local = [0, 1, 2].map(|k| (voxel[k] as i64 - o[k]) as u32);
             let slot = slots.mark(local);
-            slots.acc[slot as usize].add(w, x);
+            slots.add(slot, w, x);
         };
         if sm.interior {
             // `face(t)` from the normal `split` computed
@@ -745,6 +745,17 @@ impl Slots {
     #[inline]
     fn sums_of(&self, slot: usize) -> &Acc {
         &self.sums[self.count[slot].at as usize]
+    }
+
+    /// Adds one contribution to the sums of `slot`, making them on the first.
+    #[inline]
+    fn add(&mut self, slot: u32, w: f32, x: [f32; 8]) {
+        let j = &mut self.count[slot as usize].at;
+        if *j == NO_SUMS {
+            *j = self.sums.len() as u32;
+            self.sums.push(Acc::ZERO);
+        }
+        self.sums[*j as usize].add(w, x);
     }
 
     /// Counts one contribution to the voxel at in-chunk position `local` and returns its slot,
