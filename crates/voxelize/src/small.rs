@@ -242,7 +242,7 @@ fn part(out: &mut Small, g: &Cut, poly: &Poly, m: usize, bits: u8) {
     let Some(m) = (m..3).find(|&m| g.split[g.swz[m]]) else {
         if g.inside >> bits & 1 == 1 {
             let (w, q) = if out.area_only {
-                (area(poly, g.scale), None)
+                (poly.area(g.scale), None)
             } else {
                 let (w, c) = poly.area_centroid(g.scale);
                 (w, c.map(|c| [c[0], c[1]]))
@@ -267,27 +267,6 @@ fn part(out: &mut Small, g: &Cut, poly: &Poly, m: usize, bits: u8) {
     part(out, g, &hi, m + 1, bits | 1 << k);
 }
 
-/// The area of [`Poly::area_centroid`] without the centroid, bit for bit (the same fan and the
-/// same operations in the same order).
-#[inline]
-fn area(poly: &Poly, scale: f64) -> f64 {
-    if poly.len == 0 {
-        return 0.0;
-    }
-    let p0 = poly.p[0];
-    let mut a2 = 0.0;
-    for i in 1..poly.len.saturating_sub(1) {
-        let u = [poly.p[i][0] - p0[0], poly.p[i][1] - p0[1]];
-        let w = [poly.p[i + 1][0] - p0[0], poly.p[i + 1][1] - p0[1]];
-        a2 += u[0] * w[1] - u[1] * w[0];
-    }
-    if a2 != 0.0 {
-        0.5 * a2.abs() * scale
-    } else {
-        0.0
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -307,7 +286,7 @@ mod tests {
                     .clip_depth(rng.int(-2, 1) as f64);
             }
             let s = rng.range(1.0, 1.8);
-            assert_eq!(area(&poly, s).to_bits(), poly.area_centroid(s).0.to_bits());
+            assert_eq!(poly.area(s).to_bits(), poly.area_centroid(s).0.to_bits());
         }
     }
 }
