@@ -527,14 +527,7 @@ impl ChunkVoxelizer {
                             count[slot as usize].k |= ENCODED;
                             words[slot as usize] = r;
                         }
-                        None => {
-                            let j = &mut count[slot as usize].at;
-                            if *j == NO_SUMS {
-                                *j = sums.len() as u32;
-                                sums.push(Acc::ZERO);
-                            }
-                            sums[*j as usize].add(w, x);
-                        }
+                        None => add_sums(count, sums, slot, w, x),
                     }
                     if let Some(ms) = mats.as_deref_mut() {
                         ms.add(slot as usize, w);
@@ -727,6 +720,18 @@ struct Count {
 /// A slot without sums ([`Count::at`]).
 const NO_SUMS: u32 = u32::MAX;
 
+/// Adds one contribution to the sums of `slot`, making them on its first ([`Slots::sums`] holds
+/// only the voxels that get one).
+#[inline]
+fn add_sums(count: &mut [Count], sums: &mut Vec<Acc>, slot: u32, w: f32, x: [f32; 8]) {
+    let j = &mut count[slot as usize].at;
+    if *j == NO_SUMS {
+        *j = sums.len() as u32;
+        sums.push(Acc::ZERO);
+    }
+    sums[*j as usize].add(w, x);
+}
+
 impl Slots {
     /// Forgets every voxel (a new chunk); keeps the allocations.
     fn clear(&mut self) {
@@ -750,12 +755,7 @@ impl Slots {
     /// Adds one contribution to the sums of `slot`, making them on the first.
     #[inline]
     fn add(&mut self, slot: u32, w: f32, x: [f32; 8]) {
-        let j = &mut self.count[slot as usize].at;
-        if *j == NO_SUMS {
-            *j = self.sums.len() as u32;
-            self.sums.push(Acc::ZERO);
-        }
-        self.sums[*j as usize].add(w, x);
+        add_sums(&mut self.count, &mut self.sums, slot, w, x);
     }
 
     /// Counts one contribution to the voxel at in-chunk position `local` and returns its slot,
