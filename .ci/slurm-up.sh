@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A single-node Slurm cluster on this machine, for the test of the Slurm job-array scripts
-# (crates/voxlod/tests/slurm.rs, scripts/slurm/). Installs Debian's slurm-wlm and munge,
+# (tests/e2e/cluster.rs, scripts/slurm/). Installs Debian's slurm-wlm and munge,
 # writes /etc/slurm/slurm.conf for one node (this machine's CPUs and memory, reached as
 # localhost), starts munged, slurmctld and slurmd by hand (CI machines have no systemd) and
 # waits until `sinfo` shows the node ready for jobs.

@@ -1,15 +1,30 @@
-//! End-to-end tests of `voxlod build` / `voxlod inspect`: the binary on the bundled sample and
-//! on real meshes from `../shared/data/meshes`, checked against independent recomputations.
+//! End-to-end tests of the `voxlod` binary: on the bundled sample and on real meshes from
+//! `../shared/data/meshes`, checked against independent recomputations.
 //!
-//! One test binary (a single link), split by subject into modules: `cli`, `octree`, `resume`, `gpu`, `gen`, `gen_blocks`, `view`;
-//! the helpers shared by all of them are here.
+//! All of the `voxlod` crate's integration tests are this one test binary (one link; the tests
+//! of every module run in parallel threads of one process), split by subject into modules:
+//! `cli`, `octree`, `resume`, `gpu`, `gen`, `gen_blocks`, `view` share the helpers here; the
+//! others (`cluster`, `faults`, `json_schema`, `materials`, `python_reader`, `shard`,
+//! `textures`, `tools`, `validation`) were test binaries of their own and keep their own
+//! helpers. A new test file goes into this folder with a `mod` line here
+//! (`every_file_is_a_module` fails otherwise); run one module with
+//! `cargo test -p voxlod --test e2e MODULE::`.
 
 mod cli;
+mod cluster;
+mod faults;
 mod gen;
 mod gen_blocks;
 mod gpu;
+mod json_schema;
+mod materials;
 mod octree;
+mod python_reader;
 mod resume;
+mod shard;
+mod textures;
+mod tools;
+mod validation;
 mod view;
 
 use std::collections::{BTreeMap, HashMap};
@@ -240,4 +255,14 @@ fn binary_copy_of_sample(dir: &Path, name: &str, extra: &[[f32; 3]]) -> PathBuf 
     let p = dir.join(name);
     std::fs::write(&p, out).unwrap();
     p
+}
+
+/// Every file of this folder is compiled as a module of this binary, and no test file is left
+/// in `tests/` itself (no test target would compile it).
+#[test]
+fn every_file_is_a_module() {
+    let dir = Path::new(REPO).join("tests/e2e");
+    voxlod_testkit::suite::assert_every_file_is_a_module(&dir, include_str!("main.rs"));
+    let stray = voxlod_testkit::suite::module_files(&Path::new(REPO).join("tests"));
+    assert!(stray.is_empty(), "tests/{stray:?}.rs: move into tests/e2e/");
 }

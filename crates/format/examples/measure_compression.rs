@@ -5,7 +5,7 @@
 //!
 //! `cargo run -p voxlod-format --release --example measure_compression`
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../tests/all/common/mod.rs"]
 mod common;
 
 use std::time::Instant;

@@ -11,7 +11,7 @@
 //! cargo run --release -p voxlod-gpu --example gpu_bench -- [--mode thin|conservative] [--reps N]
 //! ```
 
-#[path = "../tests/common/mod.rs"]
+#[path = "../tests/all/common/mod.rs"]
 mod common;
 
 use std::time::Instant;

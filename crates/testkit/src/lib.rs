@@ -11,6 +11,8 @@
 //! * [`textured`]: a textured OBJ converted to textured PLY (both texture coordinate conventions).
 //! * [`mesh`]: made-up meshes (icosphere, cube, transforms) and a minimal PLY/OBJ reader
 //!   written independently of `voxlod-ingest`, so tests can check the real reader against it.
+//! * [`suite`]: the check that every test file of a crate's one test binary (`tests/all/`) is
+//!   declared in its `main.rs`.
 //!
 //! It depends on nothing, not even the other voxlod crates, so any crate can take it as a
 //! dev-dependency without a cycle.
@@ -30,6 +32,7 @@
 pub mod gltf;
 pub mod mesh;
 mod rng;
+pub mod suite;
 pub mod textured;
 
 pub use rng::Rng;

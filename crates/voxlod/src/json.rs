@@ -1,7 +1,7 @@
 //! The `--json` output of `build`, `inspect`, `verify` and `diff`: the report structs as JSON
 //! objects (keys in alphabetical order) with a `schema_version`, and the build's voxelizer as a structured object instead of
 //! a sentence. Every field is documented with its unit in docs/JSON.md and checked against
-//! docs/schema/<command>.json by tests/json_schema.rs.
+//! docs/schema/<command>.json by tests/e2e/json_schema.rs.
 
 use anyhow::Result;
 use serde::Serialize;
