@@ -859,6 +859,23 @@ fn stale_work_folders_are_reported_and_cleaned() {
         .args(["-TERM", "--", &format!("-{}", holder.id())])
         .status();
     let _ = holder.wait();
+    // The sleep that inherited the locked descriptor dies after flock(1) has been reaped: wait
+    // until the lock is free (under load the next clean could otherwise still see it in use).
+    let t = Instant::now();
+    while !Command::new("flock")
+        .arg("--nonblock")
+        .arg(busy.join("lock"))
+        .arg("true")
+        .status()
+        .unwrap()
+        .success()
+    {
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "the lock is still held"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
     // no longer held: now it goes too, and a build beside it reports nothing
     ok(&voxlod(&["clean", s(d)], d));
     assert!(work_folders(d).is_empty());
