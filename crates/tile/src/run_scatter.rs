@@ -11,13 +11,17 @@
 //! [`Bins::read_chunk`] hands out the same triangles, in the same order and the same batches,
 //! as the bins of [`crate::scatter`].
 //!
+//! The sorted run is written without a second copy: one vectored write names the buffer's
+//! stretches of consecutive records in sorted order (long in a scan, whose input order is
+//! mostly spatial), and the kernel copies them to the file (appended, so the file is always a
+//! whole number of runs).
+//!
 //! Memory is bounded by design: the buffer (records, their keys and the sort's permutation)
-//! has a byte budget, the writes go through a fixed staging buffer, and the pieces cost 16
-//! bytes per chunk per run; the grid may have at most [`RUN_SCATTER_MAX_CHUNKS`] chunks (dense
-//! per-chunk arrays).
+//! has a byte budget and the pieces cost 16 bytes per chunk per run; the grid may have at most
+//! [`RUN_SCATTER_MAX_CHUNKS`] chunks (dense per-chunk arrays).
 
 use std::fs::File;
-use std::os::unix::fs::FileExt;
+use std::io::{IoSlice, Write};
 use std::path::{Path, PathBuf};
 
 use voxlod_geom::{morton3, Grid, Triangle};
@@ -28,23 +32,42 @@ use crate::{Bins, ChunkBin, RecordLayout, TileError, DROPPED, SPANS};
 /// grid of 8192³ voxels.
 pub const RUN_SCATTER_MAX_CHUNKS: u64 = 32 * 32 * 32;
 
-/// Bytes of the staging buffer through which a run is written.
-const STAGING_BYTES: usize = 8 << 20;
+/// Stretches of records per vectored write (Linux's `IOV_MAX`).
+const SLICES_PER_WRITE: usize = 1024;
 
-/// A scatter in runs in progress (see the module documentation).
+/// One run's records, in arrival order, and their chunks' Morton ranks.
+#[derive(Default)]
+struct Run {
+    recs: Vec<u8>,
+    ranks: Vec<u32>,
+}
+
+/// A scatter in runs in progress (see the module documentation). The caller's thread encodes
+/// records into the current run; a full run goes to a writer thread, which sorts and writes it
+/// while the next one fills (two runs in memory, so the kernel's copy of the bins into the
+/// page cache runs beside the binning instead of after it).
 pub struct RunScatter {
     grid: Grid,
     n: u32,
-    path: PathBuf,
-    file: File,
     layout: RecordLayout,
-    /// Records of the current run, in arrival order, and their chunks' Morton ranks.
-    recs: Vec<u8>,
-    ranks: Vec<u32>,
-    /// Records the current run holds at most.
+    /// The run being filled, and the other buffer when the writer is not holding it.
+    current: Run,
+    spare: Option<Run>,
+    /// Records one run holds at most.
     cap: usize,
     /// Chunk linear index `(z·n + y)·n + x` -> rank of the chunk in Morton order.
     rank_of: Vec<u32>,
+    /// Full runs to the writer; emptied ones back.
+    to_writer: Option<std::sync::mpsc::SyncSender<Run>>,
+    from_writer: std::sync::mpsc::Receiver<Run>,
+    writer: Option<std::thread::JoinHandle<Result<Writer, TileError>>>,
+}
+
+/// The writer thread's state: the file and where each chunk's pieces are.
+struct Writer {
+    path: PathBuf,
+    file: File,
+    rec: usize,
     /// Per Morton rank: its pieces so far, `[first record, records]`.
     pieces: Vec<Vec<[u64; 2]>>,
     /// Records written to the file.
@@ -52,13 +75,13 @@ pub struct RunScatter {
     /// Scratch of the sort: records per rank, then each rank's next slot; the permutation.
     slots: Vec<u32>,
     perm: Vec<u32>,
-    staging: Vec<u8>,
 }
 
 impl RunScatter {
     /// Starts the bins file at `path` (created or truncated) for `grid`, buffering at most
-    /// about `buffer_bytes` (records, keys and the sort's permutation; at least 1024 records)
-    /// between runs. Refused if the grid has more than [`RUN_SCATTER_MAX_CHUNKS`] chunks.
+    /// about `buffer_bytes` (two runs of records and keys, and the sort's permutation; at least
+    /// 1024 records a run). Refused if the grid has more than [`RUN_SCATTER_MAX_CHUNKS`]
+    /// chunks.
     pub fn create(
         grid: &Grid,
         path: &Path,
@@ -88,23 +111,43 @@ impl RunScatter {
             .open(path)
             .map_err(TileError::io("create", path))?;
         let rec = layout.bytes();
-        // each buffered record: its bytes, its rank and its place in the permutation
-        let cap = (buffer_bytes as usize / (rec + 8)).max(1024);
-        Ok(RunScatter {
-            grid: *grid,
-            n,
+        // per record of a run: its bytes and rank twice (two runs), its place in the permutation
+        let cap = (buffer_bytes as usize / (2 * (rec + 4) + 4)).max(1024);
+        let mut w = Writer {
             path: path.to_path_buf(),
             file,
-            layout,
-            recs: Vec::with_capacity(cap * rec),
-            ranks: Vec::with_capacity(cap),
-            cap,
-            rank_of,
+            rec,
             pieces: vec![Vec::new(); total as usize],
             written: 0,
             slots: vec![0; total as usize + 1],
-            perm: Vec::with_capacity(cap),
-            staging: vec![0u8; STAGING_BYTES.max(rec)],
+            perm: Vec::new(),
+        };
+        let (to_writer, runs) = std::sync::mpsc::sync_channel::<Run>(1);
+        let (back, from_writer) = std::sync::mpsc::channel::<Run>();
+        let writer = std::thread::Builder::new()
+            .name("bins-writer".into())
+            .spawn(move || {
+                for mut run in runs {
+                    w.write_run(&run)?;
+                    run.recs.clear();
+                    run.ranks.clear();
+                    // the binning side may be gone (an error there): nothing to hand back to
+                    let _ = back.send(run);
+                }
+                Ok(w)
+            })
+            .map_err(TileError::io("starting the writer thread of", path))?;
+        Ok(RunScatter {
+            grid: *grid,
+            n,
+            layout,
+            current: Run::default(),
+            spare: Some(Run::default()),
+            cap,
+            rank_of,
+            to_writer: Some(to_writer),
+            from_writer,
+            writer: Some(writer),
         })
     }
 
@@ -144,71 +187,68 @@ impl RunScatter {
     /// Adds triangle `t` to the current run for the chunk of linear index `li`.
     #[inline]
     fn put(&mut self, t: &Triangle, li: usize) -> Result<(), TileError> {
-        if self.ranks.len() == self.cap {
-            self.write_run()?;
+        if self.current.ranks.len() == self.cap {
+            self.send_run()?;
         }
-        self.layout.encode(t, &mut self.recs)?;
-        self.ranks.push(self.rank_of[li]);
+        if self.current.ranks.capacity() == 0 {
+            self.current
+                .recs
+                .reserve_exact(self.cap * self.layout.bytes());
+            self.current.ranks.reserve_exact(self.cap);
+        }
+        self.layout.encode(t, &mut self.current.recs)?;
+        self.current.ranks.push(self.rank_of[li]);
         Ok(())
     }
 
-    /// Writes the buffered records as one run, chunk after chunk in Morton order (a counting
-    /// sort by rank, stable: input order inside a chunk), and empties the buffer.
-    fn write_run(&mut self) -> Result<(), TileError> {
-        if self.ranks.is_empty() {
-            return Ok(());
+    /// Hands the current run to the writer and takes the other buffer (waiting for the writer
+    /// to finish with it).
+    fn send_run(&mut self) -> Result<(), TileError> {
+        let next = match self.spare.take() {
+            Some(r) => r,
+            None => match self.from_writer.recv() {
+                Ok(r) => r,
+                Err(_) => return Err(self.writer_error()),
+            },
+        };
+        let full = std::mem::replace(&mut self.current, next);
+        let sent = self.to_writer.as_ref().map(|tx| tx.send(full));
+        match sent {
+            Some(Ok(())) => Ok(()),
+            _ => Err(self.writer_error()),
         }
-        let rec = self.layout.bytes();
-        self.slots.fill(0);
-        for &r in &self.ranks {
-            self.slots[r as usize + 1] += 1;
+    }
+
+    /// The error with which the writer thread stopped (it stops only on one).
+    fn writer_error(&mut self) -> TileError {
+        self.to_writer = None;
+        match self.writer.take().map(|h| h.join()) {
+            Some(Ok(Err(e))) => e,
+            Some(Err(panic)) => std::panic::resume_unwind(panic),
+            _ => TileError::Callback("the bins writer thread stopped".into()),
         }
-        for r in 0..self.pieces.len() {
-            let k = self.slots[r + 1];
-            if k > 0 {
-                let first = self.written + self.slots[r] as u64;
-                self.pieces[r].push([first, k as u64]);
-            }
-            self.slots[r + 1] += self.slots[r];
-        }
-        self.perm.clear();
-        self.perm.resize(self.ranks.len(), 0);
-        for (i, &r) in self.ranks.iter().enumerate() {
-            let s = &mut self.slots[r as usize];
-            self.perm[*s as usize] = i as u32;
-            *s += 1;
-        }
-        let per_write = self.staging.len() / rec;
-        for part in self.perm.chunks(per_write) {
-            for (k, &i) in part.iter().enumerate() {
-                let i = i as usize;
-                self.staging[k * rec..(k + 1) * rec]
-                    .copy_from_slice(&self.recs[i * rec..(i + 1) * rec]);
-            }
-            self.file
-                .write_all_at(&self.staging[..part.len() * rec], self.written * rec as u64)
-                .map_err(TileError::io("write", &self.path))?;
-            self.written += part.len() as u64;
-        }
-        self.recs.clear();
-        self.ranks.clear();
-        Ok(())
     }
 
     /// Writes the last run and returns the bins: the non-empty chunks in Morton order with
     /// their pieces.
     pub fn finish(mut self) -> Result<Bins, TileError> {
-        self.write_run()?;
-        self.file
-            .sync_data()
-            .map_err(TileError::io("sync", &self.path))?;
+        if !self.current.ranks.is_empty() {
+            self.send_run()?;
+        }
+        self.to_writer = None;
+        let w = match self.writer.take().map(|h| h.join()) {
+            Some(Ok(r)) => r?,
+            Some(Err(panic)) => std::panic::resume_unwind(panic),
+            None => return Err(TileError::Callback("the bins writer thread stopped".into())),
+        };
+        w.file.sync_data().map_err(TileError::io("sync", &w.path))?;
         let n = self.n;
         let mut by_rank = vec![0u32; self.rank_of.len()];
         for (li, &r) in self.rank_of.iter().enumerate() {
             by_rank[r as usize] = li as u32;
         }
         let (mut chunks, mut pieces) = (Vec::new(), Vec::new());
-        for (r, ps) in std::mem::take(&mut self.pieces).into_iter().enumerate() {
+        for (r, ps) in w.pieces.into_iter().enumerate() {
             if ps.is_empty() {
                 continue;
             }
@@ -222,14 +262,84 @@ impl RunScatter {
             });
             pieces.push(ps);
         }
-        Ok(Bins::from_runs(
-            self.path,
-            self.file,
-            chunks,
-            self.layout,
-            pieces,
-        ))
+        Ok(Bins::from_runs(w.path, w.file, chunks, self.layout, pieces))
     }
+}
+
+impl Drop for RunScatter {
+    /// Stops the writer thread of a scatter that is not finished (an error or an interrupt
+    /// in the pass): the channel closes, the thread ends after the run in hand.
+    fn drop(&mut self) {
+        self.to_writer = None;
+        if let Some(h) = self.writer.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+impl Writer {
+    /// Writes `run` appended to the file, chunk after chunk in Morton order (a counting sort
+    /// by rank, stable: input order inside a chunk), and notes each chunk's piece.
+    fn write_run(&mut self, run: &Run) -> Result<(), TileError> {
+        if run.ranks.is_empty() {
+            return Ok(());
+        }
+        let rec = self.rec;
+        self.slots.fill(0);
+        for &r in &run.ranks {
+            self.slots[r as usize + 1] += 1;
+        }
+        for r in 0..self.pieces.len() {
+            let k = self.slots[r + 1];
+            if k > 0 {
+                let first = self.written + self.slots[r] as u64;
+                self.pieces[r].push([first, k as u64]);
+            }
+            self.slots[r + 1] += self.slots[r];
+        }
+        self.perm.clear();
+        self.perm.resize(run.ranks.len(), 0);
+        for (i, &r) in run.ranks.iter().enumerate() {
+            let s = &mut self.slots[r as usize];
+            self.perm[*s as usize] = i as u32;
+            *s += 1;
+        }
+        // the sorted order as stretches of consecutive records, appended at the file's end
+        let (mut file, recs, perm) = (&self.file, &run.recs, &self.perm);
+        let mut slices = Vec::with_capacity(SLICES_PER_WRITE);
+        let mut i = 0;
+        while i < perm.len() {
+            let first = perm[i] as usize;
+            let mut end = first + 1;
+            i += 1;
+            while i < perm.len() && perm[i] as usize == end {
+                (end, i) = (end + 1, i + 1);
+            }
+            slices.push(IoSlice::new(&recs[first * rec..end * rec]));
+            if slices.len() == SLICES_PER_WRITE || i == perm.len() {
+                write_all_vectored(&mut file, &mut slices)
+                    .map_err(TileError::io("write", &self.path))?;
+                slices.clear();
+            }
+        }
+        self.written += perm.len() as u64;
+        Ok(())
+    }
+}
+
+/// Writes every byte of `slices` at the file's position (`Write::write_all_vectored` is not
+/// stable).
+fn write_all_vectored(file: &mut &File, slices: &mut [IoSlice<'_>]) -> std::io::Result<()> {
+    let mut rest = slices;
+    while !rest.is_empty() {
+        match file.write_vectored(rest) {
+            Ok(0) => return Err(std::io::ErrorKind::WriteZero.into()),
+            Ok(n) => IoSlice::advance_slices(&mut rest, n),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
