@@ -257,6 +257,41 @@ pub const SPANS: u32 = u32::MAX;
 /// a chunk's index (a grid has at most 2³⁰ chunks: `n³` with `n` a power of two below 2¹¹).
 pub const DROPPED: u32 = u32::MAX - 1;
 
+/// Calls `put(t, li)` for every chunk (linear index `li`) that keyed triangle `t` goes to
+/// (`keys` from [`ChunkKeys::of_grid`] on `grid`, `n` chunks per axis): its key's chunk, every
+/// chunk of its range for [`SPANS`], none for [`DROPPED`]; in order, stopping at an error.
+#[inline]
+pub(crate) fn for_each_keyed_chunk(
+    grid: &Grid,
+    n: u32,
+    tris: &[Triangle],
+    keys: &[u32],
+    mut put: impl FnMut(&Triangle, usize) -> Result<(), TileError>,
+) -> Result<(), TileError> {
+    assert_eq!(tris.len(), keys.len(), "one key per triangle");
+    let n = n as usize;
+    for (t, &k) in tris.iter().zip(keys) {
+        if k == DROPPED {
+            continue;
+        }
+        if k != SPANS {
+            put(t, k as usize)?;
+            continue;
+        }
+        let Some((lo, hi)) = grid.chunk_range(t) else {
+            continue;
+        };
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    put(t, (z as usize * n + y as usize) * n + x as usize)?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A triangle's chunk range as one number, worked out where the triangles are read (in a
 /// pass's prepare step, see [`Passes::for_each_prepared`]) and used where they are counted or
 /// binned: the linear index `(z·n + y)·n + x` of its chunk if the range is that one chunk,
@@ -391,29 +426,8 @@ impl<'g> Scatter<'g> {
 
     /// Bins a batch of grid-space triangles given their [`ChunkKeys::of_grid`].
     pub(crate) fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
-        assert_eq!(tris.len(), keys.len(), "one key per triangle");
-        for (t, &k) in tris.iter().zip(keys) {
-            if k == DROPPED {
-                continue;
-            }
-            if k != SPANS {
-                self.put(t, k as usize)?;
-                continue;
-            }
-            let Some((lo, hi)) = self.grid.chunk_range(t) else {
-                continue;
-            };
-            for z in lo[2]..=hi[2] {
-                for y in lo[1]..=hi[1] {
-                    for x in lo[0]..=hi[0] {
-                        let li = ((z as usize * self.n as usize) + y as usize) * self.n as usize
-                            + x as usize;
-                        self.put(t, li)?;
-                    }
-                }
-            }
-        }
-        Ok(())
+        let (grid, n) = (self.grid, self.n);
+        for_each_keyed_chunk(grid, n, tris, keys, |t, li| self.put(t, li))
     }
 
     /// Adds triangle `t` to the slice of the chunk of linear index `li`.

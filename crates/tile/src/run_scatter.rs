@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 
 use voxlod_geom::{morton3, Grid, Triangle};
 
-use crate::{Bins, ChunkBin, RecordLayout, TileError, DROPPED, SPANS};
+use crate::{Bins, ChunkBin, RecordLayout, TileError};
 
 /// Most chunks a grid may have for [`RunScatter`] (its per-chunk arrays are dense): 32³, a
 /// grid of 8192³ voxels.
@@ -157,31 +157,11 @@ impl RunScatter {
     }
 
     /// Bins a batch of grid-space triangles given their [`crate::ChunkKeys::of_grid`] (keys
-    /// of this grid): a one-chunk key goes to that chunk, [`SPANS`] to every chunk of the
-    /// triangle's range, [`DROPPED`] nowhere.
+    /// of this grid): a one-chunk key goes to that chunk, [`crate::SPANS`] to every chunk of
+    /// the triangle's range, [`crate::DROPPED`] nowhere.
     pub fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
-        assert_eq!(tris.len(), keys.len(), "one key per triangle");
-        for (t, &k) in tris.iter().zip(keys) {
-            if k == DROPPED {
-                continue;
-            }
-            if k != SPANS {
-                self.put(t, k as usize)?;
-                continue;
-            }
-            let Some((lo, hi)) = self.grid.chunk_range(t) else {
-                continue;
-            };
-            let n = self.n as usize;
-            for z in lo[2]..=hi[2] {
-                for y in lo[1]..=hi[1] {
-                    for x in lo[0]..=hi[0] {
-                        self.put(t, (z as usize * n + y as usize) * n + x as usize)?;
-                    }
-                }
-            }
-        }
-        Ok(())
+        let (grid, n) = (self.grid, self.n);
+        crate::bins::for_each_keyed_chunk(&grid, n, tris, keys, |t, li| self.put(t, li))
     }
 
     /// Adds triangle `t` to the current run for the chunk of linear index `li`.
@@ -221,11 +201,20 @@ impl RunScatter {
 
     /// The error with which the writer thread stopped (it stops only on one).
     fn writer_error(&mut self) -> TileError {
+        match self.join_writer() {
+            Err(e) => e,
+            Ok(_) => TileError::Callback("the bins writer thread stopped".into()),
+        }
+    }
+
+    /// Closes the writer's channel and waits for the thread: its state, or its error (a
+    /// panic there is resumed here).
+    fn join_writer(&mut self) -> Result<Writer, TileError> {
         self.to_writer = None;
         match self.writer.take().map(|h| h.join()) {
-            Some(Ok(Err(e))) => e,
+            Some(Ok(r)) => r,
             Some(Err(panic)) => std::panic::resume_unwind(panic),
-            _ => TileError::Callback("the bins writer thread stopped".into()),
+            None => Err(TileError::Callback("the bins writer thread stopped".into())),
         }
     }
 
@@ -235,12 +224,7 @@ impl RunScatter {
         if !self.current.ranks.is_empty() {
             self.send_run()?;
         }
-        self.to_writer = None;
-        let w = match self.writer.take().map(|h| h.join()) {
-            Some(Ok(r)) => r?,
-            Some(Err(panic)) => std::panic::resume_unwind(panic),
-            None => return Err(TileError::Callback("the bins writer thread stopped".into())),
-        };
+        let w = self.join_writer()?;
         w.file.sync_data().map_err(TileError::io("sync", &w.path))?;
         let n = self.n;
         let mut by_rank = vec![0u32; self.rank_of.len()];
