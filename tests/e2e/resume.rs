@@ -248,11 +248,12 @@ fn small_memory_budget_is_kept_and_changes_nothing() {
     );
 }
 
-/// Counting the chunks during the ingest pass (the grid known from the vertex list's bounds)
-/// gives what the separate count pass gives: the same triangles with an unused vertex inside
-/// the bounds are counted during ingest, with one outside the bounds (another grid) or a NaN
-/// one (no vertex bounds) by the count pass, a binary STL copy during ingest, and every node of
-/// all these files equals the sample's (the files differ only in the manifest, which names the
+/// Counting and binning the chunks during the ingest pass (the grid known from the vertex
+/// list's bounds; bins written in runs) gives what the separate count and scatter passes give:
+/// the same triangles with an unused vertex inside the bounds are binned during ingest, with
+/// one outside the bounds (another grid: the pass's bins are dropped) or a NaN one (no vertex
+/// bounds) by the tile stage's passes, a binary STL copy during ingest, and every node of all
+/// these files equals the sample's (the files differ only in the manifest, which names the
 /// input).
 #[test]
 fn counting_during_ingest_changes_nothing() {
@@ -271,6 +272,7 @@ fn counting_during_ingest_changes_nothing() {
         s0["counted_during_ingest"], true,
         "the sample is a binary PLY"
     );
+    assert_eq!(s0["binned_during_ingest"], true, "a 1024³ grid: runs");
     let (lo, hi) = {
         let src = voxlod_ingest::MeshSource::open(&sample()).unwrap();
         let b = src.vertex_bounds().unwrap();
@@ -286,6 +288,7 @@ fn counting_during_ingest_changes_nothing() {
         let input = binary_copy_of_sample(d, name, &[extra]);
         let (s, got) = build(&input, &format!("{name}.voxlod"));
         assert_eq!(s["counted_during_ingest"], early, "{name}");
+        assert_eq!(s["binned_during_ingest"], early, "{name}");
         assert_eq!(s["tile_source"], "input", "{name}");
         assert_eq!(s["binned_triangles"], s0["binned_triangles"], "{name}");
         assert_eq!(got.len(), want.len(), "{name}: node count");
@@ -306,5 +309,6 @@ fn counting_during_ingest_changes_nothing() {
     std::fs::write(&input, stl).unwrap();
     let (s, got) = build(&input, "copy.stl.voxlod");
     assert_eq!(s["counted_during_ingest"], true, "binary STL");
+    assert_eq!(s["binned_during_ingest"], true, "binary STL");
     assert!(got == want, "binary STL: nodes differ from the sample's");
 }

@@ -82,9 +82,12 @@ impl LocalBatch {
     }
 }
 
-/// Face records per worker and round of [`stream_triangles_parallel`]. Each worker's share is
-/// handed on as one batch, so it must not exceed the batch size the callers are promised.
+/// Face records per worker and round of [`stream_triangles_parallel`]. A round is cut into
+/// [`PARTS_PER_THREAD`] parts per worker, each handed on as one batch, so a share must not
+/// exceed the batch size the callers are promised.
 const PARALLEL_RECORDS: u64 = 16 * 1024;
+/// Parts a round is cut into per thread (each part is one batch for the caller).
+const PARTS_PER_THREAD: u64 = 4;
 const _: () = assert!(PARALLEL_RECORDS as usize <= crate::batch::BATCH);
 
 /// Bytes of one record of a `face` element if it holds a triangle: every property a scalar
@@ -104,7 +107,7 @@ fn triangle_record_bytes(el: &Element, list: usize) -> Option<usize> {
 /// Streams a memory-mapped binary `face` element (not strips) starting at byte `off` of
 /// `data`, decoding in parallel on the current rayon pool while every record is a triangle
 /// (so that record `r` starts at `off + r · size`): rounds of [`PARALLEL_RECORDS`] records per
-/// thread are decoded into [`LocalBatch`]es, prepared (`em.prepare`) on the same thread, and
+/// thread, in [`PARTS_PER_THREAD`] parts per thread, are decoded into [`LocalBatch`]es, prepared (`em.prepare`) on the same thread, and
 /// handed to `em` in record order, so the triangles, counts and the first error are those of
 /// the sequential reader. At the first record that is not a triangle, the rest is read
 /// sequentially.
@@ -150,8 +153,11 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     let round_len = |rec: u64| (PARALLEL_RECORDS * threads).min(fit - rec);
     let decode = |rec: u64| -> Round {
         let n = round_len(rec);
-        let parts: Vec<(u64, u64)> = (0..threads)
-            .map(|t| (rec + n * t / threads, rec + n * (t + 1) / threads))
+        // more parts than threads, so that a thread left idle while another runs the caller's
+        // callback decodes the parts that one would have taken (work stealing balances them)
+        let k = threads * PARTS_PER_THREAD;
+        let parts: Vec<(u64, u64)> = (0..k)
+            .map(|t| (rec + n * t / k, rec + n * (t + 1) / k))
             .filter(|(a, b)| a < b)
             .collect();
         parts

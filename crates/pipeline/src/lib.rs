@@ -264,6 +264,10 @@ pub struct BuildSummary {
     /// bounds of the vertex list before it, see [`MeshSource::vertex_bounds`]), so the tile
     /// stage had no count pass.
     pub counted_during_ingest: bool,
+    /// True if the ingest pass also wrote the bins (in runs sorted by chunk, on the grid known
+    /// before it: `voxlod_tile::RunScatter`), so the tile stage read nothing: one parse of the
+    /// input in all.
+    pub binned_during_ingest: bool,
     /// Bytes of one triangle record in the spool and bins (40–112: only the attributes the
     /// mesh has).
     pub record_bytes: usize,
@@ -621,6 +625,7 @@ fn summarize(ctx: BuildContext, built: Built, resumed: bool, t0: Instant) -> Bui
             "input"
         },
         counted_during_ingest: ingested.counted_during_ingest,
+        binned_during_ingest: ingested.binned_during_ingest,
         record_bytes: ingested.layout.bytes(),
         source_geometry,
         resumed,

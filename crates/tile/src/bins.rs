@@ -257,6 +257,41 @@ pub const SPANS: u32 = u32::MAX;
 /// a chunk's index (a grid has at most 2³⁰ chunks: `n³` with `n` a power of two below 2¹¹).
 pub const DROPPED: u32 = u32::MAX - 1;
 
+/// Calls `put(t, li)` for every chunk (linear index `li`) that keyed triangle `t` goes to
+/// (`keys` from [`ChunkKeys::of_grid`] on `grid`, `n` chunks per axis): its key's chunk, every
+/// chunk of its range for [`SPANS`], none for [`DROPPED`]; in order, stopping at an error.
+#[inline]
+pub(crate) fn for_each_keyed_chunk(
+    grid: &Grid,
+    n: u32,
+    tris: &[Triangle],
+    keys: &[u32],
+    mut put: impl FnMut(&Triangle, usize) -> Result<(), TileError>,
+) -> Result<(), TileError> {
+    assert_eq!(tris.len(), keys.len(), "one key per triangle");
+    let n = n as usize;
+    for (t, &k) in tris.iter().zip(keys) {
+        if k == DROPPED {
+            continue;
+        }
+        if k != SPANS {
+            put(t, k as usize)?;
+            continue;
+        }
+        let Some((lo, hi)) = grid.chunk_range(t) else {
+            continue;
+        };
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    put(t, (z as usize * n + y as usize) * n + x as usize)?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A triangle's chunk range as one number, worked out where the triangles are read (in a
 /// pass's prepare step, see [`Passes::for_each_prepared`]) and used where they are counted or
 /// binned: the linear index `(z·n + y)·n + x` of its chunk if the range is that one chunk,
@@ -391,29 +426,8 @@ impl<'g> Scatter<'g> {
 
     /// Bins a batch of grid-space triangles given their [`ChunkKeys::of_grid`].
     pub(crate) fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
-        assert_eq!(tris.len(), keys.len(), "one key per triangle");
-        for (t, &k) in tris.iter().zip(keys) {
-            if k == DROPPED {
-                continue;
-            }
-            if k != SPANS {
-                self.put(t, k as usize)?;
-                continue;
-            }
-            let Some((lo, hi)) = self.grid.chunk_range(t) else {
-                continue;
-            };
-            for z in lo[2]..=hi[2] {
-                for y in lo[1]..=hi[1] {
-                    for x in lo[0]..=hi[0] {
-                        let li = ((z as usize * self.n as usize) + y as usize) * self.n as usize
-                            + x as usize;
-                        self.put(t, li)?;
-                    }
-                }
-            }
-        }
-        Ok(())
+        let (grid, n) = (self.grid, self.n);
+        for_each_keyed_chunk(grid, n, tris, keys, |t, li| self.put(t, li))
     }
 
     /// Adds triangle `t` to the slice of the chunk of linear index `li`.
@@ -490,17 +504,23 @@ impl<'g> Scatter<'g> {
             file: self.file,
             chunks: self.chunks,
             layout: self.layout,
+            pieces: None,
         })
     }
 }
 
 /// The finished bins file: non-empty leaf chunks in Morton order, each with its triangles
-/// (grid coordinates, in input order), as records of one [`RecordLayout`].
+/// (grid coordinates, in input order), as records of one [`RecordLayout`]. A chunk's records
+/// are one contiguous region (`start`, `count` of its [`ChunkBin`], what [`scatter`] writes)
+/// or, for bins written in runs ([`crate::RunScatter`]), a list of pieces read one after another.
 pub struct Bins {
     path: PathBuf,
     file: File,
     chunks: Vec<ChunkBin>,
     layout: RecordLayout,
+    /// Per chunk (same order as `chunks`): its pieces `[first record, records]`, in input
+    /// order; None when every chunk is the one region its `ChunkBin` gives.
+    pieces: Option<Vec<Vec<[u64; 2]>>>,
 }
 
 impl Bins {
@@ -531,7 +551,68 @@ impl Bins {
             file,
             chunks,
             layout,
+            pieces: None,
         })
+    }
+
+    /// Reopens a finished bins file written in runs, with its chunks and each chunk's pieces
+    /// (what [`Bins::pieces`] gave). The pieces must add up to each chunk's count, lie inside
+    /// the file and cover it exactly.
+    pub fn open_pieces(
+        path: &Path,
+        chunks: Vec<ChunkBin>,
+        layout: RecordLayout,
+        pieces: Vec<Vec<[u64; 2]>>,
+    ) -> Result<Bins, TileError> {
+        let file = File::open(path).map_err(TileError::io("open", path))?;
+        let len = file.metadata().map_err(TileError::io("stat", path))?.len();
+        let rec = layout.bytes() as u64;
+        let records = len / rec;
+        let total: u64 = chunks.iter().map(|c| c.count).sum();
+        let fits = pieces.len() == chunks.len()
+            && chunks.iter().zip(&pieces).all(|(c, ps)| {
+                ps.iter().map(|p| p[1]).sum::<u64>() == c.count
+                    && ps
+                        .iter()
+                        .all(|p| p[0].checked_add(p[1]).is_some_and(|e| e <= records))
+            });
+        if len % rec != 0 || records != total || !fits {
+            return Err(TileError::Truncated {
+                path: path.to_path_buf(),
+                len,
+                record: rec,
+            });
+        }
+        Ok(Bins {
+            path: path.to_path_buf(),
+            file,
+            chunks,
+            layout,
+            pieces: Some(pieces),
+        })
+    }
+
+    pub(crate) fn from_runs(
+        path: PathBuf,
+        file: File,
+        chunks: Vec<ChunkBin>,
+        layout: RecordLayout,
+        pieces: Vec<Vec<[u64; 2]>>,
+    ) -> Bins {
+        debug_assert_eq!(chunks.len(), pieces.len());
+        Bins {
+            path,
+            file,
+            chunks,
+            layout,
+            pieces: Some(pieces),
+        }
+    }
+
+    /// Each chunk's pieces `[first record, records]` for bins written in runs (for a resume
+    /// marker); None for bins of one region per chunk.
+    pub fn pieces(&self) -> Option<&[Vec<[u64; 2]>]> {
+        self.pieces.as_deref()
     }
 
     /// The layout of the records.
@@ -555,7 +636,8 @@ impl Bins {
     }
 
     /// Hands chunk `i`'s triangles to `f` in input order, `batch` at a time, through a buffer of
-    /// that size (memory is bounded whatever the chunk holds).
+    /// that size (memory is bounded whatever the chunk holds). The batches are the same whether
+    /// the chunk is one region or several pieces: a batch is filled across pieces.
     pub fn read_chunk(
         &self,
         i: usize,
@@ -564,20 +646,42 @@ impl Bins {
     ) -> Result<(), TileError> {
         assert!(batch > 0);
         let c = self.chunks[i];
+        let region = [[c.start, c.count]];
+        let pieces: &[[u64; 2]] = match &self.pieces {
+            Some(p) => &p[i],
+            None => &region,
+        };
         let rec = self.layout.bytes();
         let cap = batch.min(c.count as usize).max(1);
         let mut raw = vec![0u8; cap * rec];
         let mut tris = Vec::with_capacity(cap);
+        // records in `raw`; the piece being read and how far
+        let (mut filled, mut p, mut in_piece) = (0usize, 0usize, 0u64);
         let mut done = 0u64;
         while done < c.count {
-            let n = (c.count - done).min(cap as u64) as usize;
-            let off = (c.start + done) * rec as u64;
-            self.file
-                .read_exact_at(&mut raw[..n * rec], off)
-                .map_err(TileError::io("read", &self.path))?;
-            self.layout.decode_all(&raw[..n * rec], &mut tris);
+            while filled < cap && p < pieces.len() {
+                let [start, count] = pieces[p];
+                let n = (count - in_piece).min((cap - filled) as u64) as usize;
+                self.file
+                    .read_exact_at(
+                        &mut raw[filled * rec..(filled + n) * rec],
+                        (start + in_piece) * rec as u64,
+                    )
+                    .map_err(TileError::io("read", &self.path))?;
+                filled += n;
+                in_piece += n as u64;
+                if in_piece == count {
+                    (p, in_piece) = (p + 1, 0);
+                }
+            }
+            assert!(
+                filled > 0,
+                "chunk {i}: its pieces hold fewer records than its count"
+            );
+            self.layout.decode_all(&raw[..filled * rec], &mut tris);
             f(&tris)?;
-            done += n as u64;
+            done += filled as u64;
+            filled = 0;
         }
         Ok(())
     }

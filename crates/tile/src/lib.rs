@@ -15,6 +15,11 @@
 //!    records ([`RecordLayout`]: only the attributes the mesh has), buffered in memory up to a
 //!    fixed budget and flushed to their regions with positioned writes.
 //!
+//! When the grid is known before the triangles are read, [`RunScatter`] bins them without
+//! the counts, in the same pass that reads them for their bounds: the buffer is written in
+//! runs, each sorted by chunk, and a chunk's bin is its pieces in the runs (same triangles,
+//! same order for [`Bins::read_chunk`]).
+//!
 //! Per-triangle work that does not depend on the order (the move to grid coordinates, the
 //! chunk ranges as [`ChunkKeys`]) runs in each pass's prepare step
 //! ([`Passes::for_each_prepared`]), on the threads that read the triangles; the counting and
@@ -44,10 +49,12 @@
 
 mod bins;
 mod record;
+mod run_scatter;
 mod spool;
 
 pub use bins::{count, scatter, Bins, ChunkBin, ChunkCounts, ChunkKeys, DROPPED, SPANS};
 pub use record::RecordLayout;
+pub use run_scatter::{RunScatter, RUN_SCATTER_MAX_CHUNKS};
 pub use spool::{Spool, Spooler};
 
 use std::path::PathBuf;

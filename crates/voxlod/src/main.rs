@@ -487,7 +487,9 @@ fn print_summary(s: &BuildSummary, input: &str) {
         s.binned_triangles,
         s.record_bytes,
         s.tile_source,
-        if s.counted_during_ingest {
+        if s.binned_during_ingest {
+            ", binned during ingest"
+        } else if s.counted_during_ingest {
             ", counted during ingest"
         } else {
             ""

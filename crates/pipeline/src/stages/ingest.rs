@@ -11,7 +11,7 @@ use anyhow::Context;
 use serde::{Deserialize, Serialize};
 use voxlod_geom::{demorton3, Bounds, Grid, Triangle};
 use voxlod_ingest::IngestError;
-use voxlod_tile::{ChunkCounts, RecordLayout, Spooler};
+use voxlod_tile::{Bins, ChunkCounts, RecordLayout, RunScatter, Spooler, RUN_SCATTER_MAX_CHUNKS};
 
 use super::voxelize::LeavesMarker;
 use super::BuildContext;
@@ -56,8 +56,13 @@ pub(crate) struct Ingested {
     /// The tile stage's chunk counts, if this pass took them on `grid` (then the tile stage
     /// has no count pass; it takes them).
     pub early_counts: Option<ChunkCounts>,
+    /// The bins, if this pass wrote them on `grid` ([`RunScatter`]: the tile stage has no
+    /// pass of its own; it takes them).
+    pub early_bins: Option<Bins>,
     /// True if the ingest pass took the chunk counts (the tile stage has no count pass).
     pub counted_during_ingest: bool,
+    /// True if the ingest pass wrote the bins (`early_bins`; the tile stage reads nothing).
+    pub binned_during_ingest: bool,
     /// Largest temporary disk use planned (bytes): spool (if one is written) plus bins.
     pub temp_disk: u64,
 }
@@ -107,16 +112,16 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
                 || std::fs::metadata(ctx.work.file(WorkFile::Spool))
                     .is_ok_and(|md| md.len() == m.count * layout.bytes() as u64))
     });
-    let (marker, early_counts) = match resumed {
+    let (marker, early) = match resumed {
         Some(m) => {
             ctx.stage_done("ingest", t, true);
-            (m, None)
+            (m, Early::None)
         }
         None => {
-            let (m, counts) = read_input(ctx, layout, spooled, !later_done)?;
+            let (m, early) = read_input(ctx, layout, spooled, !later_done, temp_disk)?;
             ctx.work.set_marker(&m)?;
             ctx.stage_done("ingest", t, false);
-            (m, counts)
+            (m, early)
         }
     };
     ctx.warnings.extend(marker.warnings.iter().cloned());
@@ -129,14 +134,24 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
     };
     let grid = Grid::fit(&bounds, ctx.settings.resolution)
         .with_context(|| format!("{input}: fitting the grid"))?;
-    // counts on the vertex list's grid serve if it is the grid of the triangles' bounds
-    let early_counts = early_counts.filter(|c| *c.grid() == grid);
+    // counts or bins on the vertex list's grid serve if it is the grid of the triangles' bounds
+    let (early_counts, early_bins) = match early {
+        Early::Counts(c) if *c.grid() == grid => (Some(c), None),
+        Early::Bins(b, g) if g == grid => (None, Some(b)),
+        Early::Bins(b, _) => {
+            b.remove()?;
+            (None, None)
+        }
+        _ => (None, None),
+    };
     Ok(Ingested {
         marker,
         layout,
         grid,
-        counted_during_ingest: early_counts.is_some(),
+        counted_during_ingest: early_counts.is_some() || early_bins.is_some(),
+        binned_during_ingest: early_bins.is_some(),
         early_counts,
+        early_bins,
         temp_disk,
     })
 }
@@ -195,7 +210,9 @@ fn from_plan(
         layout,
         grid,
         early_counts: Some(counts),
+        early_bins: None,
         counted_during_ingest: true,
+        binned_during_ingest: false,
         temp_disk,
     })
 }
@@ -265,34 +282,66 @@ fn check_temp_disk(
     Ok(temp_disk)
 }
 
-/// The pass over the input: bounds and count of the triangles, spooled or (for a mapped
-/// input, if `may_count`) counted per chunk on the vertex list's grid.
+/// What the ingest pass took for the tile stage on the vertex list's grid (the grid of the
+/// triangles unless a vertex is unused, checked once their bounds are known), if anything.
+pub(crate) enum Early {
+    None,
+    /// The per-chunk counts: the tile stage has only its scatter pass.
+    Counts(ChunkCounts),
+    /// The bins themselves, written in runs, on this grid: the tile stage has no pass.
+    Bins(Bins, Grid),
+}
+
+/// The pass over the input: bounds and count of the triangles, spooled or (for a mapped input,
+/// if `may_count`) binned in runs on the vertex list's grid (or, where that cannot be done,
+/// counted per chunk on it). `temp_disk` is the stage's upper bound of the temporary disk.
 fn read_input(
     ctx: &BuildContext,
     layout: RecordLayout,
     spooled: bool,
     may_count: bool,
-) -> Result<(SpoolMarker, Option<ChunkCounts>), StageError> {
+    temp_disk: u64,
+) -> Result<(SpoolMarker, Early), StageError> {
     let input_len = std::fs::metadata(ctx.input).map(|m| m.len()).unwrap_or(0);
     let bar = Stage::bytes(ctx.progress, "ingest", input_len);
     let mut spooler = spooled
         .then(|| Spooler::create(&ctx.work.file(WorkFile::Spool), layout))
         .transpose()?;
     let (mut count, mut bounds) = (0u64, Bounds::default());
-    let mut early_counts = (!spooled && may_count)
-        .then(|| vertex_grid_counts(ctx))
-        .flatten();
+    let vgrid = (!spooled && may_count).then(|| vertex_grid(ctx)).flatten();
+    let mut runs = vgrid
+        .filter(|g| bins_during_ingest(ctx, g, temp_disk))
+        .map(|g| {
+            let path = ctx.work.file(WorkFile::Bins);
+            RunScatter::create(&g, &path, layout, ctx.plan.scatter_buffer)
+        })
+        .transpose()?;
+    let mut early_counts = vgrid.and_then(|g| ChunkCounts::new(&g).ok());
+    let keys = early_counts.as_ref().map(|c| c.keys());
+    // binning in runs: the triangles move to the grid where they are decoded, as in the
+    // tile stage's scatter pass
+    let move_to = runs.as_ref().map(|r| *r.grid());
+    if runs.is_some() {
+        early_counts = None;
+    }
     // Inside the pool: a mapped binary PLY is decoded on its threads, and each batch's bounds
     // and chunk keys are taken there too (`prepare`); the callback, on this thread, only adds
-    // them up (or spools the batch).
-    let keys = early_counts.as_ref().map(|c| c.keys());
+    // them up and bins (or spools the batch).
     let prepare = |tris: &mut [Triangle]| {
         let mut b = Bounds::default();
         if spooled {
             return (b, None);
         }
         b.add_triangles(tris);
-        (b, keys.map(|k| k.of_world(tris)))
+        let Some(grid) = move_to else {
+            return (b, keys.map(|k| k.of_world(tris)));
+        };
+        for t in tris.iter_mut() {
+            for v in &mut t.v {
+                *v = grid.to_grid(*v);
+            }
+        }
+        (b, keys.map(|k| k.of_grid(tris)))
     };
     let stats = ctx
         .pool
@@ -303,19 +352,21 @@ fn read_input(
                     if let Err(e) = ctx.check_interrupt() {
                         return Err(IngestError::Callback(Box::new(e)));
                     }
-                    match &mut spooler {
-                        Some(sp) => sp
+                    if let Some(sp) = &mut spooler {
+                        return sp
                             .push(tris)
-                            .map_err(|e| IngestError::Callback(Box::new(e))),
-                        None => {
-                            count += tris.len() as u64;
-                            bounds.merge(&b);
-                            if let (Some(c), Some(k)) = (&mut early_counts, k) {
-                                c.add_keyed(tris, &k);
-                            }
-                            Ok(())
-                        }
+                            .map_err(|e| IngestError::Callback(Box::new(e)));
                     }
+                    count += tris.len() as u64;
+                    bounds.merge(&b);
+                    match (&mut runs, &mut early_counts, k) {
+                        (Some(rs), _, Some(k)) => rs
+                            .push_keyed(tris, &k)
+                            .map_err(|e| IngestError::Callback(Box::new(e)))?,
+                        (None, Some(c), Some(k)) => c.add_keyed(tris, &k),
+                        _ => {}
+                    }
+                    Ok(())
                 },
                 &mut |done, total| bar.set(done, total),
             )
@@ -325,6 +376,14 @@ fn read_input(
         let spool = sp.finish()?;
         (count, bounds) = (spool.count, spool.bounds);
     }
+    let early = match (runs, early_counts) {
+        (Some(rs), _) => {
+            let grid = *rs.grid();
+            Early::Bins(rs.finish()?, grid)
+        }
+        (None, Some(c)) => Early::Counts(c),
+        _ => Early::None,
+    };
     bar.finish();
     let warnings = (stats.degenerate_skipped > 0)
         .then(|| {
@@ -345,16 +404,28 @@ fn read_input(
         degenerate_skipped: stats.degenerate_skipped,
         warnings,
     };
-    Ok((marker, early_counts))
+    Ok((marker, early))
 }
 
-/// Empty chunk counts on the grid of the vertex list's bounds, for the tile stage's counts to
-/// be taken during the ingest pass: the grid is the triangles' grid unless some vertex is
-/// unused (checked once the triangles' bounds are known). None when the reader cannot give
-/// the vertex bounds before the pass.
-fn vertex_grid_counts(ctx: &BuildContext) -> Option<ChunkCounts> {
+/// The grid of the vertex list's bounds, for the tile stage's work to be done during the
+/// ingest pass: the grid is the triangles' grid unless some vertex is unused (checked once the
+/// triangles' bounds are known). None when the reader cannot give the vertex bounds before the
+/// pass.
+fn vertex_grid(ctx: &BuildContext) -> Option<Grid> {
     ctx.pool
         .install(|| ctx.source.vertex_bounds())
         .and_then(|vb| Grid::fit(&vb, ctx.settings.resolution).ok())
-        .and_then(|g| ChunkCounts::new(&g).ok())
+        .filter(|g| ChunkCounts::new(g).is_ok())
+}
+
+/// True if the ingest pass may write the bins itself ([`RunScatter`]) on `grid`: a build of an
+/// octree (a plan writes no bins), a grid of at most [`RUN_SCATTER_MAX_CHUNKS`] chunks, and
+/// free disk for the stage's upper bound of the temporary files (`temp_disk`), since the
+/// exact size of the bins is not known before they are written; otherwise the tile stage
+/// checks the exact size before its scatter pass.
+fn bins_during_ingest(ctx: &BuildContext, grid: &Grid, temp_disk: u64) -> bool {
+    ctx.output.kind() != OutputKind::Plan
+        && ctx.settings.shard.is_none()
+        && (grid.chunks_per_axis() as u64).pow(3) <= RUN_SCATTER_MAX_CHUNKS
+        && crate::system::free_disk(ctx.work.path()).is_some_and(|free| free >= temp_disk)
 }

@@ -17,10 +17,13 @@ use crate::progress::Stage;
 use crate::size::format_size;
 use crate::work::{Marker, WorkFile};
 
-/// The bins layout (`bins.json`): `[x, y, z, start, count]` per non-empty chunk.
+/// The bins layout (`bins.json`): `[x, y, z, start, count]` per non-empty chunk, and for bins
+/// written in runs during the ingest pass each chunk's pieces `[first record, records]`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) struct BinsMarker {
     chunks: Vec<[u64; 5]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pieces: Option<Vec<Vec<[u64; 2]>>>,
 }
 
 impl Marker for BinsMarker {
@@ -38,7 +41,19 @@ impl BinsMarker {
                 [x, y, z, c.start, c.count]
             })
             .collect();
-        BinsMarker { chunks }
+        BinsMarker {
+            chunks,
+            pieces: bins.pieces().map(<[_]>::to_vec),
+        }
+    }
+
+    /// The bins this marker describes, opened (None if the file does not match it).
+    pub(crate) fn open(self, path: &std::path::Path, layout: RecordLayout) -> Option<Bins> {
+        let chunks = self.chunks()?;
+        match self.pieces {
+            Some(p) => Bins::open_pieces(path, chunks, layout, p).ok(),
+            None => Bins::open(path, chunks, layout).ok(),
+        }
     }
 
     /// The chunks of the layout (None if a coordinate is out of range: the marker is not ours).
@@ -76,16 +91,21 @@ pub(crate) fn run(ctx: &mut BuildContext, ingested: &mut Ingested) -> Result<Til
     let resumed = ctx
         .work
         .marker::<BinsMarker>()
-        .and_then(|m| m.chunks())
-        .and_then(|chunks| Bins::open(&bins_path, chunks, ingested.layout).ok());
+        .and_then(|m| m.open(&bins_path, ingested.layout));
     let bins = match resumed {
         Some(b) => {
             ctx.stage_done("tile", t, true);
             b
         }
         None => {
-            let counts = ingested.early_counts.take();
-            let bins = tile(ctx, ingested, counts)?;
+            // written by the ingest pass, or by this stage's passes
+            let bins = match ingested.early_bins.take() {
+                Some(b) => b,
+                None => {
+                    let counts = ingested.early_counts.take();
+                    tile(ctx, ingested, counts)?
+                }
+            };
             ctx.work.set_marker(&BinsMarker::of(&bins))?;
             ctx.stage_done("tile", t, false);
             bins

@@ -1,0 +1,498 @@
+//! Scatter in runs: binning without the per-chunk counts, so that the pass that reads the input
+//! for its bounds can bin it too (one parse instead of two).
+//!
+//! [`crate::scatter`] (PotreeConverter 2's counting-sort chunker, Schütz et al. 2020) needs the
+//! counts of a first pass to lay out one pre-sized region per chunk. When the grid is known
+//! before the triangles are read (a binary PLY's vertex list gives it), the counting can move
+//! into the buffer instead: triangles are encoded as compact records in arrival order into one
+//! buffer; when it is full, a counting sort by the chunks' Morton rank (the keys kept beside
+//! the records) writes the buffer as one *run* appended to the bins file, chunk after chunk in
+//! Morton order. A chunk's bin is then the list of its pieces in the runs, in input order, so
+//! [`Bins::read_chunk`] hands out the same triangles, in the same order and the same batches,
+//! as the bins of [`crate::scatter`].
+//!
+//! The sorted run is written without a second copy: one vectored write names the buffer's
+//! stretches of consecutive records in sorted order (long in a scan, whose input order is
+//! mostly spatial), and the kernel copies them to the file (appended, so the file is always a
+//! whole number of runs).
+//!
+//! Memory is bounded by design: the buffer (records, their keys and the sort's permutation)
+//! has a byte budget and the pieces cost 16 bytes per chunk per run; the grid may have at most
+//! [`RUN_SCATTER_MAX_CHUNKS`] chunks (dense per-chunk arrays).
+
+use std::fs::File;
+use std::io::{IoSlice, Write};
+use std::path::{Path, PathBuf};
+
+use voxlod_geom::{morton3, Grid, Triangle};
+
+use crate::{Bins, ChunkBin, RecordLayout, TileError};
+
+/// Most chunks a grid may have for [`RunScatter`] (its per-chunk arrays are dense): 32³, a
+/// grid of 8192³ voxels.
+pub const RUN_SCATTER_MAX_CHUNKS: u64 = 32 * 32 * 32;
+
+/// Stretches of records per vectored write (Linux's `IOV_MAX`).
+const SLICES_PER_WRITE: usize = 1024;
+
+/// One run's records, in arrival order, and their chunks' Morton ranks.
+#[derive(Default)]
+struct Run {
+    recs: Vec<u8>,
+    ranks: Vec<u32>,
+}
+
+/// A scatter in runs in progress (see the module documentation). The caller's thread encodes
+/// records into the current run; a full run goes to a writer thread, which sorts and writes it
+/// while the next one fills (two runs in memory, so the kernel's copy of the bins into the
+/// page cache runs beside the binning instead of after it).
+pub struct RunScatter {
+    grid: Grid,
+    n: u32,
+    layout: RecordLayout,
+    /// The run being filled, and the other buffer when the writer is not holding it.
+    current: Run,
+    spare: Option<Run>,
+    /// Records one run holds at most.
+    cap: usize,
+    /// Chunk linear index `(z·n + y)·n + x` -> rank of the chunk in Morton order.
+    rank_of: Vec<u32>,
+    /// Full runs to the writer; emptied ones back.
+    to_writer: Option<std::sync::mpsc::SyncSender<Run>>,
+    from_writer: std::sync::mpsc::Receiver<Run>,
+    writer: Option<std::thread::JoinHandle<Result<Writer, TileError>>>,
+}
+
+/// The writer thread's state: the file and where each chunk's pieces are.
+struct Writer {
+    path: PathBuf,
+    file: File,
+    rec: usize,
+    /// Per Morton rank: its pieces so far, `[first record, records]`.
+    pieces: Vec<Vec<[u64; 2]>>,
+    /// Records written to the file.
+    written: u64,
+    /// Scratch of the sort: records per rank, then each rank's next slot; the permutation.
+    slots: Vec<u32>,
+    perm: Vec<u32>,
+}
+
+impl RunScatter {
+    /// Starts the bins file at `path` (created or truncated) for `grid`, buffering at most
+    /// about `buffer_bytes` (two runs of records and keys, and the sort's permutation; at least
+    /// 1024 records a run). Refused if the grid has more than [`RUN_SCATTER_MAX_CHUNKS`]
+    /// chunks.
+    pub fn create(
+        grid: &Grid,
+        path: &Path,
+        layout: RecordLayout,
+        buffer_bytes: u64,
+    ) -> Result<RunScatter, TileError> {
+        let n = grid.chunks_per_axis();
+        let total = (n as u64).pow(3);
+        if total > RUN_SCATTER_MAX_CHUNKS {
+            return Err(TileError::TooManyChunks(total));
+        }
+        let mut by_morton: Vec<u32> = (0..total as u32).collect();
+        let coord = |li: u32| [li % n, li / n % n, li / (n * n)];
+        by_morton.sort_unstable_by_key(|&li| {
+            let [x, y, z] = coord(li);
+            morton3(x, y, z)
+        });
+        let mut rank_of = vec![0u32; total as usize];
+        for (r, &li) in by_morton.iter().enumerate() {
+            rank_of[li as usize] = r as u32;
+        }
+        let file = std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(path)
+            .map_err(TileError::io("create", path))?;
+        let rec = layout.bytes();
+        // per record of a run: its bytes and rank twice (two runs), its place in the permutation
+        let cap = (buffer_bytes as usize / (2 * (rec + 4) + 4)).max(1024);
+        let mut w = Writer {
+            path: path.to_path_buf(),
+            file,
+            rec,
+            pieces: vec![Vec::new(); total as usize],
+            written: 0,
+            slots: vec![0; total as usize + 1],
+            perm: Vec::new(),
+        };
+        let (to_writer, runs) = std::sync::mpsc::sync_channel::<Run>(1);
+        let (back, from_writer) = std::sync::mpsc::channel::<Run>();
+        let writer = std::thread::Builder::new()
+            .name("bins-writer".into())
+            .spawn(move || {
+                for mut run in runs {
+                    w.write_run(&run)?;
+                    run.recs.clear();
+                    run.ranks.clear();
+                    // the binning side may be gone (an error there): nothing to hand back to
+                    let _ = back.send(run);
+                }
+                Ok(w)
+            })
+            .map_err(TileError::io("starting the writer thread of", path))?;
+        Ok(RunScatter {
+            grid: *grid,
+            n,
+            layout,
+            current: Run::default(),
+            spare: Some(Run::default()),
+            cap,
+            rank_of,
+            to_writer: Some(to_writer),
+            from_writer,
+            writer: Some(writer),
+        })
+    }
+
+    /// The grid the triangles are binned on.
+    pub fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    /// Bins a batch of grid-space triangles given their [`crate::ChunkKeys::of_grid`] (keys
+    /// of this grid): a one-chunk key goes to that chunk, [`crate::SPANS`] to every chunk of
+    /// the triangle's range, [`crate::DROPPED`] nowhere.
+    pub fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
+        let (grid, n) = (self.grid, self.n);
+        crate::bins::for_each_keyed_chunk(&grid, n, tris, keys, |t, li| self.put(t, li))
+    }
+
+    /// Adds triangle `t` to the current run for the chunk of linear index `li`.
+    #[inline]
+    fn put(&mut self, t: &Triangle, li: usize) -> Result<(), TileError> {
+        if self.current.ranks.len() == self.cap {
+            self.send_run()?;
+        }
+        if self.current.ranks.capacity() == 0 {
+            self.current
+                .recs
+                .reserve_exact(self.cap * self.layout.bytes());
+            self.current.ranks.reserve_exact(self.cap);
+        }
+        self.layout.encode(t, &mut self.current.recs)?;
+        self.current.ranks.push(self.rank_of[li]);
+        Ok(())
+    }
+
+    /// Hands the current run to the writer and takes the other buffer (waiting for the writer
+    /// to finish with it).
+    fn send_run(&mut self) -> Result<(), TileError> {
+        let next = match self.spare.take() {
+            Some(r) => r,
+            None => match self.from_writer.recv() {
+                Ok(r) => r,
+                Err(_) => return Err(self.writer_error()),
+            },
+        };
+        let full = std::mem::replace(&mut self.current, next);
+        let sent = self.to_writer.as_ref().map(|tx| tx.send(full));
+        match sent {
+            Some(Ok(())) => Ok(()),
+            _ => Err(self.writer_error()),
+        }
+    }
+
+    /// The error with which the writer thread stopped (it stops only on one).
+    fn writer_error(&mut self) -> TileError {
+        match self.join_writer() {
+            Err(e) => e,
+            Ok(_) => TileError::Callback("the bins writer thread stopped".into()),
+        }
+    }
+
+    /// Closes the writer's channel and waits for the thread: its state, or its error (a
+    /// panic there is resumed here).
+    fn join_writer(&mut self) -> Result<Writer, TileError> {
+        self.to_writer = None;
+        match self.writer.take().map(|h| h.join()) {
+            Some(Ok(r)) => r,
+            Some(Err(panic)) => std::panic::resume_unwind(panic),
+            None => Err(TileError::Callback("the bins writer thread stopped".into())),
+        }
+    }
+
+    /// Writes the last run and returns the bins: the non-empty chunks in Morton order with
+    /// their pieces.
+    pub fn finish(mut self) -> Result<Bins, TileError> {
+        if !self.current.ranks.is_empty() {
+            self.send_run()?;
+        }
+        let w = self.join_writer()?;
+        w.file.sync_data().map_err(TileError::io("sync", &w.path))?;
+        let n = self.n;
+        let mut by_rank = vec![0u32; self.rank_of.len()];
+        for (li, &r) in self.rank_of.iter().enumerate() {
+            by_rank[r as usize] = li as u32;
+        }
+        let (mut chunks, mut pieces) = (Vec::new(), Vec::new());
+        for (r, ps) in w.pieces.into_iter().enumerate() {
+            if ps.is_empty() {
+                continue;
+            }
+            let li = by_rank[r];
+            let coord = [li % n, li / n % n, li / (n * n)];
+            chunks.push(ChunkBin {
+                coord,
+                morton: morton3(coord[0], coord[1], coord[2]),
+                start: ps[0][0],
+                count: ps.iter().map(|p| p[1]).sum(),
+            });
+            pieces.push(ps);
+        }
+        Ok(Bins::from_runs(w.path, w.file, chunks, self.layout, pieces))
+    }
+}
+
+impl Drop for RunScatter {
+    /// Stops the writer thread of a scatter that is not finished (an error or an interrupt
+    /// in the pass): the channel closes, the thread ends after the run in hand.
+    fn drop(&mut self) {
+        self.to_writer = None;
+        if let Some(h) = self.writer.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+impl Writer {
+    /// Writes `run` appended to the file, chunk after chunk in Morton order (a counting sort
+    /// by rank, stable: input order inside a chunk), and notes each chunk's piece.
+    fn write_run(&mut self, run: &Run) -> Result<(), TileError> {
+        if run.ranks.is_empty() {
+            return Ok(());
+        }
+        let rec = self.rec;
+        self.slots.fill(0);
+        for &r in &run.ranks {
+            self.slots[r as usize + 1] += 1;
+        }
+        for r in 0..self.pieces.len() {
+            let k = self.slots[r + 1];
+            if k > 0 {
+                let first = self.written + self.slots[r] as u64;
+                self.pieces[r].push([first, k as u64]);
+            }
+            self.slots[r + 1] += self.slots[r];
+        }
+        self.perm.clear();
+        self.perm.resize(run.ranks.len(), 0);
+        for (i, &r) in run.ranks.iter().enumerate() {
+            let s = &mut self.slots[r as usize];
+            self.perm[*s as usize] = i as u32;
+            *s += 1;
+        }
+        // the sorted order as stretches of consecutive records, appended at the file's end
+        let (mut file, recs, perm) = (&self.file, &run.recs, &self.perm);
+        let mut slices = Vec::with_capacity(SLICES_PER_WRITE);
+        let mut i = 0;
+        while i < perm.len() {
+            let first = perm[i] as usize;
+            let mut end = first + 1;
+            i += 1;
+            while i < perm.len() && perm[i] as usize == end {
+                (end, i) = (end + 1, i + 1);
+            }
+            slices.push(IoSlice::new(&recs[first * rec..end * rec]));
+            if slices.len() == SLICES_PER_WRITE || i == perm.len() {
+                write_all_vectored(&mut file, &mut slices)
+                    .map_err(TileError::io("write", &self.path))?;
+                slices.clear();
+            }
+        }
+        self.written += perm.len() as u64;
+        Ok(())
+    }
+}
+
+/// Writes every byte of `slices` at the file's position (`Write::write_all_vectored` is not
+/// stable).
+fn write_all_vectored(file: &mut &File, slices: &mut [IoSlice<'_>]) -> std::io::Result<()> {
+    let mut rest = slices;
+    while !rest.is_empty() {
+        match file.write_vectored(rest) {
+            Ok(0) => return Err(std::io::ErrorKind::WriteZero.into()),
+            Ok(n) => IoSlice::advance_slices(&mut rest, n),
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{scatter, ChunkCounts, Spooler};
+    use voxlod_geom::Bounds;
+
+    /// Random triangles over a 10-unit cube: most small, every 40th large (over several
+    /// chunks at 1024³), each with its index in its colour.
+    fn triangles(n: usize) -> Vec<Triangle> {
+        let mut s = 11u64;
+        let mut f = move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 40) as f32) / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|i| {
+                let c = [f() * 10.0, f() * 10.0, f() * 10.0];
+                let r = if i % 40 == 0 { 5.0 } else { 0.2 };
+                let mut t = Triangle::new([
+                    c,
+                    [c[0] + r * f(), c[1], c[2] + r],
+                    [c[0], c[1] + r * f(), c[2]],
+                ]);
+                t.c[1] = [(i % 256) as u8, (i / 256 % 256) as u8, (i >> 16) as u8, 255];
+                t
+            })
+            .collect()
+    }
+
+    /// Each chunk's triangles, read back in batches of `batch`, with the batch sizes seen.
+    fn read_all(bins: &Bins, batch: usize) -> Vec<(ChunkBin, Vec<Triangle>, Vec<usize>)> {
+        (0..bins.chunks().len())
+            .map(|i| {
+                let (mut got, mut sizes) = (Vec::new(), Vec::new());
+                bins.read_chunk(i, batch, &mut |b| {
+                    got.extend_from_slice(b);
+                    sizes.push(b.len());
+                    Ok(())
+                })
+                .unwrap();
+                (bins.chunks()[i], got, sizes)
+            })
+            .collect()
+    }
+
+    /// Against the counted scatter (itself checked against brute force in `bins.rs`): for
+    /// any buffer size (one run, many runs, runs of the minimum 1024 records), every chunk
+    /// holds the same triangles in the same order and is handed out in the same batches; the
+    /// file holds exactly the binned records, and reopening it from its pieces gives the same.
+    #[test]
+    fn runs_give_the_bins_of_the_counted_scatter() {
+        let dir = tempfile::tempdir().unwrap();
+        let tris = triangles(6000);
+        let layout = RecordLayout {
+            normals: false,
+            colors: true,
+            texcoords: false,
+        };
+        let mut sp = Spooler::create(&dir.path().join("spool"), layout).unwrap();
+        sp.push(&tris).unwrap();
+        let spool = sp.finish().unwrap();
+        let mut bounds = Bounds::default();
+        tris.iter().for_each(|t| bounds.add_triangle(t));
+        let grid = Grid::fit(&bounds, 1024).unwrap();
+        let mut counts = ChunkCounts::new(&grid).unwrap();
+        counts.add_triangles(&tris);
+        let reference = scatter(
+            &spool,
+            &grid,
+            &counts,
+            &dir.path().join("bins-counted"),
+            layout,
+            1 << 20,
+            &mut |_, _| {},
+        )
+        .unwrap();
+        let want = read_all(&reference, 97);
+        let keys = counts.keys();
+        let rec = layout.bytes() as u64;
+        for buffer in [1u64 << 30, 100 * 1024, 0] {
+            let path = dir.path().join(format!("bins-runs-{buffer}"));
+            let mut rs = RunScatter::create(&grid, &path, layout, buffer).unwrap();
+            // batches of another size than the spool's, moved to the grid as the passes do
+            for b in tris.chunks(333) {
+                let moved: Vec<Triangle> = b.iter().map(|t| crate::to_grid(&grid, t)).collect();
+                rs.push_keyed(&moved, &keys.of_grid(&moved)).unwrap();
+            }
+            let bins = rs.finish().unwrap();
+            let runs = bins.pieces().unwrap().iter().map(Vec::len).max().unwrap();
+            assert!(
+                (buffer == 1 << 30) == (runs == 1),
+                "buffer {buffer}: at most {runs} pieces per chunk"
+            );
+            let got = read_all(&bins, 97);
+            assert_eq!(got.len(), want.len());
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!(
+                    (g.0.coord, g.0.morton, g.0.count),
+                    (w.0.coord, w.0.morton, w.0.count)
+                );
+                assert_eq!(g.1, w.1, "chunk {:?}: other triangles or order", w.0.coord);
+                assert_eq!(g.2, w.2, "chunk {:?}: other batches", w.0.coord);
+            }
+            assert_eq!(
+                std::fs::metadata(&path).unwrap().len(),
+                reference.total() * rec
+            );
+            let again = Bins::open_pieces(
+                &path,
+                bins.chunks().to_vec(),
+                layout,
+                bins.pieces().unwrap().to_vec(),
+            )
+            .unwrap();
+            assert_eq!(read_all(&again, 1000), read_all(&bins, 1000));
+        }
+    }
+
+    /// Pieces that do not add up to a chunk's count, or reach past the file, are refused
+    /// when reopening (a marker that is not the file's).
+    #[test]
+    fn reopening_with_pieces_that_do_not_fit_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let tris = triangles(3000);
+        let layout = RecordLayout {
+            normals: false,
+            colors: true,
+            texcoords: false,
+        };
+        let mut bounds = Bounds::default();
+        tris.iter().for_each(|t| bounds.add_triangle(t));
+        let grid = Grid::fit(&bounds, 512).unwrap();
+        let path = dir.path().join("bins");
+        let mut rs = RunScatter::create(&grid, &path, layout, 0).unwrap();
+        let moved: Vec<Triangle> = tris.iter().map(|t| crate::to_grid(&grid, t)).collect();
+        let keys = ChunkCounts::new(&grid).unwrap().keys().of_grid(&moved);
+        rs.push_keyed(&moved, &keys).unwrap();
+        let bins = rs.finish().unwrap();
+        let (chunks, pieces) = (bins.chunks().to_vec(), bins.pieces().unwrap().to_vec());
+        assert!(Bins::open_pieces(&path, chunks.clone(), layout, pieces.clone()).is_ok());
+        let mut short = pieces.clone();
+        short[0][0][1] -= 1;
+        let e = Bins::open_pieces(&path, chunks.clone(), layout, short)
+            .err()
+            .unwrap();
+        assert!(matches!(e, TileError::Truncated { .. }), "{e:?}");
+        let mut past = pieces.clone();
+        past[0][0][0] += 1 << 40;
+        assert!(Bins::open_pieces(&path, chunks.clone(), layout, past).is_err());
+        assert!(Bins::open_pieces(&path, chunks[1..].to_vec(), layout, pieces).is_err());
+    }
+
+    /// A grid with more chunks than the dense arrays allow is refused with a typed error.
+    #[test]
+    fn too_many_chunks_is_refused() {
+        let bounds = Bounds {
+            min: [0.0; 3],
+            max: [1.0; 3],
+        };
+        let grid = Grid::fit(&bounds, 16384).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let layout = RecordLayout::FULL;
+        let e = RunScatter::create(&grid, &dir.path().join("b"), layout, 1 << 20)
+            .err()
+            .unwrap();
+        assert!(matches!(e, TileError::TooManyChunks(262144)), "{e:?}");
+    }
+}
