@@ -20,7 +20,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
+use super::BIN;
 
 fn repo() -> PathBuf {
     voxlod_testkit::repo_root()

@@ -14,21 +14,7 @@ use std::time::{Duration, Instant};
 
 use voxlod_format::Reader;
 
-const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
-const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
-
-fn sample() -> PathBuf {
-    Path::new(REPO).join("data/bunny.ply")
-}
-
-fn voxlod(args: &[&str], cwd: &Path) -> Output {
-    Command::new(BIN)
-        .args(args)
-        .current_dir(cwd)
-        .env("NO_COLOR", "1")
-        .output()
-        .expect("running voxlod")
-}
+use super::{ok, sample, voxlod, BIN};
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -36,15 +22,6 @@ fn s(p: &Path) -> &str {
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn ok(o: &Output) {
-    assert!(
-        o.status.success(),
-        "voxlod failed: {}\n{}",
-        stderr(o),
-        String::from_utf8_lossy(&o.stdout)
-    );
 }
 
 /// Fails with a message containing every one of `parts`, no panic, no Rust debug formatting.

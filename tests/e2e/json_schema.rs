@@ -12,8 +12,7 @@ use std::process::{Command, Output};
 
 use serde_json::Value;
 
-const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
-const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
+use super::{BIN, REPO};
 
 const KNOWN: &[&str] = &[
     "$schema",

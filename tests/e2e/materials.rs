@@ -10,7 +10,8 @@ use std::process::Command;
 
 use voxlod_format::Reader;
 
-const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
+use super::BIN;
+
 const NAMES: [&str; 3] = ["stone", "grass", "dirt"];
 
 /// The floor: 4 × 4 unit cubes at (x, 0, z), material (x + 2z) % 3 (one name for all with

@@ -11,8 +11,7 @@ use std::process::{Command, Output};
 
 use voxlod_format::Reader;
 
-const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
-const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
+use super::{BIN, REPO};
 
 fn run(cmd: &mut Command) -> Output {
     let o = cmd.output().expect("running a command");

@@ -9,22 +9,7 @@ use std::process::{Command, Output};
 
 use voxlod_format::Reader;
 
-const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
-const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
-
-/// The shared test meshes, or None (with a note) when this clone has no `../shared`.
-/// Under CI (`CI=true`) a missing `../shared` is a failure, never a silent skip.
-fn shared_meshes(test: &str) -> Option<PathBuf> {
-    let p = Path::new(REPO).join("../shared/data/meshes");
-    if p.is_dir() {
-        return Some(p);
-    }
-    if std::env::var("CI").is_ok_and(|v| v == "true") {
-        panic!("{test}: ../shared/data/meshes is missing, and CI=true requires it");
-    }
-    eprintln!("{test}: SKIPPED: ../shared/data/meshes is not beside this clone");
-    None
-}
+use super::{shared_meshes, BIN};
 
 /// `voxlod build INPUT -o OUT -q --json EXTRA…`; the parsed summary.
 fn build(input: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {

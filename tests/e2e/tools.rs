@@ -4,20 +4,13 @@
 //! and by their reports. The libraries behind them have their own detailed tests
 //! (crates/check, crates/render); this checks the commands a person types.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 use voxlod_format::voxel::pack_color;
 use voxlod_format::{encode_node, Reader, Writer};
 
-const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
-const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
-
-/// The shared test meshes (`voxlod_testkit::shared_meshes`: skipped with a note without
-/// `../shared`, a failure under CI).
-fn shared_meshes(test: &str) -> Option<PathBuf> {
-    voxlod_testkit::shared_meshes(test)
-}
+use super::{shared_meshes, BIN, REPO};
 
 fn voxlod(args: &[&str]) -> Output {
     Command::new(BIN)

@@ -17,8 +17,7 @@ use std::process::Command;
 use voxlod_format::voxel::{border_caps, face_mask, pack_color, pack_normal, Voxel};
 use voxlod_format::Reader;
 
-const BIN: &str = env!("CARGO_BIN_EXE_voxlod");
-const REPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../..");
+use super::{BIN, REPO};
 
 /// The 12·n-byte block of `voxels` (Morton-sorted) as FORMAT.md 5.2 transforms it.
 fn block_of(voxels: &[Voxel]) -> Vec<u8> {
