@@ -1,0 +1,72 @@
+//! File helpers every voxlod crate shares, so each exists once: [`write_atomic`] (a file
+//! replaced whole or not at all), [`open_regular`] and [`read_bounded`] (only regular files,
+//! never more bytes than the caller allows: a FIFO, `/dev/zero` or a device is refused before a
+//! byte is read), and the small text and hash helpers ([`hex`], [`fnv1a`], [`mtime_ns`]).
+//!
+//! It depends on nothing but `std`, so every crate of the workspace can use it.
+//!
+//! ```
+//! let dir = tempfile::tempdir().unwrap();
+//! let p = dir.path().join("a.json");
+//! voxlod_io::write_atomic(&p, b"{}").unwrap();
+//! assert_eq!(voxlod_io::read_bounded(&p, 16).unwrap(), b"{}");
+//! assert!(voxlod_io::read_bounded(&p, 1).is_err()); // over the bound: refused
+//! assert_eq!(voxlod_io::hex(&[0xab, 0x01]), "ab01");
+//! ```
+
+mod atomic;
+mod regular;
+
+pub use atomic::{sync_dir, temp_path, write_atomic};
+pub use regular::{open_regular, read_bounded, BoundError};
+
+/// Lower-case hex of `bytes`.
+pub fn hex(bytes: &[u8]) -> String {
+    use std::fmt::Write;
+    let mut s = String::with_capacity(bytes.len() * 2);
+    for b in bytes {
+        let _ = write!(s, "{b:02x}");
+    }
+    s
+}
+
+/// FNV-1a offset basis (64 bit), the `h` to start [`fnv1a`] from.
+pub const FNV1A_OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+
+/// FNV-1a, 64 bit, continuing from `h` ([`FNV1A_OFFSET`] to start): a hash that is stable
+/// across Rust releases (std's hasher is not), for names derived from content.
+pub fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
+    for b in bytes {
+        h ^= *b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// A file's modification time in nanoseconds since the Unix epoch; 0 when the file system
+/// does not record one (or it is before 1970).
+pub fn mtime_ns(meta: &std::fs::Metadata) -> u128 {
+    meta.modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fnv1a_matches_the_published_vectors() {
+        // from the FNV reference test suite (http://www.isthe.com/chongo/src/fnv/test_fnv.c)
+        assert_eq!(fnv1a(b"", FNV1A_OFFSET), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(fnv1a(b"a", FNV1A_OFFSET), 0xaf63_dc4c_8601_ec8c);
+        assert_eq!(fnv1a(b"foobar", FNV1A_OFFSET), 0x8594_4171_f739_67e8);
+    }
+
+    #[test]
+    fn hex_is_lower_case_two_digits_a_byte() {
+        assert_eq!(hex(&[]), "");
+        assert_eq!(hex(&[0, 0x0f, 0xf0, 0xff]), "000ff0ff");
+    }
+}
