@@ -1,9 +1,10 @@
 //! The streamed writer: payloads go to disk as nodes are finished (leaves in Morton order,
 //! each parent right after its last child, so a build holds only the current Morton path);
 //! only the 64-byte index entries stay in memory. The file is built under a temporary name and renamed
-//! into place when complete, so `path` never holds a partial file.
+//! into place when complete, so `path` never holds a partial file; a caller that has a
+//! temporary name of its own and renames it itself writes there directly
+//! ([`Writer::create_staged`]).
 
-use std::ffi::OsString;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -27,6 +28,8 @@ use crate::{EncodedNode, FileSpec, FormatError};
 /// Dropping a writer that was not finished removes its temporary file.
 pub struct Writer {
     path: PathBuf,
+    /// Where the bytes go: [`temp_path`]`(path)`, renamed to `path` by `finish`, or `path`
+    /// itself for [`Writer::create_staged`] (no rename).
     tmp_path: PathBuf,
     file: Option<BufWriter<File>>,
     spec: FileSpec,
@@ -52,11 +55,7 @@ impl std::fmt::Debug for Writer {
 
 /// The temporary file a [`Writer`] for `path` builds: `path` with `.tmp` appended to its file
 /// name (`out.voxlod` → `out.voxlod.tmp`), in the same directory so the final rename is atomic.
-pub fn temp_path(path: &Path) -> PathBuf {
-    let mut s = OsString::from(path.as_os_str());
-    s.push(".tmp");
-    PathBuf::from(s)
-}
+pub use voxlod_io::temp_path;
 
 impl Writer {
     /// Creates (or truncates) [`temp_path`]`(path)` and writes the placeholder (all-zero) header.
@@ -73,6 +72,27 @@ impl Writer {
         spec: FileSpec,
         channels: &[u32],
     ) -> Result<Writer, FormatError> {
+        Writer::open(path, temp_path(path), spec, channels)
+    }
+
+    /// [`create_with_channels`](Self::create_with_channels) writing `path` itself, for a
+    /// caller whose `path` is already a temporary name of its own that it renames into place
+    /// (so the file is renamed once): [`finish`](Self::finish) syncs the file and does not
+    /// rename it; an unfinished writer removes it.
+    pub fn create_staged(
+        path: &Path,
+        spec: FileSpec,
+        channels: &[u32],
+    ) -> Result<Writer, FormatError> {
+        Writer::open(path, path.to_owned(), spec, channels)
+    }
+
+    fn open(
+        path: &Path,
+        tmp_path: PathBuf,
+        spec: FileSpec,
+        channels: &[u32],
+    ) -> Result<Writer, FormatError> {
         if channels.len() > MAX_CHANNELS as usize || channels.windows(2).any(|w| w[0] >= w[1]) {
             return Err(FormatError::Spec {
                 path: path.to_owned(),
@@ -85,7 +105,6 @@ impl Writer {
             path: path.to_owned(),
             what,
         })?;
-        let tmp_path = temp_path(path);
         let file = File::create(&tmp_path).map_err(|source| FormatError::Io {
             path: tmp_path.clone(),
             op: "creating the temporary file",
@@ -277,9 +296,9 @@ impl Writer {
     /// Completes the file: checks that every node below the root has its parent, writes the
     /// node index and `manifest` (serialized as compact JSON, stored verbatim), patches the
     /// header, fsyncs, renames [`temp_path`]`(path)` to `path` (replacing any old file) and
-    /// fsyncs the directory. Only then does `path` exist. Returns the file size.
+    /// fsyncs the directory. Only then does `path` exist. Returns the file size. (A writer of
+    /// [`create_staged`](Self::create_staged) stops after the fsync.)
     pub fn finish(mut self, manifest: &serde_json::Value) -> Result<u64, FormatError> {
-        // Reads best whole: the crash-safe completion sequence, in order.
         self.check_usable()?;
         let top = self.spec.levels - 1;
         for e in &self.entries {
@@ -381,13 +400,15 @@ impl Writer {
             .map_err(io("writing the header"))?;
         file.sync_all().map_err(io("syncing to disk"))?;
         drop(file);
-        std::fs::rename(&self.tmp_path, &self.path).map_err(|source| FormatError::Io {
-            path: self.path.clone(),
-            op: "renaming the temporary file into place",
-            source,
-        })?;
+        if self.tmp_path != self.path {
+            std::fs::rename(&self.tmp_path, &self.path).map_err(|source| FormatError::Io {
+                path: self.path.clone(),
+                op: "renaming the temporary file into place",
+                source,
+            })?;
+            voxlod_io::sync_dir(self.path.parent().unwrap_or(Path::new(".")));
+        }
         self.failed = false; // finished: nothing left for Drop to remove
-        sync_dir(&self.path)?;
         Ok(size)
     }
 
@@ -432,24 +453,4 @@ impl Drop for Writer {
             let _ = std::fs::remove_file(&self.tmp_path);
         }
     }
-}
-
-/// Makes the rename durable: fsync the directory holding `path` (Unix; a no-op elsewhere).
-fn sync_dir(path: &Path) -> Result<(), FormatError> {
-    #[cfg(unix)]
-    {
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d,
-            _ => Path::new("."),
-        };
-        let io = |source| FormatError::Io {
-            path: dir.to_owned(),
-            op: "syncing the directory",
-            source,
-        };
-        File::open(dir).map_err(io)?.sync_all().map_err(io)?;
-    }
-    #[cfg(not(unix))]
-    let _ = path;
-    Ok(())
 }

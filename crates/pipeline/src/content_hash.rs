@@ -42,7 +42,7 @@ pub(crate) fn xxh3_of_file(path: &Path, stop: &AtomicBool) -> Result<Option<u64>
 
 /// The checksum as the plan stores it: 16 lower-case hex digits.
 pub(crate) fn hex64(v: u64) -> String {
-    format!("{v:016x}")
+    voxlod_io::hex(&v.to_be_bytes())
 }
 
 /// Runs `pass` while [`xxh3_of_file`] of `path` runs on a thread of its own; returns both

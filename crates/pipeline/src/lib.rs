@@ -457,7 +457,7 @@ pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> R
         balance: balance.clone(),
     };
     let text = serde_json::to_vec_pretty(&p).context("serializing the plan")?;
-    plan::write_atomically(&guard, &text)?;
+    guard.write_whole(&text)?;
     work.remove()?;
     Ok(PlanSummary {
         plan: plan_path.to_path_buf(),

@@ -18,12 +18,12 @@ use anyhow::{bail, ensure, Context, Result};
 use serde::Serialize;
 use voxlod_format::channel::decode_materials;
 use voxlod_format::{
-    EncodedChannel, EncodedNode, FileSpec, Voxel, Writer, CHANNEL_MATERIAL, CHANNEL_TRIANGLES,
+    EncodedChannel, EncodedNode, Voxel, Writer, CHANNEL_MATERIAL, CHANNEL_TRIANGLES,
 };
 use voxlod_geom::morton3;
 use voxlod_lod::{halve_materials, MergeScratch};
 
-use crate::octree_writer::{LevelStats, OctreeWriter};
+use crate::octree_writer::{file_spec, LevelStats, OctreeWriter};
 use crate::shard_file::{ShardNode, ShardReader};
 use crate::{LoadedPlan, OutputGuard, OutputKind};
 
@@ -120,13 +120,7 @@ pub fn merge(
     let p = &plan.plan;
     let inputs: Vec<&Path> = shards.iter().map(|s| s.path()).collect();
     let guard = OutputGuard::acquire(output, &inputs, OutputKind::Octree, runtime.force)?;
-    let spec = FileSpec {
-        resolution: p.grid.resolution,
-        levels: p.levels,
-        mode: p.settings.mode.code(),
-        origin: p.grid.origin,
-        voxel_size: p.grid.voxel_size,
-    };
+    let spec = file_spec(&p.grid.into(), p.levels, p.settings.mode);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = match runtime.threads {
         0 => threads,
@@ -136,7 +130,7 @@ pub fn merge(
         .num_threads(threads)
         .build()
         .context("creating the thread pool")?;
-    let writer = Writer::create_with_channels(guard.staged(), spec, &p.channels)?;
+    let writer = Writer::create_staged(guard.staged(), spec, &p.channels)?;
     let mut octree = OctreeWriter::new(writer, p.levels, p.settings.zstd_level, &pool);
     let mut m = Merger {
         octree: &mut octree,

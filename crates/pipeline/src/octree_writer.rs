@@ -34,6 +34,22 @@ pub type StoredPayloads = (EncodedNode, Option<EncodedChannel>, Option<EncodedCh
 const QUEUE_NODES: usize = 16;
 const QUEUE_BYTES: u64 = 64 << 20;
 
+/// The octree file's header fields for a tree of `levels` levels over `grid` in `mode`: the
+/// one place a build and a merge take them from, so both write the same header.
+pub(crate) fn file_spec(
+    grid: &voxlod_geom::Grid,
+    levels: u32,
+    mode: voxlod_voxelize::Mode,
+) -> voxlod_format::FileSpec {
+    voxlod_format::FileSpec {
+        resolution: grid.resolution,
+        levels,
+        mode: mode.code(),
+        origin: grid.origin,
+        voxel_size: grid.voxel_size,
+    }
+}
+
 /// Voxel and node counts of one level.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct LevelStats {

@@ -20,7 +20,7 @@ use std::os::unix::fs::MetadataExt;
 use std::os::unix::io::AsRawFd;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 
 use crate::format_size;
 
@@ -181,17 +181,27 @@ impl OutputGuard {
                 os_text(&e)
             );
         }
-        if let Ok(d) = File::open(output_dir(&self.output)) {
-            let _ = d.sync_all();
-        }
+        voxlod_io::sync_dir(output_dir(&self.output));
         Ok(())
+    }
+
+    /// Writes `bytes` as the whole output: the staged file, fsynced, then [`commit`]ted.
+    ///
+    /// [`commit`]: Self::commit
+    pub fn write_whole(&self, bytes: &[u8]) -> Result<()> {
+        let staged = self.staged();
+        let mut f = File::create(staged)
+            .with_context(|| format!("{}: cannot create", staged.display()))?;
+        f.write_all(bytes)
+            .and_then(|()| f.sync_all())
+            .with_context(|| format!("{}: cannot write", staged.display()))?;
+        self.commit()
     }
 }
 
 impl Drop for OutputGuard {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.staged);
-        let _ = std::fs::remove_file(format!("{}.tmp", self.staged.display()));
         // removed while still locked (the lock goes with the descriptor, closed after this)
         if same_inode(&self.lock, &self.lock_path) {
             let _ = std::fs::remove_file(&self.lock_path);

@@ -14,7 +14,7 @@
 //! When no level allows that (fewer subtrees than shards, one dominant subtree), the level
 //! with the smallest largest shard is taken and the plan says it is unbalanced.
 
-use std::io::{Read, Seek, SeekFrom, Write};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
@@ -58,11 +58,7 @@ impl Fingerprint {
             .metadata()
             .with_context(|| format!("{}: cannot read its metadata", path.display()))?;
         let size = meta.len();
-        let mtime_ns = meta
-            .modified()
-            .ok()
-            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-            .map_or(0, |d| d.as_nanos());
+        let mtime_ns = voxlod_io::mtime_ns(&meta);
         let mut h = Sha256::new();
         let mut buf = Vec::new();
         let read = |f: &mut std::fs::File, at: u64, len: u64, buf: &mut Vec<u8>| {
@@ -81,14 +77,9 @@ impl Fingerprint {
         Ok(Fingerprint {
             size,
             mtime_ns,
-            head_tail_sha256: hex(&h.finalize()),
+            head_tail_sha256: voxlod_io::hex(&h.finalize()),
         })
     }
-}
-
-/// Lower-case hex of `bytes`.
-pub(crate) fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// The input as the plan saw it.
@@ -589,17 +580,6 @@ pub struct PlanSummary {
     pub seconds: f64,
     /// Warnings (unbalanced plan, input warnings).
     pub warnings: Vec<String>,
-}
-
-/// Writes `text` to `guard`'s staged file, fsyncs it and renames it into place.
-pub(crate) fn write_atomically(guard: &crate::OutputGuard, text: &[u8]) -> Result<()> {
-    let staged = guard.staged();
-    let mut f = std::fs::File::create(staged)
-        .with_context(|| format!("{}: cannot create", staged.display()))?;
-    f.write_all(text)
-        .and_then(|()| f.sync_all())
-        .with_context(|| format!("{}: cannot write", staged.display()))?;
-    guard.commit()
 }
 
 #[cfg(test)]

@@ -77,16 +77,6 @@ pub struct WorkDir {
     _lock: Option<std::fs::File>,
 }
 
-/// FNV-1a, 64 bit: a stable hash for the folder name (std's hasher is not stable across
-/// releases).
-fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
-    for b in bytes {
-        h ^= *b as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
-}
-
 impl WorkDir {
     /// The key of a build: input identity (canonical path, size, modification time), the
     /// settings that change the intermediates (the voxelizer method too: the leaf log of
@@ -97,11 +87,7 @@ impl WorkDir {
             .with_context(|| format!("{}: cannot resolve the path", input.display()))?;
         let meta = std::fs::metadata(&canon)
             .with_context(|| format!("{}: cannot read its metadata", input.display()))?;
-        let mtime = meta
-            .modified()
-            .ok()
-            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-            .map_or(0, |d| d.as_nanos());
+        let mtime = voxlod_io::mtime_ns(&meta);
         let text = format!(
             "{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
             canon.display(),
@@ -127,13 +113,14 @@ impl WorkDir {
                 "{text}\nshard {} of {}, plan {}",
                 sc.index,
                 sc.count,
-                crate::plan::hex(&sc.plan_sha256)
+                voxlod_io::hex(&sc.plan_sha256)
             ),
             None => text,
         };
+        // FNV-1a: stable across Rust releases, so the same build finds its folder again
         Ok(format!(
             "{:016x}",
-            fnv1a(text.as_bytes(), 0xcbf2_9ce4_8422_2325)
+            voxlod_io::fnv1a(text.as_bytes(), voxlod_io::FNV1A_OFFSET)
         ))
     }
 
@@ -201,28 +188,19 @@ impl WorkDir {
         serde_json::from_slice(&bytes).ok()
     }
 
-    /// Writes a JSON file atomically (temporary name, fsync, rename), so a marker exists
-    /// only once its stage's data is complete.
+    /// Writes a JSON file atomically ([`voxlod_io::write_atomic`]), so a marker exists only
+    /// once its stage's data is complete.
     fn write_json<T: Serialize>(&self, name: &str, value: &T) -> Result<()> {
-        let tmp = self.path.join(format!("{name}.tmp"));
         let fin = self.path.join(name);
         let bytes = serde_json::to_vec(value)?;
-        let write = || -> std::io::Result<()> {
-            let f = std::fs::File::create(&tmp)?;
-            std::io::Write::write_all(&mut &f, &bytes)?;
-            f.sync_all()?;
-            std::fs::rename(&tmp, &fin)
-        };
-        write().with_context(|| format!("writing {}", fin.display()))
+        voxlod_io::write_atomic(&fin, &bytes).with_context(|| format!("writing {}", fin.display()))
     }
 
     /// Removes the folder and everything in it.
     ///
     /// `remove_dir_all` lists the folder and then removes what it listed; a file created
-    /// meanwhile makes the final rmdir fail with "Directory not empty" (seen once in eight
-    /// Slurm test runs; the likely cause: another shard's search for stale folders created a
-    /// lock file in this one, which [`find_work_folders`] no longer does). A few retries remove such a late
-    /// file; a folder that still cannot be removed is an error naming it.
+    /// meanwhile makes the final rmdir fail with "Directory not empty". A few retries remove
+    /// such a late file; a folder that still cannot be removed is an error naming it.
     pub(crate) fn remove(self) -> Result<()> {
         let mut tries = 0;
         loop {

@@ -12,7 +12,7 @@ use std::time::Instant;
 use anyhow::Context;
 use voxlod_format::channel::decode_materials;
 use voxlod_format::{
-    EncodedChannel, EncodedNode, FileSpec, Voxel, Writer, CHANNEL_MATERIAL, CHANNEL_TRIANGLES,
+    EncodedChannel, EncodedNode, Voxel, Writer, CHANNEL_MATERIAL, CHANNEL_TRIANGLES,
 };
 
 use super::ingest::Ingested;
@@ -20,7 +20,7 @@ use super::voxelize::Voxelized;
 use super::BuildContext;
 use crate::error::StageError;
 use crate::leaf_log;
-use crate::octree_writer::{LevelStats, NodeSink, OctreeWriter};
+use crate::octree_writer::{file_spec, LevelStats, NodeSink, OctreeWriter};
 use crate::progress::Stage;
 use crate::shard_file::{ShardHeader, ShardWriter};
 use crate::size::format_size;
@@ -55,20 +55,14 @@ pub(crate) fn run(
     let s = ctx.settings;
     let grid = &ingested.grid;
     check_output_space(ctx, voxelized.marker.leaf_payload_bytes)?;
-    let spec = FileSpec {
-        resolution: grid.resolution,
-        levels: grid.levels(),
-        mode: s.mode.code(),
-        origin: grid.origin,
-        voxel_size: grid.voxel_size,
-    };
+    let spec = file_spec(grid, grid.levels(), s.mode);
     // the material channel: its records follow each leaf's payload in the leaf log
     let materials = crate::textures::has_material_channel(ctx.source.info());
     let channels = channels(ctx);
     if let Some(scope) = &s.shard {
         return write_shard(ctx, voxelized, scope, channels, t);
     }
-    let writer = Writer::create_with_channels(ctx.output.staged(), spec, &channels)?;
+    let writer = Writer::create_staged(ctx.output.staged(), spec, &channels)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &ctx.pool);
     let source = write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
     let manifest = manifest_fields(ctx, ingested);
