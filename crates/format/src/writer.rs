@@ -168,7 +168,6 @@ impl Writer {
         node: &EncodedNode,
         channels: &[Option<&EncodedChannel>],
     ) -> Result<(), FormatError> {
-        // Reads best whole: a node's checks, then its bytes in file order.
         self.check_usable()?;
         let bad = |what: String| FormatError::Tree {
             path: self.path.clone(),

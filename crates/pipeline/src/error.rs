@@ -11,7 +11,7 @@ use voxlod_tile::TileError;
 /// Why a stage stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum StageError {
-    /// Ctrl-C (or [`crate::request_interrupt`]): the work folder is kept for a resume.
+    /// Ctrl-C (or [`crate::system::request_interrupt`]): the work folder is kept for a resume.
     #[error("interrupted; the work done so far is kept in {}: run the same command again to resume", .work.display())]
     Interrupted {
         /// The work folder that is kept.

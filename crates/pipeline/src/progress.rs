@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressState, ProgressStyle};
 /// Seconds between two plain progress lines of one stage.
 const PLAIN_EVERY: Duration = Duration::from_secs(5);
 
-pub(crate) struct Stage {
+pub(crate) struct Bar {
     bar: ProgressBar,
     plain: Option<Plain>,
 }
@@ -119,8 +119,8 @@ impl Plain {
     }
 }
 
-impl Stage {
-    fn new(show: bool, name: &str, total: u64, unit: Unit) -> Stage {
+impl Bar {
+    fn new(show: bool, name: &str, total: u64, unit: Unit) -> Bar {
         let terminal = std::io::stderr().is_terminal();
         let bar = if show && terminal {
             ProgressBar::new(total)
@@ -149,16 +149,16 @@ impl Stage {
             start: now,
             last: Mutex::new((now, 0, total)),
         });
-        Stage { bar, plain }
+        Bar { bar, plain }
     }
 
     /// A stage measured in input bytes.
-    pub(crate) fn bytes(show: bool, name: &str, total: u64) -> Stage {
+    pub(crate) fn bytes(show: bool, name: &str, total: u64) -> Bar {
         Self::new(show, name, total, Unit::Bytes)
     }
 
     /// A stage measured in items (triangles, chunks).
-    pub(crate) fn items(show: bool, name: &str, total: u64) -> Stage {
+    pub(crate) fn items(show: bool, name: &str, total: u64) -> Bar {
         Self::new(show, name, total, Unit::Items(item_name(name)))
     }
 

@@ -2,9 +2,24 @@
 //! whether a GPU device exists, and the interrupt flag set by Ctrl-C.
 
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 pub(crate) static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// Leaf chunks after which a build requests an interrupt; `u64::MAX`: never.
+static INTERRUPT_AFTER_CHUNKS: AtomicU64 = AtomicU64::new(u64::MAX);
+
+/// For tests of resuming (`--debug-interrupt-after-chunks`): every build of this process
+/// requests an interrupt once `n` leaf chunks are in a stage's log (`None`: never).
+#[doc(hidden)]
+pub fn interrupt_after_chunks(n: Option<u64>) {
+    INTERRUPT_AFTER_CHUNKS.store(n.unwrap_or(u64::MAX), Ordering::SeqCst);
+}
+
+/// The chunk count set by [`interrupt_after_chunks`], if one is.
+pub(crate) fn interrupt_after() -> Option<u64> {
+    Some(INTERRUPT_AFTER_CHUNKS.load(Ordering::SeqCst)).filter(|&n| n != u64::MAX)
+}
 
 /// Asks a running build to stop at the next safe point (between batches); its work folder is
 /// kept so the same command resumes it.

@@ -382,7 +382,7 @@ fn run_build(a: BuildArgs) -> Result<()> {
     let mut s = settings(&a.settings)?;
     s.progress = !a.quiet;
     s.force = a.force;
-    s.interrupt_after_chunks = a.debug_interrupt_after_chunks;
+    voxlod_pipeline::interrupt_after_chunks(a.debug_interrupt_after_chunks);
     install_ctrlc();
 
     // Without an input, build the bundled sample, written once to a fixed place so that an

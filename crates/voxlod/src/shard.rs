@@ -151,9 +151,9 @@ pub(crate) fn run_build_shard(a: &super::BuildArgs) -> Result<()> {
         tmp_dir: st.tmp.clone(),
         progress: !a.quiet,
         force: a.force,
-        interrupt_after_chunks: a.debug_interrupt_after_chunks,
         ..defaults
     };
+    voxlod_pipeline::interrupt_after_chunks(a.debug_interrupt_after_chunks);
     super::install_ctrlc();
     let summary = voxlod_pipeline::build_shard(plan, index, a.shard.out_dir.as_deref(), &runtime)?;
     if a.json {

@@ -3,52 +3,27 @@
 //! and can be parsed again by the tile passes. When the grid is known before the pass (from the
 //! vertex list's bounds) the tile stage's chunk counts are taken during it too.
 //!
-//! Artifact and resume marker: [`SpoolMarker`] (`spool.json`).
+//! Artifact and resume marker: [`IngestMarker`] (`spool.json`).
 
 use std::time::Instant;
 
 use anyhow::Context;
-use serde::{Deserialize, Serialize};
 use voxlod_geom::{demorton3, Bounds, Grid, Triangle};
 use voxlod_ingest::IngestError;
 use voxlod_tile::{Bins, ChunkCounts, RecordLayout, RunScatter, Spooler, RUN_SCATTER_MAX_CHUNKS};
 
-use super::voxelize::LeavesMarker;
-use super::BuildContext;
+use crate::context::{BuildContext, Scope, Stage};
 use crate::error::StageError;
-use crate::output::OutputKind;
-use crate::plan::{PlanIngest, ShardScope};
-use crate::progress::Stage;
+use crate::files::markers::IngestMarker;
+use crate::files::work::WorkFile;
+use crate::progress::Bar;
+use crate::resume::Resume;
+use crate::shard::plan_file::{PlanIngest, ShardScope};
 use crate::size::format_size;
-use crate::stages::tile::BinsMarker;
-use crate::work::{Marker, WorkFile};
-
-/// What the ingest stage leaves for a resumed run (`spool.json`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub(crate) struct SpoolMarker {
-    /// True if the triangles were written to `spool.tri`; false if the tile stage reads the
-    /// input again.
-    pub spooled: bool,
-    /// Non-degenerate triangles (those the tile stage bins).
-    pub count: u64,
-    /// The triangles' bounds.
-    pub min: [f64; 3],
-    pub max: [f64; 3],
-    /// Triangles read, degenerate ones included.
-    pub triangles: u64,
-    /// Zero-area triangles skipped.
-    pub degenerate_skipped: u64,
-    /// The stage's warnings (shown again by a resumed build).
-    pub warnings: Vec<String>,
-}
-
-impl Marker for SpoolMarker {
-    const FILE: WorkFile = WorkFile::SpoolMarker;
-}
 
 /// The ingest stage's artifact: its marker and what follows from it.
 pub(crate) struct Ingested {
-    pub marker: SpoolMarker,
+    pub marker: IngestMarker,
     /// Which attributes the triangle records hold (those the mesh has).
     pub layout: RecordLayout,
     /// The grid fitted to the triangles' bounds.
@@ -78,7 +53,7 @@ impl Ingested {
 }
 
 /// Runs the ingest stage, or takes its marker from the work folder.
-pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
+pub(crate) fn run(ctx: &mut BuildContext, resume: &Resume) -> Result<Ingested, StageError> {
     let info = ctx.source.info();
     let input = ctx.input.display().to_string();
     ctx.warnings
@@ -91,21 +66,19 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
         texcoords: info.has_texcoords,
     };
     // a shard reads the input once, in the tile stage's scatter pass, whatever its format
-    let spooled = !ctx.source.rereadable() && ctx.settings.shard.is_none();
+    let spooled = !ctx.source.rereadable() && ctx.scope.shard().is_none();
     let t = Instant::now();
-    let settings = ctx.settings;
-    if let Some(scope) = &settings.shard {
+    if let Some(scope) = ctx.scope.shard() {
         // the bins of its own chunks, exactly; the tile stage checks them against the free space
         let bins: u64 = scope.chunks.iter().map(|c| c[1]).sum();
         let ingested = from_plan(ctx, scope, layout, bins * layout.bytes() as u64)?;
-        ctx.stage_done("ingest", t, false);
+        ctx.stage_done(Stage::Ingest, t, false);
         return Ok(ingested);
     }
     let temp_disk = check_temp_disk(ctx, layout, spooled)?;
     // a later stage's marker: the spool is not needed again, nor are counts
-    let later_done =
-        ctx.work.marker::<LeavesMarker>().is_some() || ctx.work.marker::<BinsMarker>().is_some();
-    let resumed = ctx.work.marker::<SpoolMarker>().filter(|m| {
+    let later_done = resume.past_ingest();
+    let resumed = resume.ingest.clone().filter(|m| {
         m.spooled == spooled
             && (later_done
                 || !m.spooled
@@ -114,13 +87,13 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
     });
     let (marker, early) = match resumed {
         Some(m) => {
-            ctx.stage_done("ingest", t, true);
+            ctx.stage_done(Stage::Ingest, t, true);
             (m, Early::None)
         }
         None => {
             let (m, early) = read_input(ctx, layout, spooled, !later_done, temp_disk)?;
             ctx.work.set_marker(&m)?;
-            ctx.stage_done("ingest", t, false);
+            ctx.stage_done(Stage::Ingest, t, false);
             (m, early)
         }
     };
@@ -157,7 +130,7 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Ingested, StageError> {
 }
 
 /// What the plan's pass found (bounds, counts, warnings), for the plan file.
-pub(crate) fn planned(m: &SpoolMarker) -> PlanIngest {
+pub(crate) fn planned(m: &IngestMarker) -> PlanIngest {
     debug_assert_eq!(m.count, m.triangles, "the pass's count is what it yielded");
     PlanIngest {
         triangles: m.count,
@@ -179,7 +152,7 @@ fn from_plan(
     temp_disk: u64,
 ) -> Result<Ingested, StageError> {
     let p = &scope.ingest;
-    let marker = SpoolMarker {
+    let marker = IngestMarker {
         spooled: false,
         count: p.triangles,
         min: p.min,
@@ -229,7 +202,7 @@ fn check_temp_disk(
     spooled: bool,
 ) -> Result<u64, StageError> {
     // `voxlod plan` writes no bins, only the spool if there is one
-    let bins = ctx.output.kind() != OutputKind::Plan;
+    let bins = ctx.scope.writes_bins();
     if !bins && !spooled {
         return Ok(0);
     }
@@ -301,9 +274,9 @@ fn read_input(
     spooled: bool,
     may_count: bool,
     temp_disk: u64,
-) -> Result<(SpoolMarker, Early), StageError> {
+) -> Result<(IngestMarker, Early), StageError> {
     let input_len = std::fs::metadata(ctx.input).map(|m| m.len()).unwrap_or(0);
-    let bar = Stage::bytes(ctx.progress, "ingest", input_len);
+    let bar = Bar::bytes(ctx.progress, Stage::Ingest.name(), input_len);
     let mut spooler = spooled
         .then(|| Spooler::create(&ctx.work.file(WorkFile::Spool), layout))
         .transpose()?;
@@ -313,7 +286,7 @@ fn read_input(
         .filter(|g| bins_during_ingest(ctx, g, temp_disk))
         .map(|g| {
             let path = ctx.work.file(WorkFile::Bins);
-            RunScatter::create(&g, &path, layout, ctx.plan.scatter_buffer)
+            RunScatter::create(&g, &path, layout, ctx.memory.scatter_buffer)
         })
         .transpose()?;
     let mut early_counts = vgrid.and_then(|g| ChunkCounts::new(&g).ok());
@@ -395,7 +368,7 @@ fn read_input(
         })
         .into_iter()
         .collect();
-    let marker = SpoolMarker {
+    let marker = IngestMarker {
         spooled,
         count,
         min: bounds.min,
@@ -424,8 +397,7 @@ fn vertex_grid(ctx: &BuildContext) -> Option<Grid> {
 /// exact size of the bins is not known before they are written; otherwise the tile stage
 /// checks the exact size before its scatter pass.
 fn bins_during_ingest(ctx: &BuildContext, grid: &Grid, temp_disk: u64) -> bool {
-    ctx.output.kind() != OutputKind::Plan
-        && ctx.settings.shard.is_none()
+    matches!(ctx.scope, Scope::Whole)
         && (grid.chunks_per_axis() as u64).pow(3) <= RUN_SCATTER_MAX_CHUNKS
         && crate::system::free_disk(ctx.work.path()).is_some_and(|free| free >= temp_disk)
 }

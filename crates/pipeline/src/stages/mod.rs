@@ -1,10 +1,10 @@
-//! The build as a sequence of stages: ingest → tile → voxelize → LOD + write.
+//! The build as a sequence of stages: ingest → tile → (source) → voxelize → LOD + write.
 //!
-//! Each stage is one file with one entry, `run(&mut BuildContext, previous artifact) →
-//! artifact`. A stage's artifact is also its resume marker: it is saved in the work folder
-//! (`spool.json`, `bins.json`, `leaves.json`) once the stage's data is complete, and a build
-//! started again with the same arguments takes the artifact from there instead of running the
-//! stage ([`run`] decides which stages a resumed build skips).
+//! Each stage is a file or folder (with its helpers) and one entry, `run(&mut BuildContext,
+//! ...) → artifact`. A stage's result is saved as its marker in the work folder
+//! (`files/markers.rs`) once its data is complete; [`Resume`] reads the markers once and a
+//! stage takes its result from there instead of running again ([`run`] skips tile and voxelize
+//! when every chunk is voxelized).
 
 pub(crate) mod ingest;
 pub(crate) mod lod_write;
@@ -12,82 +12,10 @@ pub(crate) mod source;
 pub(crate) mod tile;
 pub(crate) mod voxelize;
 
-use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
-
-use voxlod_ingest::MeshSource;
-
+use crate::context::BuildContext;
 use crate::error::StageError;
-use crate::memory::MemoryPlan;
-use crate::output::OutputGuard;
-use crate::work::WorkDir;
-use crate::{BuildSettings, StageTime};
-
-/// What every stage of one build shares.
-pub(crate) struct BuildContext<'a> {
-    /// The build's settings.
-    pub settings: &'a BuildSettings,
-    /// The input mesh, opened.
-    pub source: &'a MeshSource,
-    /// The input's path as given.
-    pub input: &'a Path,
-    /// The locked output (written to its staged name, renamed at the end).
-    pub output: &'a OutputGuard,
-    /// The worker threads.
-    pub pool: rayon::ThreadPool,
-    /// The work folder with the intermediates and the markers.
-    pub work: &'a WorkDir,
-    /// How the memory budget is split.
-    pub plan: MemoryPlan,
-    /// Show progress on stderr.
-    pub progress: bool,
-    /// Time and peak memory of each stage, in the order they ran.
-    pub times: Vec<StageTime>,
-    /// Warnings for the summary.
-    pub warnings: Vec<String>,
-    /// Set by Ctrl-C; checked between batches.
-    pub interrupt: &'static AtomicBool,
-}
-
-impl BuildContext<'_> {
-    /// The error to stop with once an interrupt was requested.
-    pub(crate) fn interrupted(&self) -> StageError {
-        StageError::Interrupted {
-            work: self.work.path().to_path_buf(),
-        }
-    }
-
-    /// `Err(Interrupted)` once an interrupt was requested.
-    pub(crate) fn check_interrupt(&self) -> Result<(), StageError> {
-        if self.interrupt.load(Ordering::SeqCst) {
-            return Err(self.interrupted());
-        }
-        Ok(())
-    }
-
-    /// Chunk `i` of `total` is in a stage's log (leaf or source log): shows it on `bar`, and
-    /// requests an interrupt once `interrupt_after_chunks` chunks are logged (the resume
-    /// tests' hook).
-    pub(crate) fn chunk_logged(&self, bar: &crate::progress::Stage, i: usize, total: usize) {
-        bar.set(i as u64 + 1, total as u64);
-        let after = self.settings.interrupt_after_chunks;
-        if after.is_some_and(|n| i as u64 + 1 >= n) {
-            self.interrupt.store(true, Ordering::SeqCst);
-        }
-    }
-
-    /// Records a stage's time, started at `t`; `resumed` if its artifact came from the work
-    /// folder.
-    pub(crate) fn stage_done(&mut self, stage: &'static str, t: Instant, resumed: bool) {
-        self.times.push(StageTime {
-            stage,
-            seconds: t.elapsed().as_secs_f64(),
-            peak_rss: crate::system::peak_rss(),
-            resumed,
-        });
-    }
-}
+use crate::files::markers::SourceMarker;
+use crate::resume::Resume;
 
 /// What the stages produced, for the summary.
 pub(crate) struct Built {
@@ -95,14 +23,15 @@ pub(crate) struct Built {
     pub voxelized: voxelize::Voxelized,
     pub written: lod_write::Written,
     /// The source-geometry stage's totals (`--source-geometry`).
-    pub source: Option<source::SourceMarker>,
+    pub source: Option<SourceMarker>,
 }
 
 /// Runs the stages in order, each from the previous one's artifact; a stage whose marker is
 /// in the work folder is skipped (the voxelize stage's marker skips the tile stage too).
 pub(crate) fn run(ctx: &mut BuildContext) -> Result<Built, StageError> {
-    let mut ingested = ingest::run(ctx)?;
-    if let Some(scope) = &ctx.settings.shard {
+    let resume = Resume::read(ctx.work);
+    let mut ingested = ingest::run(ctx, &resume)?;
+    if let Some(scope) = ctx.scope.shard() {
         // the plan's fingerprint was checked; its grid and channels must come out the same
         let channels = lod_write::channels(ctx);
         if ingested.grid != scope.grid || channels != scope.channels {
@@ -116,15 +45,30 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Built, StageError> {
             .into());
         }
     }
-    let voxelized = match voxelize::Voxelized::resume(ctx) {
-        Some(v) => v,
+    let (voxelized, source) = match voxelize::Voxelized::resume(ctx, &resume) {
+        // the source stage ran before the voxelize stage: its marker holds its totals
+        Some(v) => {
+            let source = match (ctx.settings.source_geometry, resume.source) {
+                (false, _) => None,
+                (true, Some(m)) => Some(m),
+                (true, None) => {
+                    return Err(anyhow::anyhow!(
+                        "the work folder has a leaf log but no complete source log (source.json)"
+                    )
+                    .into())
+                }
+            };
+            (v, source)
+        }
         None => {
-            let tiled = tile::run(ctx, &mut ingested)?;
+            let tiled = tile::run(ctx, &resume, &mut ingested)?;
             // source geometry (its own stage, from the same bins) before the voxelizers exist
-            if ctx.settings.source_geometry {
-                source::run(ctx, &tiled)?;
-            }
-            voxelize::run(ctx, tiled)?
+            let source = if ctx.settings.source_geometry {
+                Some(source::run(ctx, &resume, &tiled)?)
+            } else {
+                None
+            };
+            (voxelize::run(ctx, tiled)?, source)
         }
     };
     if voxelized.marker.skipped > 0 {
@@ -133,17 +77,6 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Built, StageError> {
             voxelized.marker.skipped
         ));
     }
-    // after a resume from the leaf log, the source stage's marker holds its totals
-    let source = if ctx.settings.source_geometry {
-        let m = ctx.work.marker::<source::SourceMarker>();
-        Some(m.ok_or_else(|| {
-            anyhow::anyhow!(
-                "the work folder has a leaf log but no complete source log (source.json)"
-            )
-        })?)
-    } else {
-        None
-    };
     let written = lod_write::run(ctx, &ingested, &voxelized)?;
     Ok(Built {
         ingested,
@@ -160,9 +93,15 @@ mod tests {
     use std::sync::atomic::AtomicBool;
 
     use super::*;
-    use crate::backend::{ChunkSource, ChunkVoxels, CpuVoxelizers, Voxelize};
-    use crate::output::OutputKind;
-    use crate::work::Marker;
+    use crate::context::Scope;
+    use crate::files::markers::{BinsMarker, IngestMarker, LeavesMarker};
+    use crate::files::output::{OutputGuard, OutputKind};
+    use crate::files::work::{Marker, WorkDir};
+    use crate::memory::MemoryPlan;
+    use crate::settings::BuildSettings;
+    use crate::stages::voxelize::backend::{ChunkSource, ChunkVoxels, CpuVoxelizers, Voxelize};
+    use std::sync::atomic::Ordering;
+    use voxlod_ingest::MeshSource;
 
     /// A small mesh in a temporary folder, opened as a build would open it.
     struct Fixture {
@@ -172,6 +111,7 @@ mod tests {
         guard: OutputGuard,
         work: WorkDir,
         input: PathBuf,
+        pool: rayon::ThreadPool,
     }
 
     /// An ASCII PLY of a tetrahedron and a triangle across the unit cube: at 512³ its
@@ -201,13 +141,13 @@ mod tests {
         std::fs::write(&input, text).unwrap();
         let settings = BuildSettings {
             resolution: 512,
-            backend: crate::Backend::Cpu,
+            backend: crate::settings::Backend::Cpu,
             ..Default::default()
         };
         let output = dir.path().join("t.voxlod");
         let guard = OutputGuard::acquire(&output, &[&input], OutputKind::Octree, false).unwrap();
         let source = MeshSource::open(&input).unwrap();
-        let key = WorkDir::key(&input, &settings).unwrap();
+        let key = WorkDir::key(&input, &settings, None).unwrap();
         let (work, _) = WorkDir::open(dir.path(), &output, &key).unwrap();
         Fixture {
             dir,
@@ -216,22 +156,28 @@ mod tests {
             guard,
             work,
             input,
+            pool: rayon::ThreadPoolBuilder::new()
+                .num_threads(2)
+                .build()
+                .unwrap(),
         }
     }
 
     impl Fixture {
+        fn resume(&self) -> Resume {
+            Resume::read(&self.work)
+        }
+
         fn ctx(&self, interrupt: &'static AtomicBool) -> BuildContext<'_> {
             BuildContext {
                 settings: &self.settings,
+                scope: &Scope::Whole,
                 source: &self.source,
                 input: &self.input,
                 output: &self.guard,
-                pool: rayon::ThreadPoolBuilder::new()
-                    .num_threads(2)
-                    .build()
-                    .unwrap(),
+                pool: &self.pool,
                 work: &self.work,
-                plan: MemoryPlan::new(2 << 30, 2).unwrap(),
+                memory: MemoryPlan::new(2 << 30, 2).unwrap(),
                 progress: false,
                 times: Vec::new(),
                 warnings: Vec::new(),
@@ -251,17 +197,17 @@ mod tests {
     fn stage_artifacts_round_trip_as_resume_markers() {
         let fx = fixture();
         let mut ctx = fx.ctx(flag());
-        let mut ingested = ingest::run(&mut ctx).unwrap();
+        let mut ingested = ingest::run(&mut ctx, &fx.resume()).unwrap();
         assert_eq!(ingested.marker.count, 5);
         assert_eq!(
-            ctx.work.marker::<ingest::SpoolMarker>(),
+            ctx.work.marker::<IngestMarker>(),
             Some(ingested.marker.clone())
         );
-        let tiled = tile::run(&mut ctx, &mut ingested).unwrap();
+        let tiled = tile::run(&mut ctx, &fx.resume(), &mut ingested).unwrap();
         let chunks = tiled.bins.chunks().to_vec();
         assert!(chunks.len() > 1, "{} chunks", chunks.len());
-        let bins_marker = ctx.work.marker::<tile::BinsMarker>().unwrap();
-        assert_eq!(bins_marker, tile::BinsMarker::of(&tiled.bins));
+        let bins_marker = ctx.work.marker::<BinsMarker>().unwrap();
+        assert_eq!(bins_marker, BinsMarker::of(&tiled.bins));
         let back = bins_marker.chunks().unwrap();
         assert_eq!(back.len(), chunks.len());
         for (a, b) in back.iter().zip(&chunks) {
@@ -273,10 +219,10 @@ mod tests {
         drop(tiled);
         // a second build on the same folder takes both artifacts from the markers
         let mut again = fx.ctx(flag());
-        let mut ingested2 = ingest::run(&mut again).unwrap();
+        let mut ingested2 = ingest::run(&mut again, &fx.resume()).unwrap();
         assert_eq!(ingested2.marker, ingested.marker);
         assert_eq!(ingested2.grid, ingested.grid);
-        let tiled2 = tile::run(&mut again, &mut ingested2).unwrap();
+        let tiled2 = tile::run(&mut again, &fx.resume(), &mut ingested2).unwrap();
         assert_eq!(
             tiled2.bins.total(),
             chunks.iter().map(|c| c.count).sum::<u64>()
@@ -286,18 +232,14 @@ mod tests {
         // the voxelize stage's marker is its artifact, and skips tile and voxelize
         let v = voxelize::run(&mut again, tiled2).unwrap();
         assert_eq!(v.marker.records, chunks.len() as u64);
-        assert_eq!(
-            again.work.marker::<voxelize::LeavesMarker>(),
-            Some(v.marker.clone())
-        );
+        assert_eq!(again.work.marker::<LeavesMarker>(), Some(v.marker.clone()));
         let mut third = fx.ctx(flag());
-        let r = voxelize::Voxelized::resume(&mut third).unwrap();
+        let r = voxelize::Voxelized::resume(&mut third, &fx.resume()).unwrap();
         assert_eq!(r.marker, v.marker);
         // a marker whose chunk coordinates no u32 holds is not taken
-        let bad: tile::BinsMarker =
-            serde_json::from_str(r#"{"chunks":[[4294967296,0,0,0,1]]}"#).unwrap();
+        let bad: BinsMarker = serde_json::from_str(r#"{"chunks":[[4294967296,0,0,0,1]]}"#).unwrap();
         assert!(bad.chunks().is_none());
-        assert_eq!(tile::BinsMarker::FILE.name(), "bins.json");
+        assert_eq!(BinsMarker::FILE.name(), "bins.json");
         drop(fx.dir);
     }
 
@@ -337,8 +279,8 @@ mod tests {
         });
         let fx = fixture();
         let mut ctx = fx.ctx(flag());
-        let mut ingested = ingest::run(&mut ctx).unwrap();
-        let tiled = tile::run(&mut ctx, &mut ingested).unwrap();
+        let mut ingested = ingest::run(&mut ctx, &fx.resume()).unwrap();
+        let tiled = tile::run(&mut ctx, &fx.resume(), &mut ingested).unwrap();
         let n = tiled.bins.chunks().len();
         assert!(n > 2);
         let e = voxelize::run_with(&mut ctx, &tiled, Box::new(PanicsOn(1)))
@@ -358,7 +300,7 @@ mod tests {
         assert!(e
             .to_string()
             .starts_with(&format!("voxelizing leaf chunk 1 {coord:?} panicked")));
-        assert!(ctx.work.marker::<voxelize::LeavesMarker>().is_none());
+        assert!(ctx.work.marker::<LeavesMarker>().is_none());
         // the log holds chunk 0 only; the real voxelizer continues from there
         let cpu = Box::new(CpuVoxelizers::new(&fx.settings, 2, None, false));
         let (m, gpu) = voxelize::run_with(&mut ctx, &tiled, cpu).unwrap();
@@ -385,19 +327,23 @@ mod tests {
         };
         let mut ctx = fx.ctx(stop);
         stop.store(true, Ordering::SeqCst);
-        interrupted(ingest::run(&mut ctx).err().expect("ingest interrupted"));
+        interrupted(
+            ingest::run(&mut ctx, &fx.resume())
+                .err()
+                .expect("ingest interrupted"),
+        );
         stop.store(false, Ordering::SeqCst);
-        let mut ingested = ingest::run(&mut ctx).unwrap();
+        let mut ingested = ingest::run(&mut ctx, &fx.resume()).unwrap();
         // the spooled fixture has no chunk counts yet: the count pass is interrupted
         assert!(ingested.marker.spooled && ingested.early_counts.is_none());
         stop.store(true, Ordering::SeqCst);
         interrupted(
-            tile::run(&mut ctx, &mut ingested)
+            tile::run(&mut ctx, &fx.resume(), &mut ingested)
                 .err()
                 .expect("tile interrupted"),
         );
         stop.store(false, Ordering::SeqCst);
-        let tiled = tile::run(&mut ctx, &mut ingested).unwrap();
+        let tiled = tile::run(&mut ctx, &fx.resume(), &mut ingested).unwrap();
         let voxelized = voxelize::run(&mut ctx, tiled).unwrap();
         stop.store(true, Ordering::SeqCst);
         let e = lod_write::run(&mut ctx, &ingested, &voxelized).err();

@@ -12,35 +12,24 @@ use std::cell::RefCell;
 use std::time::Instant;
 
 use anyhow::Context;
-use serde::{Deserialize, Serialize};
 use voxlod_format::{encode_materials, encode_node, EncodedNode, Voxel};
 use voxlod_lod::MergeScratch;
 use voxlod_tile::Bins;
 
 use super::tile::Tiled;
-use super::BuildContext;
-use crate::backend::{BinChunk, GpuStats, Voxelize};
+use crate::context::{BuildContext, Stage};
 use crate::error::StageError;
-use crate::leaf_log::{LeafLog, LeafRecord};
-use crate::progress::Stage;
-use crate::work::{Marker, WorkFile};
+use crate::files::markers::LeavesMarker;
+use crate::files::work::WorkFile;
+use crate::progress::Bar;
+use crate::resume::Resume;
+use backend::{BinChunk, GpuStats, Voxelize};
+use leaf_log::{LeafLog, LeafRecord};
 
-/// The voxelize stage's totals (`leaves.json`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub(crate) struct LeavesMarker {
-    /// Leaf chunks in the log (one per non-empty bin).
-    pub records: u64,
-    /// Triangle/chunk pairs the voxelizer skipped.
-    pub skipped: u64,
-    /// Triangle records in the bins.
-    pub binned_triangles: u64,
-    /// Bytes of the leaves' payloads in the log (what the octree file holds of them).
-    pub leaf_payload_bytes: u64,
-}
-
-impl Marker for LeavesMarker {
-    const FILE: WorkFile = WorkFile::LeavesMarker;
-}
+pub(crate) mod backend;
+pub(crate) mod leaf_log;
+pub(crate) mod textures;
+pub(crate) mod window;
 
 /// The voxelize stage's artifact.
 pub(crate) struct Voxelized {
@@ -50,16 +39,16 @@ pub(crate) struct Voxelized {
     /// What the GPU backend did; None on the CPU or when resumed.
     pub gpu_stats: Option<GpuStats>,
     /// The textures' tile cache, if they were read by tile; None when resumed.
-    pub texture_cache: Option<crate::textures::TextureCacheSummary>,
+    pub texture_cache: Option<textures::TextureCacheSummary>,
 }
 
 impl Voxelized {
     /// The artifact of an interrupted run that voxelized every chunk (the tile and voxelize
     /// stages are then skipped).
-    pub(crate) fn resume(ctx: &mut BuildContext) -> Option<Voxelized> {
-        let marker = ctx.work.marker::<LeavesMarker>()?;
-        ctx.stage_done("tile", Instant::now(), true);
-        ctx.stage_done("voxelize", Instant::now(), true);
+    pub(crate) fn resume(ctx: &mut BuildContext, resume: &Resume) -> Option<Voxelized> {
+        let marker = resume.leaves.clone()?;
+        ctx.stage_done(Stage::Tile, Instant::now(), true);
+        ctx.stage_done(Stage::Voxelize, Instant::now(), true);
         Some(Voxelized {
             marker,
             backend: "(voxelized by the interrupted run)".into(),
@@ -73,7 +62,7 @@ impl Voxelized {
 pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, StageError> {
     let threads = ctx.pool.current_num_threads();
     let t = Instant::now();
-    let textures = crate::textures::load(ctx)?;
+    let textures = textures::load(ctx)?;
     let tiles = textures.clone().filter(|t| t.tiles().is_some());
     if textures.is_some() {
         // decoding (and tiling) the textures, before the voxelizers start
@@ -81,12 +70,12 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, Sta
             .as_ref()
             .and_then(|t| t.tiles())
             .is_some_and(|t| t.reused);
-        ctx.stage_done("textures", t, reused);
+        ctx.stage_done(Stage::Textures, t, reused);
     }
-    let materials = crate::textures::has_material_channel(ctx.source.info());
-    let (vz, backend) = crate::backend::select(
+    let materials = textures::has_material_channel(ctx.source.info());
+    let (vz, backend) = backend::select(
         ctx.settings,
-        ctx.plan.voxelizers,
+        ctx.memory.voxelizers,
         threads,
         &tiled.bins,
         textures,
@@ -96,7 +85,7 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, Sta
     tiled.bins.remove()?;
     let texture_cache = tiles.as_ref().and_then(|t| t.tiles()).map(|t| {
         let st = t.stats();
-        crate::textures::TextureCacheSummary {
+        textures::TextureCacheSummary {
             decoded_bytes: t.decoded_bytes,
             capacity: st.capacity,
             peak_resident: st.peak_resident,
@@ -138,7 +127,7 @@ pub(crate) fn run_with(
     };
     log.finish()?;
     ctx.work.set_marker(&m)?;
-    ctx.stage_done("voxelize", t, start > 0);
+    ctx.stage_done(Stage::Voxelize, t, start > 0);
     Ok((m, gpu_stats))
 }
 
@@ -167,7 +156,7 @@ fn append_chunks(
 ) -> Result<(), StageError> {
     let chunks = bins.chunks();
     let start = log.records() as usize;
-    let bar = Stage::items(ctx.progress, "voxelize", chunks.len() as u64);
+    let bar = Bar::items(ctx.progress, Stage::Voxelize.name(), chunks.len() as u64);
     bar.set(start as u64, chunks.len() as u64);
     let zstd_level = ctx.settings.zstd_level;
     // a leaf that is not the root gets its half (its share of its parent) here, on its worker
@@ -205,10 +194,10 @@ fn append_chunks(
             skipped: r.skipped,
         })
     };
-    crate::window::ordered(
-        &ctx.pool,
-        ctx.plan.voxelizers,
-        ctx.plan.voxelizers * 4,
+    window::ordered(
+        ctx.pool,
+        ctx.memory.voxelizers,
+        ctx.memory.voxelizers * 4,
         start..chunks.len(),
         &voxelize_one,
         &mut |i, r| {

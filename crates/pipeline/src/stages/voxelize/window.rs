@@ -79,7 +79,6 @@ pub(crate) fn ordered<T: Send, E>(
     sink: &mut dyn FnMut(usize, T) -> Result<(), E>,
     on_panic: &dyn Fn(usize, &str) -> E,
 ) -> Result<(), E> {
-    // Reads best whole: one algorithm (claim, run, hand on in order) around one lock.
     assert!(workers > 0 && window > 0);
     let state = Mutex::new(State {
         next_claim: range.start,

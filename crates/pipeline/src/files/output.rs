@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
-use crate::format_size;
+use crate::size::format_size;
 
 /// Below this much free space in the output's folder a command is refused at once: even the
 /// smallest octree (header, one node, index, manifest) or picture would not fit.
@@ -61,7 +61,7 @@ impl OutputKind {
             Some(OutputKind::Png)
         } else if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
             Some(OutputKind::Ply)
-        } else if head.starts_with(crate::shard_file::MAGIC) {
+        } else if head.starts_with(crate::shard::shard_file::MAGIC) {
             Some(OutputKind::Shard)
         } else if head.starts_with(b"{\n  \"format\": \"v") {
             // the first 16 bytes of a plan as `plan` writes it (`"format": "voxlod-plan"`)
@@ -95,7 +95,6 @@ pub struct OutputGuard {
     staged: PathBuf,
     lock_path: PathBuf,
     lock: File,
-    kind: OutputKind,
 }
 
 /// The output's folder (`.` for a bare file name).
@@ -123,11 +122,6 @@ pub(crate) fn os_text(e: &std::io::Error) -> String {
 }
 
 impl OutputGuard {
-    /// What is written.
-    pub(crate) fn kind(&self) -> OutputKind {
-        self.kind
-    }
-
     /// Runs the up-front checks for writing `output` from `inputs` and takes the output's lock.
     /// Errors name the output (or its folder) once and say what to do.
     pub fn acquire(
@@ -153,7 +147,6 @@ impl OutputGuard {
             )),
             lock_path,
             lock,
-            kind,
         };
         check_free_space(output, dir)?;
         remove_leftovers(dir, &name);
@@ -190,8 +183,8 @@ impl OutputGuard {
     /// [`commit`]: Self::commit
     pub fn write_whole(&self, bytes: &[u8]) -> Result<()> {
         let staged = self.staged();
-        let mut f = File::create(staged)
-            .with_context(|| format!("{}: cannot create", staged.display()))?;
+        let mut f =
+            File::create(staged).with_context(|| format!("{}: cannot create", staged.display()))?;
         f.write_all(bytes)
             .and_then(|()| f.sync_all())
             .with_context(|| format!("{}: cannot write", staged.display()))?;

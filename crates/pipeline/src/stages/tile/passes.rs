@@ -7,8 +7,8 @@ use voxlod_geom::Triangle;
 use voxlod_ingest::{IngestError, MeshSource};
 use voxlod_tile::{Passes, TileError};
 
+use crate::context::BuildContext;
 use crate::error::StageError;
-use crate::stages::BuildContext;
 
 /// Passes over a memory-mapped input (see [`MeshSource::rereadable`]): parsing it again costs
 /// what reading a spool would, and saves writing one.

@@ -13,9 +13,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use xxhash_rust::xxh3::Xxh3Default;
 
+use super::plan_file::{hex64, ShardScope};
+use crate::context::BuildContext;
 use crate::error::StageError;
-use crate::plan::ShardScope;
-use crate::stages::BuildContext;
 
 /// Bytes read per step (one buffer, reused).
 const BLOCK: usize = 4 << 20;
@@ -38,11 +38,6 @@ pub(crate) fn xxh3_of_file(path: &Path, stop: &AtomicBool) -> Result<Option<u64>
         };
         h.update(&buf[..n]);
     }
-}
-
-/// The checksum as the plan stores it: 16 lower-case hex digits.
-pub(crate) fn hex64(v: u64) -> String {
-    voxlod_io::hex(&v.to_be_bytes())
 }
 
 /// Runs `pass` while [`xxh3_of_file`] of `path` runs on a thread of its own; returns both

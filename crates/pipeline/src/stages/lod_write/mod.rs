@@ -17,14 +17,16 @@ use voxlod_format::{
 
 use super::ingest::Ingested;
 use super::voxelize::Voxelized;
-use super::BuildContext;
+use crate::context::{BuildContext, Stage};
 use crate::error::StageError;
-use crate::leaf_log;
-use crate::octree_writer::{file_spec, LevelStats, NodeSink, OctreeWriter};
-use crate::progress::Stage;
-use crate::shard_file::{ShardHeader, ShardWriter};
+use crate::files::work::WorkFile;
+use crate::progress::Bar;
+use crate::shard::shard_file::{ShardHeader, ShardWriter};
 use crate::size::format_size;
-use crate::work::WorkFile;
+use crate::stages::voxelize::leaf_log;
+use octree_writer::{file_spec, LevelStats, NodeSink, OctreeWriter};
+
+pub(crate) mod octree_writer;
 
 /// The LOD + write stage's artifact.
 pub(crate) struct Written {
@@ -57,13 +59,13 @@ pub(crate) fn run(
     check_output_space(ctx, voxelized.marker.leaf_payload_bytes)?;
     let spec = file_spec(grid, grid.levels(), s.mode);
     // the material channel: its records follow each leaf's payload in the leaf log
-    let materials = crate::textures::has_material_channel(ctx.source.info());
+    let materials = crate::stages::voxelize::textures::has_material_channel(ctx.source.info());
     let channels = channels(ctx);
-    if let Some(scope) = &s.shard {
+    if let Some(scope) = ctx.scope.shard() {
         return write_shard(ctx, voxelized, scope, channels, t);
     }
     let writer = Writer::create_staged(ctx.output.staged(), spec, &channels)?;
-    let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, &ctx.pool);
+    let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, ctx.pool);
     let source = write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
     let manifest = manifest_fields(ctx, ingested);
     let (bytes, levels) = octree.finish(|levels| {
@@ -87,7 +89,7 @@ pub(crate) fn run(
 /// (`--source-geometry`: the source log's records, beside the leaves).
 pub(crate) fn channels(ctx: &BuildContext) -> Vec<u32> {
     let mut channels = Vec::new();
-    if crate::textures::has_material_channel(ctx.source.info()) {
+    if crate::stages::voxelize::textures::has_material_channel(ctx.source.info()) {
         channels.push(CHANNEL_MATERIAL);
     }
     if ctx.settings.source_geometry {
@@ -100,7 +102,7 @@ pub(crate) fn channels(ctx: &BuildContext) -> Vec<u32> {
 fn write_shard(
     ctx: &mut BuildContext,
     voxelized: &Voxelized,
-    scope: &crate::ShardScope,
+    scope: &crate::shard::plan_file::ShardScope,
     channels: Vec<u32>,
     t: Instant,
 ) -> Result<Written, StageError> {
@@ -114,7 +116,7 @@ fn write_shard(
     };
     let materials = header.channels.contains(&CHANNEL_MATERIAL);
     let sink = ShardWriter::create(ctx.output.staged(), header)?;
-    let mut octree = OctreeWriter::new(sink, scope.levels, ctx.settings.zstd_level, &ctx.pool)
+    let mut octree = OctreeWriter::new(sink, scope.levels, ctx.settings.zstd_level, ctx.pool)
         .with_top(scope.split_level);
     let source = write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
     let (sink, levels) = octree.finish_sink()?;
@@ -134,8 +136,8 @@ fn write_shard(
 fn committed(ctx: &mut BuildContext, t: Instant, written: Written) -> Result<Written, StageError> {
     ctx.output
         .commit()
-        .map_err(|e| StageError::Output(crate::chain_text(&e)))?;
-    ctx.stage_done("lod+write", t, false);
+        .map_err(|e| StageError::Output(crate::chain_text::chain_text(&e)))?;
+    ctx.stage_done(Stage::LodWrite, t, false);
     Ok(written)
 }
 
@@ -143,7 +145,7 @@ fn committed(ctx: &mut BuildContext, t: Instant, written: Written) -> Result<Wri
 /// hold even those (the work folder is kept, see `build`), warns if it may not hold the rest.
 fn check_output_space(ctx: &mut BuildContext, leaf_payloads: u64) -> Result<(), StageError> {
     let output = ctx.output.output();
-    let out_dir = crate::output::output_dir(output);
+    let out_dir = crate::files::output::output_dir(output);
     let Some(free) = crate::system::free_disk(out_dir) else {
         return Ok(());
     };
@@ -168,17 +170,21 @@ fn check_output_space(ctx: &mut BuildContext, leaf_payloads: u64) -> Result<(), 
     Ok(())
 }
 
-/// A leaf from the log: chunk coordinates, its half, the half's materials, its encoded payload
-/// (None when empty), its encoded material payload (with the material channel) and its
-/// source-triangle payload (with source geometry; None when no triangle touches it).
-type Leaf = (
-    [u32; 3],
-    Vec<Voxel>,
-    Option<Vec<u32>>,
-    Option<EncodedNode>,
-    Option<EncodedChannel>,
-    Option<EncodedChannel>,
-);
+/// A leaf from the log, as the octree writer takes it.
+struct Leaf {
+    /// Chunk coordinates.
+    coord: [u32; 3],
+    /// Its voxels merged alone to its parent's resolution.
+    half: Vec<Voxel>,
+    /// The half's materials (with the material channel).
+    half_materials: Option<Vec<u32>>,
+    /// Its encoded payload; None when it has no voxel.
+    node: Option<EncodedNode>,
+    /// Its encoded material payload (with the material channel).
+    materials: Option<EncodedChannel>,
+    /// Its source-triangle payload (with source geometry; None when no triangle touches it).
+    source: Option<EncodedChannel>,
+}
 
 /// Feeds the leaf log to `octree`. The log is read and split on a second thread, one leaf
 /// ahead of the merges and parent encodes of this one (two leaves in flight at most). The
@@ -196,7 +202,7 @@ fn write_leaves<W: NodeSink>(
         .source_geometry
         .then(|| leaf_log::LogReader::open(&ctx.work.file(WorkFile::Source)))
         .transpose()?;
-    let bar = Stage::items(ctx.progress, "lod+write", records);
+    let bar = Bar::items(ctx.progress, Stage::LodWrite.name(), records);
     let (tx, rx) = std::sync::mpsc::sync_channel::<Result<Leaf, StageError>>(1);
     let mut written = SourceWritten::default();
     std::thread::scope(|scope| -> Result<(), StageError> {
@@ -205,7 +211,7 @@ fn write_leaves<W: NodeSink>(
                 ctx.check_interrupt()?;
                 let mut leaf = split_leaf(h, payload, materials)?;
                 if let Some(log) = &mut sources {
-                    leaf.5 = crate::stages::source::leaf_channel(log, h)?;
+                    leaf.source = crate::stages::source::leaf_channel(log, h)?;
                 }
                 // a closed channel means the writer failed: stop reading
                 tx.send(Ok(leaf))
@@ -222,12 +228,19 @@ fn write_leaves<W: NodeSink>(
         let rx = rx;
         let mut n = 0u64;
         for leaf in rx.iter() {
-            let (coord, half, half_mats, enc, menc, source) = leaf?;
+            let Leaf {
+                coord,
+                half,
+                half_materials,
+                node,
+                materials,
+                source,
+            } = leaf?;
             if let Some(s) = &source {
                 written.triangles += s.count as u64;
                 written.payload_bytes += s.payload.len() as u64;
             }
-            octree.push_halved(coord, half, half_mats, enc, menc, source)?;
+            octree.push_halved(coord, half, half_materials, node, materials, source)?;
             n += 1;
             bar.set(n, records);
         }
@@ -245,7 +258,14 @@ fn split_leaf(
     materials: bool,
 ) -> anyhow::Result<Leaf> {
     if h.voxel_count == 0 {
-        return Ok((h.coord, Vec::new(), None, None, None, None));
+        return Ok(Leaf {
+            coord: h.coord,
+            half: Vec::new(),
+            half_materials: None,
+            node: None,
+            materials: None,
+            source: None,
+        });
     }
     let leaf = leaf_log::StoredLeaf::split(h, payload, materials)?;
     let menc = if materials {
@@ -256,14 +276,14 @@ fn split_leaf(
     } else {
         None
     };
-    Ok((
-        h.coord,
-        leaf.half,
-        leaf.half_materials,
-        Some(leaf.node),
-        menc,
-        None,
-    ))
+    Ok(Leaf {
+        coord: h.coord,
+        half: leaf.half,
+        half_materials: leaf.half_materials,
+        node: Some(leaf.node),
+        materials: menc,
+        source: None,
+    })
 }
 
 /// The manifest without its `levels` (known once the file is written).
@@ -301,11 +321,11 @@ pub(crate) fn manifest_fields(ctx: &BuildContext, ingested: &Ingested) -> serde_
     });
     // the source material names, indexed by material id (FORMAT.md 14.3)
     let info = ctx.source.info();
-    if crate::textures::has_material_channel(info) {
+    if crate::stages::voxelize::textures::has_material_channel(info) {
         let names: Vec<&str> = info.materials.iter().map(|m| m.name.as_str()).collect();
         manifest["materials"] = serde_json::json!(names);
     }
-    // the up axis the input format defines (glTF: +Y), for `render` (issue 14)
+    // the up axis the input format defines (glTF: +Y), for `render`
     if let Some(up) = info.up {
         manifest["input"]["up"] = serde_json::json!(up);
     }

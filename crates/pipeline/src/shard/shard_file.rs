@@ -13,7 +13,7 @@ use anyhow::{bail, ensure, Context, Result};
 use voxlod_format::channel::ChannelEntry;
 use voxlod_format::{EncodedChannel, EncodedNode, NodeEntry};
 
-use crate::octree_writer::NodeSink;
+use crate::stages::lod_write::octree_writer::NodeSink;
 
 /// The first 8 bytes of a shard file.
 pub const MAGIC: &[u8; 8] = b"VLSHARD\0";

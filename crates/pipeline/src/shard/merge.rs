@@ -23,9 +23,10 @@ use voxlod_format::{
 use voxlod_geom::morton3;
 use voxlod_lod::{halve_materials, MergeScratch};
 
-use crate::octree_writer::{file_spec, LevelStats, OctreeWriter};
-use crate::shard_file::{ShardNode, ShardReader};
-use crate::{LoadedPlan, OutputGuard, OutputKind};
+use super::plan_file::LoadedPlan;
+use super::shard_file::{ShardNode, ShardReader};
+use crate::runner::{Job, Runner};
+use crate::stages::lod_write::octree_writer::{file_spec, LevelStats, OctreeWriter};
 
 /// What `voxlod merge` did.
 #[derive(Clone, Debug, Serialize)]
@@ -70,7 +71,7 @@ fn open_shards(plan: &LoadedPlan, dir: Option<&Path>) -> Result<Vec<ShardReader>
         let r = match ShardReader::open(&path) {
             Ok(r) => r,
             Err(e) => {
-                problems.push(format!("shard {i}: {}", crate::chain_text(&e)));
+                problems.push(format!("shard {i}: {}", crate::chain_text::chain_text(&e)));
                 continue;
             }
         };
@@ -112,26 +113,23 @@ pub fn merge(
     plan_path: &Path,
     output: &Path,
     shard_dir: Option<&Path>,
-    runtime: &crate::BuildSettings,
+    runtime: &crate::settings::BuildSettings,
 ) -> Result<MergeSummary> {
     let t0 = Instant::now();
     let plan = LoadedPlan::load(plan_path)?;
     let shards = open_shards(&plan, shard_dir)?;
     let p = &plan.plan;
     let inputs: Vec<&Path> = shards.iter().map(|s| s.path()).collect();
-    let guard = OutputGuard::acquire(output, &inputs, OutputKind::Octree, runtime.force)?;
+    let runner = Runner::open(
+        Job::Merge {
+            shards: &inputs,
+            output,
+        },
+        runtime,
+    )?;
     let spec = file_spec(&p.grid.into(), p.levels, p.settings.mode);
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = match runtime.threads {
-        0 => threads,
-        t => t.min(threads),
-    };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .context("creating the thread pool")?;
-    let writer = Writer::create_staged(guard.staged(), spec, &p.channels)?;
-    let mut octree = OctreeWriter::new(writer, p.levels, p.settings.zstd_level, &pool);
+    let writer = Writer::create_staged(runner.guard.staged(), spec, &p.channels)?;
+    let mut octree = OctreeWriter::new(writer, p.levels, p.settings.zstd_level, &runner.pool);
     let mut m = Merger {
         octree: &mut octree,
         split: p.split_level,
@@ -151,7 +149,8 @@ pub fn merge(
         manifest["levels"] = serde_json::json!(levels);
         manifest
     })?;
-    guard.commit()?;
+    runner.guard.commit()?;
+    runner.finish(&mut Vec::new())?;
     Ok(MergeSummary {
         output: output.to_path_buf(),
         shards: p.shards.len() as u32,

@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use serde::{de::DeserializeOwned, Serialize};
 
-use crate::BuildSettings;
+use crate::settings::BuildSettings;
+use crate::shard::plan_file::ShardScope;
 
 /// Version of the intermediate files (spool and bins records, markers): a work folder left by a
 /// build with another layout is never resumed. 2: compact records (`voxlod_tile::RecordLayout`),
@@ -26,8 +27,8 @@ pub const WORK_FORMAT: u32 = 4;
 pub(crate) enum WorkFile {
     /// The ingest stage's triangles (only for an input that cannot be read again cheaply).
     Spool,
-    /// The ingest stage's marker ([`crate::stages::ingest::Ingested`]).
-    SpoolMarker,
+    /// The ingest stage's marker.
+    IngestMarker,
     /// The tile stage's chunk bins.
     Bins,
     /// The tile stage's marker (the bins layout).
@@ -50,7 +51,7 @@ impl WorkFile {
     pub(crate) fn name(self) -> &'static str {
         match self {
             WorkFile::Spool => "spool.tri",
-            WorkFile::SpoolMarker => "spool.json",
+            WorkFile::IngestMarker => "spool.json",
             WorkFile::Bins => "bins.tri",
             WorkFile::BinsMarker => "bins.json",
             WorkFile::Leaves => "leaves.bin",
@@ -81,7 +82,7 @@ impl WorkDir {
     /// The key of a build: input identity (canonical path, size, modification time), the
     /// settings that change the intermediates (the voxelizer method too: the leaf log of
     /// `scanline-ilv` differs), the tool version and [`WORK_FORMAT`].
-    pub fn key(input: &Path, s: &BuildSettings) -> Result<String> {
+    pub fn key(input: &Path, s: &BuildSettings, shard: Option<&ShardScope>) -> Result<String> {
         let canon = input
             .canonicalize()
             .with_context(|| format!("{}: cannot resolve the path", input.display()))?;
@@ -108,7 +109,7 @@ impl WorkDir {
             text
         };
         // a shard's intermediates hold its own chunks only
-        let text = match &s.shard {
+        let text = match shard {
             Some(sc) => format!(
                 "{text}\nshard {} of {}, plan {}",
                 sc.index,
@@ -138,21 +139,21 @@ impl WorkDir {
                 anyhow::anyhow!(
                     "creating the work folder {}: {}",
                     path.display(),
-                    crate::output::os_text(&e)
+                    crate::files::output::os_text(&e)
                 )
             })?;
         }
-        let lock = match crate::output::lock_or_name_holder(&path.join("lock")) {
+        let lock = match crate::files::output::lock_or_name_holder(&path.join("lock")) {
             Ok(f) => f,
-            Err(crate::output::LockError::Held(pid)) => bail!(
+            Err(crate::files::output::LockError::Held(pid)) => bail!(
                 "the work folder {} is in use by another voxlod build ({}): wait for it to finish",
                 path.display(),
                 pid.map_or("pid unknown".to_string(), |p| format!("pid {p}"))
             ),
-            Err(crate::output::LockError::Io(e)) => bail!(
+            Err(crate::files::output::LockError::Io(e)) => bail!(
                 "locking the work folder {}: {}",
                 path.display(),
-                crate::output::os_text(&e)
+                crate::files::output::os_text(&e)
             ),
         };
         Ok((
@@ -254,7 +255,7 @@ pub fn find_work_folders(dir: &Path) -> Result<Vec<WorkFolder>> {
         anyhow::anyhow!(
             "{}: cannot list it: {}",
             dir.display(),
-            crate::output::os_text(&e)
+            crate::files::output::os_text(&e)
         )
     })?;
     let mut found = Vec::new();
@@ -309,23 +310,23 @@ fn holder(path: &Path) -> Option<Option<u32>> {
 /// Removes a stale work folder, holding its lock while it does so that a build starting on
 /// it meanwhile is refused instead of losing its files; a folder in use is refused.
 pub fn remove_stale_work_folder(path: &Path) -> Result<()> {
-    match crate::output::lock_or_name_holder(&path.join("lock")) {
+    match crate::files::output::lock_or_name_holder(&path.join("lock")) {
         Ok(_lock) => std::fs::remove_dir_all(path).map_err(|e| {
             anyhow::anyhow!(
                 "removing {}: {}",
                 path.display(),
-                crate::output::os_text(&e)
+                crate::files::output::os_text(&e)
             )
         }),
-        Err(crate::output::LockError::Held(pid)) => bail!(
+        Err(crate::files::output::LockError::Held(pid)) => bail!(
             "{} is in use by a running voxlod build ({}): not removed",
             path.display(),
             pid.map_or("pid unknown".to_string(), |p| format!("pid {p}"))
         ),
-        Err(crate::output::LockError::Io(e)) => bail!(
+        Err(crate::files::output::LockError::Io(e)) => bail!(
             "locking {}: {}: not removed",
             path.display(),
-            crate::output::os_text(&e)
+            crate::files::output::os_text(&e)
         ),
     }
 }
@@ -365,10 +366,10 @@ mod tests {
         std::fs::write(removing.join("leaves.json"), b"{}").unwrap();
         let held = dir.path().join(format!("{WORK_PREFIX}b-2"));
         std::fs::create_dir(&held).unwrap();
-        let _lock = crate::output::lock_or_name_holder(&held.join("lock")).unwrap();
+        let _lock = crate::files::output::lock_or_name_holder(&held.join("lock")).unwrap();
         let stale = dir.path().join(format!("{WORK_PREFIX}c-3"));
         std::fs::create_dir(&stale).unwrap();
-        drop(crate::output::lock_or_name_holder(&stale.join("lock")).unwrap());
+        drop(crate::files::output::lock_or_name_holder(&stale.join("lock")).unwrap());
         let found = find_work_folders(dir.path()).unwrap();
         let state: Vec<_> = found.iter().map(|f| f.in_use_by).collect();
         assert_eq!(

@@ -6,76 +6,19 @@
 
 use std::time::Instant;
 
-use serde::{Deserialize, Serialize};
-use voxlod_tile::{Bins, ChunkBin, ChunkCounts, Passes, RecordLayout, Spool};
+use voxlod_tile::{Bins, ChunkCounts, Passes, RecordLayout, Spool};
 
 use super::ingest::Ingested;
-use super::BuildContext;
+use crate::context::{BuildContext, Stage};
 use crate::error::StageError;
-use crate::passes::{InputPasses, Interruptible};
-use crate::progress::Stage;
+use crate::files::markers::BinsMarker;
+use crate::files::work::WorkFile;
+use crate::progress::Bar;
+use crate::resume::Resume;
 use crate::size::format_size;
-use crate::work::{Marker, WorkFile};
+use passes::{InputPasses, Interruptible};
 
-/// The bins layout (`bins.json`): `[x, y, z, start, count]` per non-empty chunk, and for bins
-/// written in runs during the ingest pass each chunk's pieces `[first record, records]`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub(crate) struct BinsMarker {
-    chunks: Vec<[u64; 5]>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pieces: Option<Vec<Vec<[u64; 2]>>>,
-}
-
-impl Marker for BinsMarker {
-    const FILE: WorkFile = WorkFile::BinsMarker;
-}
-
-impl BinsMarker {
-    /// The layout of `bins`.
-    pub(crate) fn of(bins: &Bins) -> BinsMarker {
-        let chunks = bins
-            .chunks()
-            .iter()
-            .map(|c| {
-                let [x, y, z] = c.coord.map(u64::from);
-                [x, y, z, c.start, c.count]
-            })
-            .collect();
-        BinsMarker {
-            chunks,
-            pieces: bins.pieces().map(<[_]>::to_vec),
-        }
-    }
-
-    /// The bins this marker describes, opened (None if the file does not match it).
-    pub(crate) fn open(self, path: &std::path::Path, layout: RecordLayout) -> Option<Bins> {
-        let chunks = self.chunks()?;
-        match self.pieces {
-            Some(p) => Bins::open_pieces(path, chunks, layout, p).ok(),
-            None => Bins::open(path, chunks, layout).ok(),
-        }
-    }
-
-    /// The chunks of the layout (None if a coordinate is out of range: the marker is not ours).
-    pub(crate) fn chunks(&self) -> Option<Vec<ChunkBin>> {
-        self.chunks
-            .iter()
-            .map(|c| {
-                let coord = [
-                    u32::try_from(c[0]).ok()?,
-                    u32::try_from(c[1]).ok()?,
-                    u32::try_from(c[2]).ok()?,
-                ];
-                Some(ChunkBin {
-                    coord,
-                    morton: voxlod_geom::morton3(coord[0], coord[1], coord[2]),
-                    start: c[3],
-                    count: c[4],
-                })
-            })
-            .collect()
-    }
-}
+pub(crate) mod passes;
 
 /// The tile stage's artifact.
 pub(crate) struct Tiled {
@@ -85,16 +28,20 @@ pub(crate) struct Tiled {
 
 /// Runs the tile stage, or opens the bins its marker describes. Takes the chunk counts the
 /// ingest stage left, if any. Removes the spool once the bins are complete.
-pub(crate) fn run(ctx: &mut BuildContext, ingested: &mut Ingested) -> Result<Tiled, StageError> {
+pub(crate) fn run(
+    ctx: &mut BuildContext,
+    resume: &Resume,
+    ingested: &mut Ingested,
+) -> Result<Tiled, StageError> {
     let t = Instant::now();
     let bins_path = ctx.work.file(WorkFile::Bins);
-    let resumed = ctx
-        .work
-        .marker::<BinsMarker>()
+    let resumed = resume
+        .bins
+        .clone()
         .and_then(|m| m.open(&bins_path, ingested.layout));
     let bins = match resumed {
         Some(b) => {
-            ctx.stage_done("tile", t, true);
+            ctx.stage_done(Stage::Tile, t, true);
             b
         }
         None => {
@@ -107,7 +54,7 @@ pub(crate) fn run(ctx: &mut BuildContext, ingested: &mut Ingested) -> Result<Til
                 }
             };
             ctx.work.set_marker(&BinsMarker::of(&bins))?;
-            ctx.stage_done("tile", t, false);
+            ctx.stage_done(Stage::Tile, t, false);
             bins
         }
     };
@@ -148,7 +95,7 @@ pub(crate) fn count_pass(
     ing: &Ingested,
     src: &dyn Passes,
 ) -> Result<ChunkCounts, StageError> {
-    let bar = Stage::items(ctx.progress, "count", ing.marker.count);
+    let bar = Bar::items(ctx.progress, "count", ing.marker.count);
     let c = ctx
         .pool
         .install(|| voxlod_tile::count(src, &ing.grid, &mut |d, n| bar.set(d, n)))
@@ -177,12 +124,12 @@ fn tile(
             Some(c) => c,
             None => count_pass(ctx, ing, src)?,
         };
-        if let Some(scope) = &ctx.settings.shard {
-            counts.retain(|c| scope.contains_chunk(c));
+        if ctx.scope.drops_chunks() {
+            counts.retain(|c| ctx.scope.keeps(c));
         }
         ctx.check_interrupt()?;
         check_bins_space(ctx, &counts, ing.layout)?;
-        let bar = Stage::items(ctx.progress, "scatter", ing.marker.count);
+        let bar = Bar::items(ctx.progress, "scatter", ing.marker.count);
         let scatter = || {
             ctx.pool
                 .install(|| {
@@ -192,15 +139,15 @@ fn tile(
                         &counts,
                         &ctx.work.file(WorkFile::Bins),
                         ing.layout,
-                        ctx.plan.scatter_buffer,
+                        ctx.memory.scatter_buffer,
                         &mut |d, n| bar.set(d, n),
                     )
                 })
                 .map_err(StageError::from)
         };
         // a shard's only pass over the input: its content must be the plan's
-        let bins = match &ctx.settings.shard {
-            Some(scope) => crate::content_hash::checked(ctx, scope, scatter)?,
+        let bins = match ctx.scope.shard() {
+            Some(scope) => crate::shard::content_hash::checked(ctx, scope, scatter)?,
             None => scatter()?,
         };
         bar.finish();

@@ -11,11 +11,11 @@ use serde::Serialize;
 use voxlod_ingest::MeshInfo;
 use voxlod_texture::TextureSet;
 
+use crate::context::BuildContext;
 use crate::error::StageError;
+use crate::files::work::WorkFile;
 use crate::memory::{MemoryPlan, BASE_BYTES, LOD_BYTES};
 use crate::size::format_size;
-use crate::stages::BuildContext;
-use crate::work::WorkFile;
 
 /// The tile cache of a build whose decoded textures exceed their share of the plan
 /// (`--json` `texture_cache`).
@@ -43,7 +43,7 @@ pub(crate) fn load(ctx: &mut BuildContext) -> Result<Option<Arc<TextureSet>>, St
     if !info.has_texcoords {
         return Ok(None);
     }
-    let share = ctx.plan.texture_share();
+    let share = ctx.memory.texture_share();
     let file = ctx.work.file(WorkFile::TextureTiles);
     let set = TextureSet::load_within(&info.materials, share, &file)
         .map_err(|e| StageError::Other(anyhow::anyhow!(e)))?;
@@ -53,9 +53,9 @@ pub(crate) fn load(ctx: &mut BuildContext) -> Result<Option<Arc<TextureSet>>, St
     if set.is_empty() {
         return Ok(None);
     }
-    ctx.plan = ctx.plan.with_textures(set.bytes() as u64);
+    ctx.memory = ctx.memory.with_textures(set.bytes() as u64);
     if let Some(t) = set.tiles() {
-        decode_warning(&set, &ctx.plan, &mut ctx.warnings);
+        decode_warning(&set, &ctx.memory, &mut ctx.warnings);
         if ctx.progress {
             eprintln!(
                 "textures: {} decoded, more than their {} share: read by 64×64 tile through a {} cache from {} ({}, {})",

@@ -14,46 +14,40 @@
 use std::time::Instant;
 
 use anyhow::Context;
-use serde::{Deserialize, Serialize};
 use voxlod_format::{encode_source, EncodedChannel};
 use voxlod_tile::Bins;
 
 use super::tile::Tiled;
-use super::BuildContext;
-use crate::backend::READ_BATCH;
+use super::voxelize::backend::READ_BATCH;
+use super::voxelize::leaf_log::{LeafLog, LogReader, RecordHeader};
+use super::voxelize::textures;
+use crate::context::{BuildContext, Stage};
 use crate::error::StageError;
-use crate::leaf_log::{LeafLog, LogReader, RecordHeader};
+use crate::files::markers::SourceMarker;
+use crate::files::work::WorkFile;
 use crate::memory::VOXELIZER_BYTES;
-use crate::progress::Stage;
+use crate::progress::Bar;
+use crate::resume::Resume;
 use crate::size::format_size;
-use crate::source_mesh::{SourceAttributes, SourceBuilder, SourceCounts};
-use crate::work::{Marker, WorkFile};
+use mesh::{SourceAttributes, SourceBuilder, SourceCounts};
+
+pub(crate) mod clip;
+pub(crate) mod mesh;
 
 /// Bytes a chunk's source mesh may take while it is built, per triangle of its bin: up to
 /// three vertex-index entries (hash map slots included) and vertices, the triangle, the
 /// uncompressed block and the compressed payload, with the slack of growing vectors.
 pub(crate) const BYTES_PER_TRIANGLE: u64 = 512;
 
-/// The source-geometry stage's totals (`source.json`).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub(crate) struct SourceMarker {
-    /// Records in the source log (one per non-empty bin).
-    pub records: u64,
-    /// Triangles kept, clipped and stored, over all chunks.
-    pub counts: SourceCounts,
-    /// Compressed payload bytes in the log.
-    pub payload_bytes: u64,
-}
-
-impl Marker for SourceMarker {
-    const FILE: WorkFile = WorkFile::SourceMarker;
-}
-
 /// Runs the stage (or takes its marker from an earlier run).
-pub(crate) fn run(ctx: &mut BuildContext, tiled: &Tiled) -> Result<SourceMarker, StageError> {
+pub(crate) fn run(
+    ctx: &mut BuildContext,
+    resume: &Resume,
+    tiled: &Tiled,
+) -> Result<SourceMarker, StageError> {
     let t = Instant::now();
-    if let Some(m) = ctx.work.marker::<SourceMarker>() {
-        ctx.stage_done("source", t, true);
+    if let Some(m) = resume.source.clone() {
+        ctx.stage_done(Stage::Source, t, true);
         return Ok(m);
     }
     let bins = &tiled.bins;
@@ -61,7 +55,7 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: &Tiled) -> Result<SourceMarker,
     let attrs = SourceAttributes {
         normals: bins.layout().normals,
         colors: bins.layout().colors,
-        materials: crate::textures::has_material_channel(info),
+        materials: textures::has_material_channel(info),
     };
     let workers = workers(ctx, bins)?;
     let path = ctx.work.file(WorkFile::Source);
@@ -71,7 +65,7 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: &Tiled) -> Result<SourceMarker,
     log.finish()?;
     r?;
     let mut m = SourceMarker::default();
-    crate::leaf_log::read_log(&path, &mut |h, payload| {
+    super::voxelize::leaf_log::read_log(&path, &mut |h, payload| {
         m.records += 1;
         m.counts.stored += h.voxel_count as u64;
         let (kept, clipped, frame) = split_record(&payload)?;
@@ -81,7 +75,7 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: &Tiled) -> Result<SourceMarker,
         Ok(())
     })?;
     ctx.work.set_marker(&m)?;
-    ctx.stage_done("source", t, resumed);
+    ctx.stage_done(Stage::Source, t, resumed);
     Ok(m)
 }
 
@@ -89,7 +83,7 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: &Tiled) -> Result<SourceMarker,
 /// largest chunk's mesh would not fit their memory beside the others; an error naming the
 /// chunk when it does not fit alone.
 fn workers(ctx: &BuildContext, bins: &Bins) -> Result<usize, StageError> {
-    let share = (ctx.plan.voxelizers as u64 * VOXELIZER_BYTES).max(ctx.plan.scatter_buffer);
+    let share = (ctx.memory.voxelizers as u64 * VOXELIZER_BYTES).max(ctx.memory.scatter_buffer);
     let Some(big) = bins.chunks().iter().max_by_key(|c| c.count) else {
         return Ok(1);
     };
@@ -103,7 +97,7 @@ fn workers(ctx: &BuildContext, bins: &Bins) -> Result<usize, StageError> {
             format_size(share)
         )));
     }
-    Ok(((share / need.max(1)) as usize).clamp(1, ctx.plan.voxelizers))
+    Ok(((share / need.max(1)) as usize).clamp(1, ctx.memory.voxelizers))
 }
 
 /// Builds the chunks after those in `log` on `workers` workers and appends them in order.
@@ -116,7 +110,7 @@ fn append_chunks(
 ) -> Result<(), StageError> {
     let chunks = bins.chunks();
     let start = log.records() as usize;
-    let bar = Stage::items(ctx.progress, "source", chunks.len() as u64);
+    let bar = Bar::items(ctx.progress, Stage::Source.name(), chunks.len() as u64);
     bar.set(start as u64, chunks.len() as u64);
     let zstd_level = ctx.settings.zstd_level;
     type Built = (Vec<u8>, SourceCounts);
@@ -141,8 +135,8 @@ fn append_chunks(
         }
         Ok((record, counts))
     };
-    crate::window::ordered(
-        &ctx.pool,
+    super::voxelize::window::ordered(
+        ctx.pool,
         workers,
         workers * 4,
         start..chunks.len(),

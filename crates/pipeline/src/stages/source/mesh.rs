@@ -18,7 +18,7 @@ use std::collections::HashMap;
 use voxlod_format::triangles::{oct_encode, quantize, SourceMesh, BOX_MAX, BOX_MIN, MARGIN};
 use voxlod_geom::{Triangle, CHUNK};
 
-use crate::source_clip::{clip_to_box, ClipVertex};
+use crate::stages::source::clip::{clip_to_box, ClipVertex};
 
 /// How far past the chunk box a triangle may reach and still count as touching it, in voxels
 /// (rounding of the clip; far below the quantization step of 1/128).
