@@ -4,6 +4,7 @@
 //! (`every_file_is_a_module` fails otherwise). Run one module with
 //! `cargo test -p voxlod-pipeline --test all MODULE::`.
 
+mod imports;
 mod lod_reference;
 mod source_geometry;
 
