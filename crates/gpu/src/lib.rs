@@ -111,9 +111,6 @@ pub use device::{open_device, open_device_for_surface, probe_adapter, AdapterPro
 pub use shaders::Precision;
 pub use voxelizer::{Feed, GpuVoxelizer};
 
-use std::fmt;
-use std::str::FromStr;
-
 /// Default cutoff (voxels² of dominant projected area) between triangles voxelized in the
 /// classification pass and triangles deferred to the fragment pass. The paper finds "a few
 /// voxels²" best on a GTX 480. On lavapipe (2 loaded cores, thin mode, one 256³ chunk,
@@ -122,48 +119,9 @@ use std::str::FromStr;
 /// are noisy (other builds were running); an automatic cutoff search is still to do.
 pub const DEFAULT_CUTOFF: f32 = 8.0;
 
-/// Which GPU voxelization scheme to run (paper section 3).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum GpuMethod {
-    /// Small triangles in the classification pass, large ones in the fragment pass (3.4). A
-    /// triangle under the cutoff with more than 64 columns in the chunk (a long sliver) is
-    /// deferred too (see [`GpuMethod::Triangle`]).
-    Hybrid,
-    /// No rasterizer: every triangle in compute passes (3.2), one invocation per triangle,
-    /// except that triangles with more than 64 columns in the chunk are swept by one invocation
-    /// per column line and 64-row strip (lavapipe ends an invocation after 65535 loop
-    /// iterations, which a large triangle's single invocation exceeds).
-    Triangle,
-    /// Every triangle rasterized, one fragment per column (3.3).
-    Fragment,
-}
-
-impl fmt::Display for GpuMethod {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            GpuMethod::Hybrid => "hybrid",
-            GpuMethod::Triangle => "triangle",
-            GpuMethod::Fragment => "fragment",
-        })
-    }
-}
-
-/// A string that is not `hybrid`, `triangle` or `fragment`.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown GPU method {0:?} (expected \"hybrid\", \"triangle\" or \"fragment\")")]
-pub struct ParseMethodError(pub String);
-
-impl FromStr for GpuMethod {
-    type Err = ParseMethodError;
-    fn from_str(s: &str) -> Result<GpuMethod, ParseMethodError> {
-        match s {
-            "hybrid" => Ok(GpuMethod::Hybrid),
-            "triangle" => Ok(GpuMethod::Triangle),
-            "fragment" => Ok(GpuMethod::Fragment),
-            _ => Err(ParseMethodError(s.to_string())),
-        }
-    }
-}
+/// Which GPU voxelization scheme to run (paper section 3); defined beside the CPU's
+/// `Method` so that the settings and this crate share one type.
+pub use voxlod_voxelize::{GpuMethod, ParseGpuMethodError};
 
 /// Why the GPU voxelizer failed.
 #[derive(Debug, thiserror::Error)]

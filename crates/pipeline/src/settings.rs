@@ -149,66 +149,7 @@ impl clap::ValueEnum for Backend {
 }
 
 /// `--gpu-method`: how the GPU voxelizer covers a chunk's triangles.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum GpuMethod {
-    /// Small triangles in the classification pass, large ones rasterized.
-    #[default]
-    Hybrid,
-    /// Every triangle in compute passes.
-    Triangle,
-    /// Every triangle rasterized.
-    Fragment,
-}
-
-impl GpuMethod {
-    /// Every method, as named in settings and on the command line.
-    pub const ALL: [GpuMethod; 3] = [GpuMethod::Hybrid, GpuMethod::Triangle, GpuMethod::Fragment];
-
-    /// The method's name, as settings and the command line spell it.
-    pub const fn name(self) -> &'static str {
-        match self {
-            GpuMethod::Hybrid => "hybrid",
-            GpuMethod::Triangle => "triangle",
-            GpuMethod::Fragment => "fragment",
-        }
-    }
-
-    #[cfg(feature = "gpu")]
-    pub(crate) fn to_gpu(self) -> voxlod_gpu::GpuMethod {
-        match self {
-            GpuMethod::Hybrid => voxlod_gpu::GpuMethod::Hybrid,
-            GpuMethod::Triangle => voxlod_gpu::GpuMethod::Triangle,
-            GpuMethod::Fragment => voxlod_gpu::GpuMethod::Fragment,
-        }
-    }
-}
-
-impl std::str::FromStr for GpuMethod {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        GpuMethod::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| format!("unknown GPU method '{s}' (hybrid, triangle or fragment)"))
-    }
-}
-
-impl std::fmt::Display for GpuMethod {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-#[cfg(feature = "clap")]
-impl clap::ValueEnum for GpuMethod {
-    fn value_variants<'a>() -> &'a [Self] {
-        &GpuMethod::ALL
-    }
-    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
-        Some(clap::builder::PossibleValue::new(self.name()))
-    }
-}
+pub use voxlod_voxelize::GpuMethod;
 
 impl std::str::FromStr for Backend {
     type Err = String;

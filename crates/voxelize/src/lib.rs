@@ -315,6 +315,72 @@ impl fmt::Display for Method {
     }
 }
 
+/// Which GPU voxelization scheme the GPU backend runs (Schwarz & Seidel 2010 section 3):
+/// the `--gpu-method` setting, and the mode `voxlod_gpu::GpuVoxelizer` runs in.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum GpuMethod {
+    /// Small triangles in the classification pass, large ones in the fragment pass (3.4). A
+    /// triangle under the cutoff with more than 64 columns in the chunk (a long sliver) is
+    /// deferred too (see [`GpuMethod::Triangle`]).
+    #[default]
+    Hybrid,
+    /// No rasterizer: every triangle in compute passes (3.2), one invocation per triangle,
+    /// except that triangles with more than 64 columns in the chunk are swept by one invocation
+    /// per column line and 64-row strip (lavapipe ends an invocation after 65535 loop
+    /// iterations, which a large triangle's single invocation exceeds).
+    Triangle,
+    /// Every triangle rasterized, one fragment per column (3.3).
+    Fragment,
+}
+
+impl GpuMethod {
+    /// Every method.
+    pub const ALL: [GpuMethod; 3] = [GpuMethod::Hybrid, GpuMethod::Triangle, GpuMethod::Fragment];
+
+    /// The method's name in settings files and on the command line.
+    pub const fn name(self) -> &'static str {
+        match self {
+            GpuMethod::Hybrid => "hybrid",
+            GpuMethod::Triangle => "triangle",
+            GpuMethod::Fragment => "fragment",
+        }
+    }
+}
+
+/// A string that names no [`GpuMethod`].
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown GPU method {0:?} (expected \"hybrid\", \"triangle\" or \"fragment\")")]
+pub struct ParseGpuMethodError(pub String);
+
+impl FromStr for GpuMethod {
+    type Err = ParseGpuMethodError;
+    fn from_str(s: &str) -> Result<GpuMethod, ParseGpuMethodError> {
+        GpuMethod::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| ParseGpuMethodError(s.to_string()))
+    }
+}
+
+impl fmt::Display for GpuMethod {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(feature = "clap")]
+impl clap::ValueEnum for GpuMethod {
+    fn value_variants<'a>() -> &'a [Self] {
+        &GpuMethod::ALL
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -318,7 +318,7 @@ fn select_gpu(
     cpu: impl Fn() -> (Box<dyn Voxelize>, String),
 ) -> Result<(Box<dyn Voxelize>, String)> {
     let backend = s.backend;
-    let method = s.gpu_method.to_gpu();
+    let method = s.gpu_method;
     let fixed = match s.cutoff {
         Cutoff::Fixed(c) => c,
         Cutoff::Auto => DEFAULT_CUTOFF,
