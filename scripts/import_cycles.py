@@ -32,8 +32,9 @@ Not edges: edges into or out of the crate root (lib.rs, main.rs), unless `--with
 given: the root is the crate's index (it declares the modules, re-exports the public API,
 and may hold the crate's shared vocabulary types and its entry points, which its modules
 use while it calls them); the `mod` declarations themselves (containment is not a dependency), a module
-naming itself, paths in comments, doc comments and string literals, `$crate::` in macros,
-and paths into other crates.
+naming itself, paths in comments, doc comments and string literals, a `use` under
+`#[cfg(doc)]` (it only resolves doc links), `$crate::` in macros, and paths into other
+crates.
 
 A circle is a strongly connected component of two or more modules; for each, one cycle
 through all its edges' evidence is printed.
@@ -218,6 +219,8 @@ def parse_file(crate, file, module, dir_):
     used = []
     for m in USE_RE.finditer(text):
         used.append((m.start(), m.end()))
+        if re.search(r"#\[cfg\(doc\)\]\s*$", text[:m.start()]):
+            continue
         own = owner(m.start())
         for segs, alias in expand_use(m.group(2)):
             if not segs:
@@ -452,7 +455,8 @@ def self_test():
             "src/a.rs": "use crate::Thing;\npub fn f() {}\n"
                         "#[cfg(test)]\nmod tests {\n    use super::*;\n    #[test]\n"
                         "    fn t() { f(); let _ = crate::b::Thing; }\n}\n",
-            "src/b.rs": "// crate::a is named here only in a comment\npub struct Thing;\n",
+            "src/b.rs": "// crate::a is named here only in a comment\npub struct Thing;\n"
+                        "#[cfg(doc)]\nuse crate::a::f;\n",
         }, 0),
         # a circle of three through a `use` group
         "three": ({
