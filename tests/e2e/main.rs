@@ -3,10 +3,9 @@
 //!
 //! All of the `voxlod` crate's integration tests are this one test binary (one link; the tests
 //! of every module run in parallel threads of one process), split by subject into modules:
-//! `cli`, `octree`, `resume`, `gpu`, `gen`, `gen_blocks`, `view` share the helpers here; the
-//! others (`cluster`, `faults`, `json_schema`, `materials`, `python_reader`, `shard`,
-//! `textures`, `tools`, `validation`) were test binaries of their own and keep their own
-//! helpers. A new test file goes into this folder with a `mod` line here
+//! the helpers here (running the binary: `voxlod`, `ok`, `text`; the sample, the shared
+//! meshes, the LOD reference) are the one copy every module uses, beside a module's own
+//! helpers for its subject. A new test file goes into this folder with a `mod` line here
 //! (`every_file_is_a_module` fails otherwise); run one module with
 //! `cargo test -p voxlod --test e2e MODULE::`.
 
@@ -50,13 +49,23 @@ fn shared_meshes(test: &str) -> Option<PathBuf> {
     voxlod_testkit::shared_meshes(test)
 }
 
-fn voxlod(args: &[&str], cwd: &Path) -> Output {
+/// Runs the binary with `args` in `cwd` (`NO_COLOR` set, so messages carry no escapes).
+fn voxlod<S: AsRef<std::ffi::OsStr>>(args: &[S], cwd: impl AsRef<Path>) -> Output {
     Command::new(BIN)
         .args(args)
         .current_dir(cwd)
         .env("NO_COLOR", "1")
         .output()
         .expect("running voxlod")
+}
+
+/// A run's stdout followed by its stderr, as text.
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
 }
 
 /// `build -q INPUT -o OUT` followed by `extra`, as owned strings.
@@ -81,13 +90,16 @@ fn build_ok(input: &Path, out: &Path, extra: &[&str], cwd: &Path) -> Output {
     o
 }
 
-fn ok(o: &Output) {
+/// Asserts that a run succeeded (its stderr and stdout in the message otherwise); its
+/// [`text`].
+fn ok(o: &Output) -> String {
     assert!(
         o.status.success(),
         "voxlod failed: {}\n{}",
         String::from_utf8_lossy(&o.stderr),
         String::from_utf8_lossy(&o.stdout)
     );
+    text(o)
 }
 
 /// Every node of a file, keyed by (level, x, y, z), with its child mask.
@@ -213,11 +225,12 @@ fn sample_triangles() -> Vec<voxlod_geom::Triangle> {
 fn ascii_copy_of_sample(dir: &Path) -> PathBuf {
     use std::fmt::Write as _;
     let tris = sample_triangles();
-    let mut t = format!(
-        "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
-        tris.len() * 3,
-        tris.len()
-    );
+    let mut t = voxlod_io::PlyHeader::ascii()
+        .element("vertex", (tris.len() * 3) as u64)
+        .properties("float", &["x", "y", "z"])
+        .element("face", tris.len() as u64)
+        .list("uchar", "int", "vertex_indices")
+        .end();
     for tri in &tris {
         for v in &tri.v {
             writeln!(t, "{:?} {:?} {:?}", v[0], v[1], v[2]).unwrap();
@@ -235,12 +248,13 @@ fn ascii_copy_of_sample(dir: &Path) -> PathBuf {
 /// `extra` vertices that no face uses.
 fn binary_copy_of_sample(dir: &Path, name: &str, extra: &[[f32; 3]]) -> PathBuf {
     let tris = sample_triangles();
-    let mut out = format!(
-        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
-        tris.len() * 3 + extra.len(),
-        tris.len()
-    )
-    .into_bytes();
+    let mut out = voxlod_io::PlyHeader::binary_le()
+        .element("vertex", (tris.len() * 3 + extra.len()) as u64)
+        .properties("float", &["x", "y", "z"])
+        .element("face", tris.len() as u64)
+        .list("uchar", "int", "vertex_indices")
+        .end()
+        .into_bytes();
     for p in tris.iter().flat_map(|t| t.v.iter()).chain(extra) {
         for c in p {
             out.extend_from_slice(&c.to_le_bytes());

@@ -4,28 +4,9 @@
 //! input is refused naming it, and a killed shard reruns to the same bytes.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-use super::BIN;
-
-fn voxlod<S: AsRef<std::ffi::OsStr>>(args: &[S], cwd: &Path) -> Output {
-    Command::new(BIN)
-        .args(args)
-        .current_dir(cwd)
-        .env("NO_COLOR", "1")
-        .output()
-        .expect("running voxlod")
-}
-
-fn ok(o: Output) -> Output {
-    assert!(
-        o.status.success(),
-        "voxlod failed: {}\n{}",
-        String::from_utf8_lossy(&o.stderr),
-        String::from_utf8_lossy(&o.stdout)
-    );
-    o
-}
+use super::{ok, voxlod};
 
 fn err(o: Output) -> String {
     assert!(!o.status.success(), "voxlod succeeded where it must refuse");
@@ -47,7 +28,7 @@ fn single(input: &Path, dir: &Path, settings: &[&str]) -> Vec<u8> {
         s(&out),
     ];
     a.extend(settings.iter().map(|x| x.to_string()));
-    ok(voxlod(&a, dir));
+    ok(&voxlod(&a, dir));
     std::fs::read(out).unwrap()
 }
 
@@ -65,7 +46,7 @@ fn plan(input: &Path, dir: &Path, n: u32, settings: &[&str]) -> (PathBuf, serde_
     ];
     a.extend(["--shards".to_string(), n.to_string()]);
     a.extend(settings.iter().map(|x| x.to_string()));
-    ok(voxlod(&a, dir));
+    ok(&voxlod(&a, dir));
     let v = serde_json::from_slice(&std::fs::read(&plan).unwrap()).unwrap();
     (plan, v)
 }
@@ -93,10 +74,10 @@ fn merge(plan: &Path, out: &Path) -> Output {
 fn sharded(input: &Path, dir: &Path, n: u32, settings: &[&str]) -> (Vec<u8>, serde_json::Value) {
     let (p, v) = plan(input, dir, n, settings);
     for i in 0..n {
-        ok(build_shard(&p, i, &[]));
+        ok(&build_shard(&p, i, &[]));
     }
     let out = p.with_file_name("merged.voxlod");
-    ok(merge(&p, &out));
+    ok(&merge(&p, &out));
     (std::fs::read(out).unwrap(), v)
 }
 
@@ -125,7 +106,7 @@ fn npm_bunny(test: &str) -> Option<PathBuf> {
 /// A small generated scan (`voxlod gen`, coloured bunny copies) in `dir`.
 fn gen_mesh(dir: &Path, n: &str) -> PathBuf {
     let p = dir.join("gen.ply");
-    ok(voxlod(
+    ok(&voxlod(
         &["gen", "-q", "-n", n, "--seed", "7", "-o", &s(&p)],
         dir,
     ));
@@ -211,7 +192,7 @@ fn plans_are_balanced() {
         let (ratio, total) = check_plan(&v, n);
         assert!(ratio <= 1.5, "gen, {n} shards: {ratio}");
         assert!(v["balance"]["balanced"].as_bool().unwrap());
-        let o = ok(voxlod(
+        let o = voxlod(
             &[
                 "build",
                 "-q",
@@ -225,7 +206,8 @@ fn plans_are_balanced() {
                 "--json",
             ],
             d,
-        ));
+        );
+        ok(&o);
         let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(summary["binned_triangles"].as_u64().unwrap(), total);
     }
@@ -251,7 +233,7 @@ fn bad_shards_and_inputs_are_refused() {
     let (p, _) = plan(&gen, d, 3, &set);
     let pdir = p.parent().unwrap().to_path_buf();
     for i in 0..3 {
-        ok(build_shard(&p, i, &[]));
+        ok(&build_shard(&p, i, &[]));
     }
     let out = pdir.join("m.voxlod");
     let shard = |i: u32| pdir.join(format!("shard-{i:04}.vlshard"));
@@ -284,11 +266,11 @@ fn bad_shards_and_inputs_are_refused() {
     std::fs::copy(shard(2), shard(1)).unwrap();
     refused("index", "it is shard 2 of 3, expected shard 1 of 3");
     std::fs::write(shard(1), &keep).unwrap();
-    ok(merge(&p, &out));
+    ok(&merge(&p, &out));
     std::fs::remove_file(&out).unwrap();
     // a shard of another plan (other settings) in this plan's folder
     let (p2, _) = plan(&gen, d, 2, &["-r", "512", "--backend", "cpu", "-m", "thin"]);
-    ok(build_shard(&p2, 0, &["--out-dir", &s(&pdir)]));
+    ok(&build_shard(&p2, 0, &["--out-dir", &s(&pdir)]));
     refused(
         "other plan",
         &format!("{}: it was built from another plan", shard(0).display()),
@@ -326,7 +308,7 @@ fn a_shard_refuses_an_input_whose_content_changed() {
     assert_eq!(xxh3.len(), 16, "{xxh3}");
     let pdir = p.parent().unwrap();
     let shard0 = pdir.join("shard-0000.vlshard");
-    ok(build_shard(&p, 0, &[]));
+    ok(&build_shard(&p, 0, &[]));
     let good = std::fs::read(&shard0).unwrap();
     std::fs::remove_file(&shard0).unwrap();
     // one byte in the middle, then the old modification time back
@@ -360,7 +342,7 @@ fn a_shard_refuses_an_input_whose_content_changed() {
     bytes[mid] ^= 1;
     std::fs::write(&gen, &bytes).unwrap();
     set_mtime(mtime);
-    ok(build_shard(&p, 0, &[]));
+    ok(&build_shard(&p, 0, &[]));
     assert!(std::fs::read(&shard0).unwrap() == good, "shard 0 differs");
     // a plan whose per-chunk counts were edited
     let mut edited = v.clone();
@@ -390,9 +372,9 @@ fn interrupted_shard_reruns_to_the_same_bytes() {
     std::fs::create_dir(&clean).unwrap();
     let mut reference = Vec::new();
     for i in 0..2 {
-        ok(build_shard(&p, i, &["--out-dir", &s(&clean)]));
+        ok(&build_shard(&p, i, &["--out-dir", &s(&clean)]));
         reference.push(std::fs::read(clean.join(format!("shard-{i:04}.vlshard"))).unwrap());
-        ok(build_shard(&p, i, &["--out-dir", &s(&clean)]));
+        ok(&build_shard(&p, i, &["--out-dir", &s(&clean)]));
         let again = std::fs::read(clean.join(format!("shard-{i:04}.vlshard"))).unwrap();
         assert!(
             again == reference[i as usize],
@@ -409,16 +391,17 @@ fn interrupted_shard_reruns_to_the_same_bytes() {
         .filter(|e| e.file_name().to_string_lossy().starts_with(".voxlod-work-"))
         .collect();
     assert_eq!(work.len(), 1, "the interrupted shard keeps one work folder");
-    let o = ok(build_shard(&p, 0, &["--json"]));
+    let o = build_shard(&p, 0, &["--json"]);
+    ok(&o);
     let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(summary["resumed"], serde_json::Value::Bool(true));
     assert!(
         std::fs::read(&path).unwrap() == reference[0],
         "the resumed shard differs"
     );
-    ok(build_shard(&p, 1, &[]));
+    ok(&build_shard(&p, 1, &[]));
     let out = pdir.join("m.voxlod");
-    ok(merge(&p, &out));
+    ok(&merge(&p, &out));
     assert!(std::fs::read(out).unwrap() == want);
 }
 

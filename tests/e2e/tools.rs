@@ -10,27 +10,7 @@ use std::process::{Command, Output};
 use voxlod_format::voxel::pack_color;
 use voxlod_format::{encode_node, Reader, Writer};
 
-use super::{shared_meshes, BIN, REPO};
-
-fn voxlod(args: &[&str]) -> Output {
-    Command::new(BIN)
-        .args(args)
-        .output()
-        .expect("running voxlod")
-}
-
-fn text(o: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    )
-}
-
-fn ok(o: &Output) -> String {
-    assert!(o.status.success(), "voxlod failed:\n{}", text(o));
-    text(o)
-}
+use super::{ok, shared_meshes, text, voxlod, BIN, REPO};
 
 /// Fails without panicking: non-zero exit, no Rust panic message.
 fn fails(o: &Output) -> String {
@@ -41,17 +21,20 @@ fn fails(o: &Output) -> String {
 }
 
 fn build(mesh: &Path, out: &Path, res: &str, mode: &str) {
-    ok(&voxlod(&[
-        "build",
-        mesh.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-        "-r",
-        res,
-        "-m",
-        mode,
-        "-q",
-    ]));
+    ok(&voxlod(
+        &[
+            "build",
+            mesh.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "-r",
+            res,
+            "-m",
+            mode,
+            "-q",
+        ],
+        ".",
+    ));
 }
 
 fn s(p: &Path) -> &str {
@@ -68,10 +51,10 @@ fn verify_and_diff_commands() {
     let bunny = m.join("stanford-bunny/bun_zipper.ply");
     let a = d.join("a.voxlod");
     build(&bunny, &a, "512", "thin");
-    let out = ok(&voxlod(&["verify", s(&a)]));
+    let out = ok(&voxlod(&["verify", s(&a)], "."));
     assert!(out.contains("every checksum and invariant holds"), "{out}");
     let j: serde_json::Value =
-        serde_json::from_slice(&voxlod(&["verify", s(&a), "--json"]).stdout).unwrap();
+        serde_json::from_slice(&voxlod(&["verify", s(&a), "--json"], ".").stdout).unwrap();
     assert_eq!(j["problems"].as_array().unwrap().len(), 0);
 
     // corrupted copies: payload byte, index byte, truncation
@@ -82,7 +65,7 @@ fn verify_and_diff_commands() {
     let mut b = bytes.clone();
     b[(e.payload_offset + 3) as usize] ^= 1;
     std::fs::write(&bad, &b).unwrap();
-    let t = fails(&voxlod(&["verify", s(&bad)]));
+    let t = fails(&voxlod(&["verify", s(&bad)], "."));
     assert!(
         t.contains(&format!(
             "node 2 (level {}, position {:?})",
@@ -94,10 +77,10 @@ fn verify_and_diff_commands() {
     let mut b = bytes.clone();
     b[r.header().index_offset as usize + 70] ^= 0x80;
     std::fs::write(&bad, &b).unwrap();
-    let t = fails(&voxlod(&["verify", s(&bad)]));
+    let t = fails(&voxlod(&["verify", s(&bad)], "."));
     assert!(t.contains("node index"), "{t}");
     std::fs::write(&bad, &bytes[..bytes.len() - 10]).unwrap();
-    fails(&voxlod(&["verify", s(&bad)]));
+    fails(&voxlod(&["verify", s(&bad)], "."));
 
     // a root that is not the merge of its children: named
     let root = r.root().unwrap();
@@ -118,16 +101,16 @@ fn verify_and_diff_commands() {
         .unwrap();
     }
     w.finish(&r.manifest().unwrap()).unwrap();
-    let t = fails(&voxlod(&["verify", s(&w_path)]));
+    let t = fails(&voxlod(&["verify", s(&w_path)], "."));
     assert!(
         t.contains(&format!("node {root} (level 1, position [0, 0, 0])")) && t.contains("OR-merge"),
         "{t}"
     );
 
     // diff: self, the edited root (exactly that chunk, accepted with --max-color 1), mode, resolution
-    let t = ok(&voxlod(&["diff", s(&a), s(&a)]));
+    let t = ok(&voxlod(&["diff", s(&a), s(&a)], "."));
     assert!(t.contains("identical"), "{t}");
-    let o = voxlod(&["diff", s(&a), s(&w_path), "--json"]);
+    let o = voxlod(&["diff", s(&a), s(&w_path), "--json"], ".");
     fails(&o);
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let changed = j["changed"].as_array().unwrap();
@@ -137,18 +120,21 @@ fn verify_and_diff_commands() {
         serde_json::json!({"level": 1, "pos": [0, 0, 0]})
     );
     assert_eq!(changed[0]["max_color_diff"], 1);
-    ok(&voxlod(&["diff", s(&a), s(&w_path), "--max-color", "1"]));
+    ok(&voxlod(
+        &["diff", s(&a), s(&w_path), "--max-color", "1"],
+        ".",
+    ));
 
     let c = d.join("conservative.voxlod");
     build(&bunny, &c, "512", "conservative");
-    let t = fails(&voxlod(&["diff", s(&a), s(&c)]));
+    let t = fails(&voxlod(&["diff", s(&a), s(&c)], "."));
     assert!(
         t.contains("mode: thin → conservative") && t.contains("changed"),
         "{t}"
     );
     let r2 = d.join("r256.voxlod");
     build(&bunny, &r2, "256", "thin");
-    let t = fails(&voxlod(&["diff", s(&a), s(&r2)]));
+    let t = fails(&voxlod(&["diff", s(&a), s(&r2)], "."));
     assert!(
         t.contains("different grids") && t.contains("resolution: 512 → 256"),
         "{t}"
@@ -181,27 +167,32 @@ fn export_and_render_commands() {
         })
         .sum();
     let ply = d.join("level1.ply");
-    let t = ok(&voxlod(&["export", s(&a), "--level", "1", "-o", s(&ply)]));
+    let t = ok(&voxlod(
+        &["export", s(&a), "--level", "1", "-o", s(&ply)],
+        ".",
+    ));
     assert!(t.contains(&format!("{quads} quads")), "{t}");
     let head = std::fs::read(&ply).unwrap();
     assert!(head.starts_with(b"ply\nformat binary_little_endian 1.0\n"));
-    let t = fails(&voxlod(&["export", s(&a), "--level", "2", "-o", s(&ply)]));
+    let t = fails(&voxlod(
+        &["export", s(&a), "--level", "2", "-o", s(&ply)],
+        ".",
+    ));
     assert!(t.contains("level 2 is not in the file"), "{t}");
 
     let png = d.join("dragon.png");
-    let t = ok(&voxlod(&[
-        "render",
-        s(&a),
-        "-o",
-        s(&png),
-        "--size",
-        "240x180",
-    ]));
+    let t = ok(&voxlod(
+        &["render", s(&a), "-o", s(&png), "--size", "240x180"],
+        ".",
+    ));
     assert!(t.contains("240x180"), "{t}");
     let bytes = std::fs::read(&png).unwrap();
     assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n") && bytes.len() > 2000);
     // a level the file does not have is an error naming it
-    let t = fails(&voxlod(&["render", s(&a), "-o", s(&png), "--level", "7"]));
+    let t = fails(&voxlod(
+        &["render", s(&a), "-o", s(&png), "--level", "7"],
+        ".",
+    ));
     assert!(t.contains("level 7 is not in the file"), "{t}");
 }
 
@@ -238,44 +229,48 @@ fn first_hour_messages() {
 
     let bunny = d.join("bunny.voxlod");
     let ply = d.join("octree.ply");
-    let t = ok(&voxlod(&[
-        "build",
-        s(&Path::new(REPO).join("data/bunny.ply")),
-        "-o",
-        s(&ply),
-        "-r",
-        "256",
-        "--backend",
-        "cpu",
-        "-q",
-    ]));
+    let t = ok(&voxlod(
+        &[
+            "build",
+            s(&Path::new(REPO).join("data/bunny.ply")),
+            "-o",
+            s(&ply),
+            "-r",
+            "256",
+            "--backend",
+            "cpu",
+            "-q",
+        ],
+        ".",
+    ));
     assert!(
         !t.contains("does not end in"),
         "-q hides the warning too:\n{t}"
     );
     std::fs::remove_file(&ply).unwrap();
-    let t = ok(&voxlod(&[
-        "build",
-        s(&Path::new(REPO).join("data/bunny.ply")),
-        "-o",
-        s(&ply),
-        "-r",
-        "256",
-        "--backend",
-        "cpu",
-    ]));
+    let t = ok(&voxlod(
+        &[
+            "build",
+            s(&Path::new(REPO).join("data/bunny.ply")),
+            "-o",
+            s(&ply),
+            "-r",
+            "256",
+            "--backend",
+            "cpu",
+        ],
+        ".",
+    ));
     assert!(t.contains("does not end in .voxlod"), "{t}");
 
-    let t = fails(&voxlod(&[
-        "build",
-        "-o",
-        s(&d.join("no/such/x.voxlod")),
-        "-q",
-    ]));
+    let t = fails(&voxlod(
+        &["build", "-o", s(&d.join("no/such/x.voxlod")), "-q"],
+        ".",
+    ));
     assert!(t.contains("no/such") && t.contains("does not exist"), "{t}");
 
     let out = d.join("level0.ply");
-    let o = voxlod(&["export", s(&bunny), "-o", s(&out)]);
+    let o = voxlod(&["export", s(&bunny), "-o", s(&out)], ".");
     let t = ok(&o);
     let size = std::fs::metadata(&out).unwrap().len();
     let err = String::from_utf8_lossy(&o.stderr);

@@ -147,7 +147,6 @@ pub enum DiffError {
 
 /// Compares files `a` and `b` chunk by chunk, judging changed nodes by `tol`.
 pub fn diff(a: &Path, b: &Path, tol: &Tolerance) -> Result<DiffReport, DiffError> {
-    // Reads best whole: one pass over both indexes, node by node.
     let ra = Reader::open(a)?;
     let rb = Reader::open(b)?;
     let (ha, hb) = (ra.header(), rb.header());

@@ -78,7 +78,7 @@ impl VerifyReport {
 /// Checks the file at `path` completely; never panics, whatever the bytes. See the crate docs
 /// for the list of checks. A file that does not open reports the one reason why.
 pub fn verify(path: &Path) -> VerifyReport {
-    // Reads best whole: the crate docs' list of checks, in that order, each adding to one report.
+    // The crate docs' list of checks, in that order, each adding to one report.
     let mut report = VerifyReport::default();
     let reader = match Reader::open(path) {
         Ok(r) => r,

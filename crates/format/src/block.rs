@@ -12,6 +12,8 @@
 
 use std::cell::RefCell;
 
+use voxlod_geom::morton::{morton8_word, unmorton8_word};
+
 use crate::voxel::{has_minus_512, Voxel};
 use crate::{FormatError, MAX_NODE_VOXELS};
 
@@ -285,7 +287,7 @@ pub(crate) fn shuffle(voxels: &[Voxel], out: &mut Vec<u8>) -> Option<([u8; 3], [
             color[j + 1] = v.color;
         }
         for j in 0..len {
-            morton[j + 1] = morton_spread(pos_mask[j]);
+            morton[j + 1] = morton8_word(pos_mask[j]);
         }
         // strictly increasing codes (from the second voxel of the node on)
         for j in usize::from(s == 0)..len {
@@ -326,20 +328,6 @@ pub(crate) fn shuffle(voxels: &[Voxel], out: &mut Vec<u8>) -> Option<([u8; 3], [
     (ordered == 0 && bad == 0).then_some((lo.map(|c| c as u8), hi.map(|c| c as u8)))
 }
 
-/// `morton8` of a position word (bits 0–23: x, y, z) by bit spreading (shifts and masks
-/// only, so that a loop over words runs in SIMD lanes; [`morton_of_word`] is the table form).
-#[inline]
-fn morton_spread(w: u32) -> u32 {
-    #[inline]
-    fn spread(v: u32) -> u32 {
-        let x = v & 0xff;
-        let x = (x | (x << 8)) & 0x0000_f00f;
-        let x = (x | (x << 4)) & 0x000c_30c3;
-        (x | (x << 2)) & 0x0024_9249
-    }
-    spread(w) | spread(w >> 8) << 1 | spread(w >> 16) << 2
-}
-
 /// Byte `b` of every word into plane `b`.
 #[inline]
 fn spread_planes(words: &[u32], planes: [&mut [u8]; 4]) {
@@ -370,31 +358,6 @@ fn gather_planes(planes: [&[u8]; 4], words: &mut [u32]) {
         words[j] = u32::from_le_bytes([p0[j], p1[j], p2[j], p3[j]]);
     }
 }
-
-/// `morton8` of a position word (bits 0–23: x, y, z), by table (the voxel-by-voxel reference
-/// of the tests).
-#[cfg(test)]
-fn morton_of_word(w: u32) -> u32 {
-    MORTON[(w & 0xff) as usize]
-        | MORTON[(w >> 8 & 0xff) as usize] << 1
-        | MORTON[(w >> 16 & 0xff) as usize] << 2
-}
-
-/// Byte `v` with its bits moved to every third bit (bit `b` → bit `3b`): one axis of `morton8`.
-#[cfg(test)]
-static MORTON: [u32; 256] = {
-    let mut t = [0u32; 256];
-    let mut v = 0;
-    while v < 256 {
-        let mut b = 0;
-        while b < 8 {
-            t[v] |= ((v as u32 >> b) & 1) << (3 * b);
-            b += 1;
-        }
-        v += 1;
-    }
-    t
-};
 
 /// Inverse of [`shuffle`]: decodes the block of `n` voxels into `out` (cleared). Checks what
 /// the transform cannot express in a valid node (Morton codes past 24 bits or not strictly
@@ -444,9 +407,7 @@ pub(crate) fn unshuffle(
             color = byte_add(color, words[2][j]);
             bad |= (w | normal) >> 30 != 0 || has_minus_512(normal);
             // the position as Voxel::pos_mask packs it (x | y << 8 | z << 16), by table
-            let pos = UNMORTON[0][(m & 0xff) as usize]
-                | UNMORTON[1][(m >> 8 & 0xff) as usize]
-                | UNMORTON[2][(m >> 16 & 0xff) as usize];
+            let pos = unmorton8_word(m);
             for (a, (l, h)) in lo.iter_mut().zip(&mut hi).enumerate() {
                 let c = (pos >> (8 * a)) as u8;
                 *l = (*l).min(c);
@@ -514,54 +475,10 @@ fn byte_add(a: u32, b: u32) -> u32 {
     ((a & LOW7) + (b & LOW7)) ^ ((a ^ b) & !LOW7)
 }
 
-/// For byte `b` of a 24-bit Morton code (`b` = 0, 1, 2) and each of its 256 values, the
-/// coordinate bits it holds, packed as `x | y << 8 | z << 16`: Morton bit `i` is bit `i / 3` of
-/// axis `i % 3` ([`crate::voxel::morton8`]).
-static UNMORTON: [[u32; 256]; 3] = unmorton_tables();
-
-const fn unmorton_tables() -> [[u32; 256]; 3] {
-    let mut t = [[0u32; 256]; 3];
-    let mut b = 0;
-    while b < 3 {
-        let mut v = 0;
-        while v < 256 {
-            let mut w = 0u32;
-            let mut j = 0;
-            while j < 8 {
-                if v >> j & 1 == 1 {
-                    let i = 8 * b + j;
-                    w |= 1 << ((i % 3) * 8 + i / 3);
-                }
-                j += 1;
-            }
-            t[b][v] = w;
-            v += 1;
-        }
-        b += 1;
-    }
-    t
-}
-
-/// Inverse of [`morton8`] (the tests' reference for the tables).
-#[cfg(test)]
-pub(crate) fn unmorton8(m: u32) -> [u8; 3] {
-    #[inline]
-    fn compact(v: u32) -> u8 {
-        let mut x = v & 0x0024_9249;
-        x = (x | (x >> 2)) & 0x000c_30c3;
-        x = (x | (x >> 4)) & 0x0000_f00f;
-        x = (x | (x >> 8)) & 0x0000_00ff;
-        x as u8
-    }
-    let p = [compact(m), compact(m >> 1), compact(m >> 2)];
-    debug_assert_eq!(crate::voxel::morton8(p[0], p[1], p[2]), m & 0x00ff_ffff);
-    p
-}
-
 #[cfg(test)]
 mod tests {
     #[test]
-    fn byte_add_sub_and_morton_tables_match_their_plain_definitions() {
+    fn byte_add_and_sub_match_their_plain_definitions() {
         use super::*;
         let mut s = 0x1234_5678_9abc_def1u64;
         for _ in 0..200_000 {
@@ -578,16 +495,6 @@ mod tests {
             }));
             assert_eq!(byte_sub(a, b), plain, "{a:#x} - {b:#x}");
         }
-        for m in (0..1u32 << 24).step_by(7) {
-            let pos = UNMORTON[0][(m & 0xff) as usize]
-                | UNMORTON[1][(m >> 8 & 0xff) as usize]
-                | UNMORTON[2][(m >> 16) as usize];
-            let p = unmorton8(m);
-            assert_eq!(pos, p[0] as u32 | (p[1] as u32) << 8 | (p[2] as u32) << 16);
-            assert_eq!(crate::voxel::morton8(p[0], p[1], p[2]), m);
-            assert_eq!(morton_of_word(pos | 0x3f00_0000), m);
-            assert_eq!(morton_spread(pos | 0x3f00_0000), m);
-        }
     }
 
     #[test]
@@ -595,7 +502,7 @@ mod tests {
         use crate::voxel::{pack_color, pack_normal};
         let voxels: Vec<Voxel> = (0..500u32)
             .map(|i| {
-                let p = crate::block::unmorton8(i * 7);
+                let p = voxlod_geom::morton::unmorton8(i * 7);
                 Voxel::new(
                     p,
                     (i % 64) as u8,
@@ -676,7 +583,7 @@ mod tests {
         let mut words = [[0u32; STEP]; 3];
         for (s, step) in voxels.chunks(STEP).enumerate() {
             for (j, v) in step.iter().enumerate() {
-                let m = morton_of_word(v.pos_mask);
+                let m = voxlod_geom::morton::morton8_word_by_table(v.pos_mask);
                 ok &= Some(m) > prev_m;
                 let delta = m.wrapping_sub(prev_m.unwrap_or(0));
                 prev_m = Some(m);
@@ -735,7 +642,7 @@ mod tests {
                 .iter()
                 .map(|&m| {
                     let r = next();
-                    let p = unmorton8(m);
+                    let p = voxlod_geom::morton::unmorton8(m);
                     let normal = (r as u32) & 0x3fff_ffff;
                     // keep −512 components out of the valid nodes
                     let normal = if has_minus_512(normal) {
@@ -766,14 +673,6 @@ mod tests {
             if want.is_some() {
                 assert_eq!(a, b, "case {case}");
             }
-        }
-    }
-
-    #[test]
-    fn unmorton_inverts_morton() {
-        for m in (0..1u32 << 24).step_by(997).chain([0, 1, (1 << 24) - 1]) {
-            let p = unmorton8(m);
-            assert_eq!(crate::voxel::morton8(p[0], p[1], p[2]), m);
         }
     }
 

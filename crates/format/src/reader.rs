@@ -63,7 +63,7 @@ impl Reader {
     /// The file may change while the reader is alive: what is read afterwards then fails with
     /// an error (a short read or a checksum mismatch), never a crash.
     pub fn open(path: &Path) -> Result<Reader, FormatError> {
-        // Reads best whole: FORMAT.md's layout in file order.
+        // FORMAT.md's layout, in file order.
         let io = |op: &'static str| {
             move |source| FormatError::Io {
                 path: path.to_owned(),
@@ -181,7 +181,7 @@ impl Reader {
 
     /// Per-entry checks, then the tree structure (child masks, parents).
     fn check_entries(&self) -> Result<(), FormatError> {
-        // Reads best whole: FORMAT.md's index rules in the order the document lists them.
+        // FORMAT.md's index rules, in the order the document lists them.
         let spec = self.spec();
         let h = &self.header;
         let mut prev_end = HEADER_SIZE as u64;
@@ -712,7 +712,7 @@ thread_local! {
 
 /// Header checks in the order that gives the most useful message first.
 fn check_header(h: &Header, len: u64) -> Result<(), String> {
-    // Reads best whole: the header checks as one ordered list (the most useful message first).
+    // The header checks in order, the most useful message first.
     if h.magic != MAGIC {
         let hex = |b: &[u8]| {
             b.iter()

@@ -88,20 +88,9 @@ pub fn pack_pos(pos: [u8; 3], mask: u8) -> u32 {
     pos[0] as u32 | (pos[1] as u32) << 8 | (pos[2] as u32) << 16 | ((mask & 0x3f) as u32) << 24
 }
 
-/// Morton code of an 8-bit-per-axis position (24 bits): bit `3i` from x, `3i+1` from y,
-/// `3i+2` from z.
-#[inline]
-pub fn morton8(x: u8, y: u8, z: u8) -> u32 {
-    #[inline]
-    fn spread(v: u8) -> u32 {
-        let mut x = v as u32;
-        x = (x | (x << 8)) & 0x0000_f00f;
-        x = (x | (x << 4)) & 0x000c_30c3;
-        x = (x | (x << 2)) & 0x0024_9249;
-        x
-    }
-    spread(x) | spread(y) << 1 | spread(z) << 2
-}
+/// Morton code of an 8-bit-per-axis position (24 bits), defined in `voxlod-geom` with the
+/// other Morton forms.
+pub use voxlod_geom::morton8;
 
 /// Quantizes a normal to 10:10:10 snorm. The input is normalized first; a zero or non-finite
 /// vector packs to zero (which [`face_mask`] maps to all six faces).

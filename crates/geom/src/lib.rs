@@ -17,6 +17,10 @@
 
 use bytemuck::{Pod, Zeroable};
 
+pub mod morton;
+
+pub use morton::{compact1by2, demorton3, morton3, morton8, part1by2};
+
 /// Voxels per chunk along one axis (the Chajdas paper's 256³ chunks: 8 bits per coordinate).
 pub const CHUNK: u32 = 256;
 /// log2 of [`CHUNK`].
@@ -382,73 +386,9 @@ fn corners(v: &[[f32; 3]; 3]) -> ([f32; 3], [f32; 3]) {
     (mn, mx)
 }
 
-/// Spreads the low 21 bits of `v` so there are two zero bits between each.
-#[inline]
-pub fn part1by2(v: u32) -> u64 {
-    let mut x = v as u64 & 0x1f_ffff;
-    x = (x | (x << 32)) & 0x001f_0000_0000_ffff;
-    x = (x | (x << 16)) & 0x001f_0000_ff00_00ff;
-    x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
-    x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
-    x = (x | (x << 2)) & 0x1249_2492_4924_9249;
-    x
-}
-
-/// Inverse of [`part1by2`].
-#[inline]
-pub fn compact1by2(x: u64) -> u32 {
-    let mut x = x & 0x1249_2492_4924_9249;
-    x = (x ^ (x >> 2)) & 0x10c3_0c30_c30c_30c3;
-    x = (x ^ (x >> 4)) & 0x100f_00f0_0f00_f00f;
-    x = (x ^ (x >> 8)) & 0x001f_0000_ff00_00ff;
-    x = (x ^ (x >> 16)) & 0x001f_0000_0000_ffff;
-    x = (x ^ (x >> 32)) & 0x1f_ffff;
-    x as u32
-}
-
-/// Morton (Z-order) code of a 3D point with up to 21 bits per axis: bit `3i` is bit `i` of x,
-/// bit `3i+1` of y, bit `3i+2` of z.
-#[inline]
-pub fn morton3(x: u32, y: u32, z: u32) -> u64 {
-    part1by2(x) | (part1by2(y) << 1) | (part1by2(z) << 2)
-}
-
-/// Inverse of [`morton3`].
-#[inline]
-pub fn demorton3(m: u64) -> [u32; 3] {
-    [compact1by2(m), compact1by2(m >> 1), compact1by2(m >> 2)]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn morton_roundtrip_and_order() {
-        for &(x, y, z) in &[
-            (0, 0, 0),
-            (1, 2, 3),
-            (255, 255, 255),
-            (65535, 1, 40000),
-            (12345, 54321, 7),
-        ] {
-            assert_eq!(demorton3(morton3(x, y, z)), [x, y, z]);
-        }
-        // brute-force bit interleave
-        for x in 0..8u32 {
-            for y in 0..8u32 {
-                for z in 0..8u32 {
-                    let mut m = 0u64;
-                    for b in 0..3 {
-                        m |= (((x >> b) & 1) as u64) << (3 * b);
-                        m |= (((y >> b) & 1) as u64) << (3 * b + 1);
-                        m |= (((z >> b) & 1) as u64) << (3 * b + 2);
-                    }
-                    assert_eq!(morton3(x, y, z), m);
-                }
-            }
-        }
-    }
 
     #[test]
     fn grid_rejects_bad_resolution() {

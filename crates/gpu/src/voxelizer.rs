@@ -80,26 +80,9 @@ pub struct GpuVoxelizer {
     method: GpuMethod,
     cutoff: f32,
     precision: Precision,
-    classify: wgpu::ComputePipeline,
-    compact: wgpu::ComputePipeline,
-    sweep: wgpu::ComputePipeline,
-    raster: wgpu::RenderPipeline,
-    bgl_compute: wgpu::BindGroupLayout,
-    bgl_raster: wgpu::BindGroupLayout,
-    params: wgpu::Buffer,
-    /// two triangle buffers: batch k+1 is uploaded while batch k runs
-    tris: [wgpu::Buffer; 2],
-    occ: wgpu::Buffer,
-    deferred: wgpu::Buffer,
-    args: wgpu::Buffer,
-    base: wgpu::Buffer,
-    accum: wgpu::Buffer,
-    counter: wgpu::Buffer,
-    staging: wgpu::Buffer,
-    target: wgpu::TextureView,
-    /// stands in for `args` in the sweep pass's bind group (a buffer cannot be bound as storage
-    /// in the dispatch that reads it as indirect arguments)
-    args_dummy: wgpu::Buffer,
+    layouts: Layouts,
+    pipelines: Pipelines,
+    buffers: Buffers,
     /// bind groups per triangle buffer
     bind: [Option<Groups>; 2],
     /// the last submission that used each triangle buffer, until waited for
@@ -148,42 +131,20 @@ fn storage_entry(
     }
 }
 
-impl GpuVoxelizer {
-    /// Opens an adapter (Vulkan, else GL; `WGPU_BACKEND` overrides) and builds the pipelines.
-    /// `cutoff` is the dominant projected area (voxels²) from which [`GpuMethod::Hybrid`] defers
-    /// a triangle to the fragment pass; the other methods ignore it.
-    pub fn new(mode: Mode, method: GpuMethod, cutoff: f32) -> Result<GpuVoxelizer, GpuError> {
-        GpuVoxelizer::with_precision(mode, method, cutoff, None)
-    }
+/// The bind group layouts, as the WGSL binds them (`crate::bindings`).
+struct Layouts {
+    /// The compute passes' (classify, compact, sweep).
+    compute: wgpu::BindGroupLayout,
+    /// The fragment pass's.
+    raster: wgpu::BindGroupLayout,
+}
 
-    /// [`GpuVoxelizer::new`] with the shaders' precision chosen: `None` takes f64 when the
-    /// adapter has `SHADER_F64`, else f32; `Some(Precision::F32)` forces the f32 shaders (for
-    /// tests of that variant on an adapter with f64); `Some(Precision::F64)` on an adapter
-    /// without f64 is an error.
-    pub fn with_precision(
-        mode: Mode,
-        method: GpuMethod,
-        cutoff: f32,
-        precision: Option<Precision>,
-    ) -> Result<GpuVoxelizer, GpuError> {
-        // Reads best whole: the device objects, as the WGSL binds them.
-        let gpu = open()?;
-        let precision = match precision {
-            Some(Precision::F64) if !gpu.f64 => {
-                return Err(GpuError::Device {
-                    adapter: gpu.name.clone(),
-                    reason: "f64 shaders requested, but the adapter lacks SHADER_F64".into(),
-                })
-            }
-            Some(p) => p,
-            None if gpu.f64 => Precision::F64,
-            None => Precision::F32,
-        };
-        let d = &gpu.device;
+impl Layouts {
+    fn new(d: &wgpu::Device) -> Layouts {
         let cs = wgpu::ShaderStages::COMPUTE;
         let fs = wgpu::ShaderStages::FRAGMENT;
         let vfs = wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT;
-        let bgl_compute = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        let compute = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("voxlod compute"),
             entries: &[
                 storage_entry(PARAMS, cs, true),
@@ -196,7 +157,7 @@ impl GpuVoxelizer {
                 storage_entry(COUNTER, cs, false),
             ],
         });
-        let bgl_raster = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        let raster = d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("voxlod raster"),
             entries: &[
                 storage_entry(PARAMS, vfs, true),
@@ -208,6 +169,24 @@ impl GpuVoxelizer {
                 storage_entry(COUNTER, fs, false),
             ],
         });
+        Layouts { compute, raster }
+    }
+}
+
+/// The passes of the hybrid algorithm: classification (section 3.2), compaction of the
+/// listed triangles, the triangle-parallel sweep and the fragment pass (sections 3.3-3.6),
+/// and the fragment pass's attachment.
+struct Pipelines {
+    classify: wgpu::ComputePipeline,
+    compact: wgpu::ComputePipeline,
+    sweep: wgpu::ComputePipeline,
+    raster: wgpu::RenderPipeline,
+    /// wgpu wants an attachment; the viewport is clipped to it, so it covers the chunk
+    target: wgpu::TextureView,
+}
+
+impl Pipelines {
+    fn new(d: &wgpu::Device, layouts: &Layouts, precision: Precision) -> Pipelines {
         let layout = |bgl: &wgpu::BindGroupLayout| {
             d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: None,
@@ -215,8 +194,8 @@ impl GpuVoxelizer {
                 immediate_size: 0,
             })
         };
-        let compute_layout = layout(&bgl_compute);
-        let raster_layout = layout(&bgl_raster);
+        let compute_layout = layout(&layouts.compute);
+        let raster_layout = layout(&layouts.raster);
         let cmod = d.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("classify.wgsl"),
             source: wgpu::ShaderSource::Wgsl(classify_source(precision).into()),
@@ -267,7 +246,6 @@ impl GpuVoxelizer {
             multiview_mask: None,
             cache: None,
         });
-        // wgpu wants an attachment; the viewport is clipped to it, so it covers the chunk
         let target = d
             .create_texture(&wgpu::TextureDescriptor {
                 label: Some("dummy target"),
@@ -284,6 +262,37 @@ impl GpuVoxelizer {
                 view_formats: &[],
             })
             .create_view(&Default::default());
+        Pipelines {
+            classify,
+            compact,
+            sweep,
+            raster,
+            target,
+        }
+    }
+}
+
+/// The storage buffers the passes share (bindings in `crate::bindings`), the indirect
+/// arguments, and the staging buffer of the read-backs. The triangle, deferred, accumulator
+/// and staging buffers grow on demand.
+struct Buffers {
+    params: wgpu::Buffer,
+    /// two triangle buffers: batch k+1 is uploaded while batch k runs
+    tris: [wgpu::Buffer; 2],
+    occ: wgpu::Buffer,
+    deferred: wgpu::Buffer,
+    args: wgpu::Buffer,
+    /// stands in for `args` in the sweep pass's bind group (a buffer cannot be bound as storage
+    /// in the dispatch that reads it as indirect arguments)
+    args_dummy: wgpu::Buffer,
+    base: wgpu::Buffer,
+    accum: wgpu::Buffer,
+    counter: wgpu::Buffer,
+    staging: wgpu::Buffer,
+}
+
+impl Buffers {
+    fn new(d: &wgpu::Device) -> Buffers {
         use wgpu::BufferUsages as U;
         let buf = |label: &str, size: u64, usage: U| {
             d.create_buffer(&wgpu::BufferDescriptor {
@@ -319,6 +328,54 @@ impl GpuVoxelizer {
             U::STORAGE | U::COPY_SRC | U::COPY_DST,
         );
         let staging = buf("staging", 2 * OCC_BYTES, U::MAP_READ | U::COPY_DST);
+        Buffers {
+            params,
+            tris,
+            occ,
+            deferred,
+            args,
+            args_dummy,
+            base,
+            accum,
+            counter,
+            staging,
+        }
+    }
+}
+
+impl GpuVoxelizer {
+    /// Opens an adapter (Vulkan, else GL; `WGPU_BACKEND` overrides) and builds the pipelines.
+    /// `cutoff` is the dominant projected area (voxels²) from which [`GpuMethod::Hybrid`] defers
+    /// a triangle to the fragment pass; the other methods ignore it.
+    pub fn new(mode: Mode, method: GpuMethod, cutoff: f32) -> Result<GpuVoxelizer, GpuError> {
+        GpuVoxelizer::with_precision(mode, method, cutoff, None)
+    }
+
+    /// [`GpuVoxelizer::new`] with the shaders' precision chosen: `None` takes f64 when the
+    /// adapter has `SHADER_F64`, else f32; `Some(Precision::F32)` forces the f32 shaders (for
+    /// tests of that variant on an adapter with f64); `Some(Precision::F64)` on an adapter
+    /// without f64 is an error.
+    pub fn with_precision(
+        mode: Mode,
+        method: GpuMethod,
+        cutoff: f32,
+        precision: Option<Precision>,
+    ) -> Result<GpuVoxelizer, GpuError> {
+        let gpu = open()?;
+        let precision = match precision {
+            Some(Precision::F64) if !gpu.f64 => {
+                return Err(GpuError::Device {
+                    adapter: gpu.name.clone(),
+                    reason: "f64 shaders requested, but the adapter lacks SHADER_F64".into(),
+                })
+            }
+            Some(p) => p,
+            None if gpu.f64 => Precision::F64,
+            None => Precision::F32,
+        };
+        let layouts = Layouts::new(&gpu.device);
+        let pipelines = Pipelines::new(&gpu.device, &layouts, precision);
+        let buffers = Buffers::new(&gpu.device);
         gpu.check()?;
         Ok(GpuVoxelizer {
             gpu,
@@ -326,23 +383,9 @@ impl GpuVoxelizer {
             method,
             cutoff,
             precision,
-            classify,
-            compact,
-            sweep,
-            raster,
-            bgl_compute,
-            bgl_raster,
-            params,
-            tris,
-            occ,
-            deferred,
-            args,
-            base,
-            accum,
-            counter,
-            staging,
-            target,
-            args_dummy,
+            layouts,
+            pipelines,
+            buffers,
             bind: [None, None],
             inflight: [None, None],
             next: 0,
@@ -455,7 +498,7 @@ impl GpuVoxelizer {
 
     /// Grows triangle buffer `slot` to at least `size` bytes (see [`GpuVoxelizer::ensure`]).
     fn ensure_tris(&mut self, slot: usize, size: u64) {
-        let b = &mut self.tris[slot];
+        let b = &mut self.buffers.tris[slot];
         if b.size() >= size {
             return;
         }
@@ -473,16 +516,20 @@ impl GpuVoxelizer {
     /// CPU device, hence reuse with geometric growth).
     fn ensure(&mut self, which: Which, size: u64) {
         let (b, usage, label) = match which {
-            Which::Deferred => (&mut self.deferred, wgpu::BufferUsages::STORAGE, "deferred"),
+            Which::Deferred => (
+                &mut self.buffers.deferred,
+                wgpu::BufferUsages::STORAGE,
+                "deferred",
+            ),
             Which::Accum => (
-                &mut self.accum,
+                &mut self.buffers.accum,
                 wgpu::BufferUsages::STORAGE
                     | wgpu::BufferUsages::COPY_SRC
                     | wgpu::BufferUsages::COPY_DST,
                 "accumulators",
             ),
             Which::Staging => (
-                &mut self.staging,
+                &mut self.buffers.staging,
                 wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
                 "staging",
             ),
@@ -505,7 +552,7 @@ impl GpuVoxelizer {
         if let Some(b) = &self.bind[slot] {
             return b.clone();
         }
-        let tris = &self.tris[slot];
+        let tris = &self.buffers.tris[slot];
         let d = &self.gpu.device;
         fn e(binding: u32, b: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
             wgpu::BindGroupEntry {
@@ -516,32 +563,32 @@ impl GpuVoxelizer {
         let compute_group = |args: &wgpu::Buffer| {
             d.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("compute"),
-                layout: &self.bgl_compute,
+                layout: &self.layouts.compute,
                 entries: &[
-                    e(PARAMS, &self.params),
+                    e(PARAMS, &self.buffers.params),
                     e(TRIS, tris),
-                    e(OCC, &self.occ),
-                    e(DEFERRED, &self.deferred),
+                    e(OCC, &self.buffers.occ),
+                    e(DEFERRED, &self.buffers.deferred),
                     e(DRAW_ARGS, args),
-                    e(BASE, &self.base),
-                    e(ACCUM, &self.accum),
-                    e(COUNTER, &self.counter),
+                    e(BASE, &self.buffers.base),
+                    e(ACCUM, &self.buffers.accum),
+                    e(COUNTER, &self.buffers.counter),
                 ],
             })
         };
-        let compute = compute_group(&self.args);
-        let sweep = compute_group(&self.args_dummy);
+        let compute = compute_group(&self.buffers.args);
+        let sweep = compute_group(&self.buffers.args_dummy);
         let raster = d.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("raster"),
-            layout: &self.bgl_raster,
+            layout: &self.layouts.raster,
             entries: &[
-                e(PARAMS, &self.params),
+                e(PARAMS, &self.buffers.params),
                 e(TRIS, tris),
-                e(OCC, &self.occ),
-                e(DEFERRED, &self.deferred),
-                e(BASE, &self.base),
-                e(ACCUM, &self.accum),
-                e(COUNTER, &self.counter),
+                e(OCC, &self.buffers.occ),
+                e(DEFERRED, &self.buffers.deferred),
+                e(BASE, &self.buffers.base),
+                e(ACCUM, &self.buffers.accum),
+                e(COUNTER, &self.buffers.counter),
             ],
         });
         self.bind[slot] = Some((compute.clone(), raster.clone(), sweep.clone()));
@@ -582,7 +629,7 @@ impl GpuVoxelizer {
         origin: [u32; 3],
         replay: &mut dyn FnMut(&mut Feed<'_>) -> Result<(), E>,
     ) -> Result<Vec<Voxel>, E> {
-        // Reads best whole: the hybrid algorithm's phases, in order.
+        // The hybrid algorithm's phases, in order.
         if origin
             .iter()
             .any(|&c| c % CHUNK != 0 || c > i32::MAX as u32 - CHUNK)
@@ -601,8 +648,8 @@ impl GpuVoxelizer {
         // pass 1: mark the occupancy bitset
         {
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-            enc.clear_buffer(&self.occ, 0, None);
-            enc.clear_buffer(&self.counter, 0, None);
+            enc.clear_buffer(&self.buffers.occ, 0, None);
+            enc.clear_buffer(&self.buffers.counter, 0, None);
             self.gpu.queue.submit([enc.finish()]);
         }
         let mut st = Stream::new(origin_i, PHASE_MARK, (0, 0));
@@ -632,9 +679,11 @@ impl GpuVoxelizer {
         if listed > 0 && !fall_back {
             // the per-triangle fallback: the listed triangles' exact voxels, set before
             // compaction (compaction runs again)
-            let words = self
-                .gpu
-                .read(&self.counter, &self.staging, (LIST_AT + listed) * 4)?;
+            let words = self.gpu.read(
+                &self.buffers.counter,
+                &self.buffers.staging,
+                (LIST_AT + listed) * 4,
+            )?;
             let words: &[u32] = bytemuck::cast_slice(&words);
             self.listed = words[LIST_AT as usize..].to_vec();
             self.listed.sort_unstable();
@@ -660,15 +709,17 @@ impl GpuVoxelizer {
             }
             let pairs = Listed::new(tris, origin, self.mode);
             let mut occ: Vec<u32> = bytemuck::pod_collect_to_vec(&self.gpu.read(
-                &self.occ,
-                &self.staging,
+                &self.buffers.occ,
+                &self.buffers.staging,
                 OCC_BYTES,
             )?);
             if pairs.mark(&mut occ) {
                 self.gpu
                     .queue
-                    .write_buffer(&self.occ, 0, bytemuck::cast_slice(&occ));
-                self.gpu.queue.write_buffer(&self.counter, 0, &[0; 4]);
+                    .write_buffer(&self.buffers.occ, 0, bytemuck::cast_slice(&occ));
+                self.gpu
+                    .queue
+                    .write_buffer(&self.buffers.counter, 0, &[0; 4]);
                 count = self.compact_and_count()?[0] as u64;
             }
             host = Some(pairs);
@@ -713,10 +764,16 @@ impl GpuVoxelizer {
         // occupancy and slot bases, for decoding
         let occ_base = {
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-            enc.copy_buffer_to_buffer(&self.occ, 0, &self.staging, 0, OCC_BYTES);
-            enc.copy_buffer_to_buffer(&self.base, 0, &self.staging, OCC_BYTES, OCC_BYTES);
+            enc.copy_buffer_to_buffer(&self.buffers.occ, 0, &self.buffers.staging, 0, OCC_BYTES);
+            enc.copy_buffer_to_buffer(
+                &self.buffers.base,
+                0,
+                &self.buffers.staging,
+                OCC_BYTES,
+                OCC_BYTES,
+            );
             self.gpu.queue.submit([enc.finish()]);
-            self.gpu.map_staging(&self.staging, 2 * OCC_BYTES)?
+            self.gpu.map_staging(&self.buffers.staging, 2 * OCC_BYTES)?
         };
         let (occ, base): (&[u8], &[u8]) = occ_base.split_at(OCC_BYTES as usize);
         let occ: Vec<u32> = bytemuck::pod_collect_to_vec(occ);
@@ -731,7 +788,7 @@ impl GpuVoxelizer {
             let bytes = (hi - lo) * SLOT_BYTES;
             {
                 let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-                enc.clear_buffer(&self.accum, 0, Some(bytes));
+                enc.clear_buffer(&self.buffers.accum, 0, Some(bytes));
                 self.gpu.queue.submit([enc.finish()]);
             }
             let slots = (lo as u32, hi as u32);
@@ -759,7 +816,9 @@ impl GpuVoxelizer {
                     }
                 }
             }
-            let acc = self.gpu.read(&self.accum, &self.staging, bytes)?;
+            let acc = self
+                .gpu
+                .read(&self.buffers.accum, &self.buffers.staging, bytes)?;
             self.inflight = [None, None];
             let owned: Vec<u32>;
             let acc: &[u32] = match &host {
@@ -862,7 +921,7 @@ impl GpuVoxelizer {
         self.ensure(Which::Deferred, tris.len() as u64 * DEFERRED_BYTES);
         self.gpu
             .queue
-            .write_buffer(&self.tris[slot], 0, bytemuck::cast_slice(&packed));
+            .write_buffer(&self.buffers.tris[slot], 0, bytemuck::cast_slice(&packed));
         let defers = self.may_defer(tris);
         // (a chunk whose stream exceeds u32 indices falls back as a whole)
         let tri_base = st.tris.min(u32::MAX as u64) as u32;
@@ -901,14 +960,16 @@ impl GpuVoxelizer {
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.compact);
+            pass.set_pipeline(&self.pipelines.compact);
             pass.set_bind_group(0, &compute, &[]);
             pass.dispatch_workgroups((OCC_WORDS / WG as u64) as u32, 1, 1);
         }
         self.gpu.queue.submit([enc.finish()]);
-        let c = self
-            .gpu
-            .read(&self.counter, &self.staging, 4 * (LIST_COUNT as u64 + 1))?;
+        let c = self.gpu.read(
+            &self.buffers.counter,
+            &self.buffers.staging,
+            4 * (LIST_COUNT as u64 + 1),
+        )?;
         let c: Vec<u32> = bytemuck::pod_collect_to_vec(&c);
         Ok(std::array::from_fn(|k| c[k]))
     }
@@ -950,7 +1011,7 @@ impl GpuVoxelizer {
         };
         self.gpu
             .queue
-            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+            .write_buffer(&self.buffers.params, 0, bytemuck::bytes_of(&params));
         let (compute, raster, sweep) = self.bind_groups(slot);
         let words = (len as u64).div_ceil(32);
         if phase == PHASE_ACCUMULATE {
@@ -958,12 +1019,12 @@ impl GpuVoxelizer {
         }
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         if phase == PHASE_MARK {
-            enc.clear_buffer(&self.counter, LIST_FLAGS * 4, Some(words * 4));
+            enc.clear_buffer(&self.buffers.counter, LIST_FLAGS * 4, Some(words * 4));
         }
-        enc.clear_buffer(&self.args, 0, None);
+        enc.clear_buffer(&self.buffers.args, 0, None);
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.classify);
+            pass.set_pipeline(&self.pipelines.classify);
             pass.set_bind_group(0, &compute, &[]);
             pass.dispatch_workgroups(groups_x, groups_y, 1);
         }
@@ -987,9 +1048,11 @@ impl GpuVoxelizer {
             if k >= batch.len as u64 {
                 break;
             }
-            self.gpu
-                .queue
-                .write_buffer(&self.tris[batch.slot], k * zero.len() as u64, &zero);
+            self.gpu.queue.write_buffer(
+                &self.buffers.tris[batch.slot],
+                k * zero.len() as u64,
+                &zero,
+            );
         }
     }
 
@@ -1004,14 +1067,14 @@ impl GpuVoxelizer {
     ) {
         if self.method == GpuMethod::Triangle {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&self.sweep);
+            pass.set_pipeline(&self.pipelines.sweep);
             pass.set_bind_group(0, sweep, &[]);
-            pass.dispatch_workgroups_indirect(&self.args, 16);
+            pass.dispatch_workgroups_indirect(&self.buffers.args, 16);
         } else {
             let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("fragment pass"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.target,
+                    view: &self.pipelines.target,
                     depth_slice: None,
                     resolve_target: None,
                     ops: wgpu::Operations {
@@ -1022,9 +1085,9 @@ impl GpuVoxelizer {
                 ..Default::default()
             });
             pass.set_viewport(0.0, 0.0, CHUNK as f32, CHUNK as f32, 0.0, 1.0);
-            pass.set_pipeline(&self.raster);
+            pass.set_pipeline(&self.pipelines.raster);
             pass.set_bind_group(0, raster, &[]);
-            pass.draw_indirect(&self.args, 0);
+            pass.draw_indirect(&self.buffers.args, 0);
         }
     }
 }

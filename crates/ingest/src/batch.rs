@@ -9,7 +9,6 @@
 
 use std::any::Any;
 
-use crate::ply_faces::LocalBatch;
 use crate::{IngestError, IngestStats};
 use voxlod_geom::Triangle;
 
@@ -156,4 +155,80 @@ impl<'a> Emitter<'a> {
         self.flush()?;
         Ok(self.stats)
     }
+}
+
+/// Where decoded triangles go: the [`Emitter`] (sequential reading) or a [`LocalBatch`] (one
+/// worker's share of a parallel PLY read).
+pub(crate) trait Sink {
+    fn polygon(&mut self);
+    fn repeated_index(&mut self);
+    fn push(&mut self, t: Triangle) -> Result<(), IngestError>;
+    fn bytes_done(&mut self, bytes: u64);
+}
+
+impl Sink for Emitter<'_> {
+    #[inline]
+    fn polygon(&mut self) {
+        self.stats.polygons += 1;
+    }
+    #[inline]
+    fn repeated_index(&mut self) {
+        Emitter::repeated_index(self)
+    }
+    #[inline]
+    fn push(&mut self, t: Triangle) -> Result<(), IngestError> {
+        Emitter::push(self, t)
+    }
+    #[inline]
+    fn bytes_done(&mut self, bytes: u64) {
+        self.bytes_done = bytes;
+    }
+}
+
+/// Triangles and counts of a range of face records decoded by one worker, handed to the
+/// emitter in record order afterwards ([`Emitter::push_local`]).
+#[derive(Default)]
+pub(crate) struct LocalBatch {
+    pub tris: Vec<Triangle>,
+    pub polygons: u64,
+    pub degenerate: u64,
+    pub repeated: u64,
+    /// The emitter's `prepare` step run on `tris` by the worker, once they are complete.
+    pub prepared: Option<Prepared>,
+}
+
+impl Sink for LocalBatch {
+    #[inline]
+    fn polygon(&mut self) {
+        self.polygons += 1;
+    }
+    #[inline]
+    fn repeated_index(&mut self) {
+        self.repeated += 1;
+    }
+    #[inline]
+    fn push(&mut self, t: Triangle) -> Result<(), IngestError> {
+        self.add(t);
+        Ok(())
+    }
+    #[inline]
+    fn bytes_done(&mut self, _: u64) {}
+}
+
+impl LocalBatch {
+    /// Keeps `t` unless it has zero area (the same test as `Emitter::push`).
+    #[inline]
+    pub(crate) fn add(&mut self, t: Triangle) {
+        if t.is_degenerate() {
+            self.degenerate += 1;
+        } else {
+            self.tris.push(t);
+        }
+    }
+}
+
+/// A corner index repeated: the triangle has zero area.
+#[inline]
+pub(crate) fn repeats(tri: [usize; 3]) -> bool {
+    tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]
 }

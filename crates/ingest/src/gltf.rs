@@ -214,7 +214,7 @@ fn mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
 
 impl GltfSource {
     pub fn open(path: &Path) -> Result<(GltfSource, MeshInfo), IngestError> {
-        // Reads best whole: the glTF document's checks, in the spec's order.
+        // The glTF document's checks, in the specification's order.
         let bytes = std::fs::read(path).map_err(|e| IngestError::io(path, e))?;
         let g = gltf::Gltf::from_slice(&bytes)
             .map_err(|e| bad(path, format!("not a valid glTF 2.0 file: {e}")))?;
@@ -371,7 +371,6 @@ impl GltfSource {
         world: &[[f64; 4]; 4],
         em: &mut Emitter,
     ) -> Result<(), IngestError> {
-        // Reads best whole: one primitive's accessors checked, then streamed.
         let mode = p.mode();
         if !matches!(
             mode,

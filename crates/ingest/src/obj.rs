@@ -3,8 +3,8 @@
 //! `vn` normals when every face corner names one. A material with a `map_Kd` texture gets an
 //! entry in the material table ([`MeshInfo::materials`]; entry 0 is "no texture") and its
 //! triangles carry their `vt` coordinates (`TRI_HAS_UV`) and that entry's index; `Kd` stays
-//! their colour, the factor the texture is multiplied by (the MTL definition). `tobj` loads the whole file into memory: OBJ input costs
-//! O(file) memory.
+//! their colour, the factor the texture is multiplied by (the MTL definition). `tobj` loads
+//! the whole file into memory: OBJ input costs O(file) memory.
 //!
 //! Because `tobj` reports errors without a line number, [`scan`] first walks the file once
 //! and checks what can be checked cheaply (numbers, finite positions, face indices), so the
@@ -33,6 +33,8 @@ pub(crate) struct ObjSource {
     ids: HashMap<String, u32>,
 }
 
+/// What [`scan`] found: the counts of the file's records, and the materials it names.
+#[derive(Default)]
 struct Scan {
     vertices: u64,
     normals: u64,
@@ -45,6 +47,8 @@ struct Scan {
     without_texcoord: HashSet<String>,
     mtllibs: Vec<String>,
     used_materials: HashSet<String>,
+    /// The material of the faces that follow (the last `usemtl`; empty before the first).
+    current_material: String,
 }
 
 fn tokens(line: &str) -> std::str::SplitAsciiWhitespace<'_> {
@@ -53,24 +57,11 @@ fn tokens(line: &str) -> std::str::SplitAsciiWhitespace<'_> {
 
 /// Checks the file line by line and counts what it declares.
 fn scan(path: &Path) -> Result<Scan, IngestError> {
-    // Reads best whole: one match over a line's keyword, line by line.
     let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
     let mut r = BufReader::with_capacity(1 << 18, file);
-    let mut s = Scan {
-        vertices: 0,
-        normals: 0,
-        texcoords: 0,
-        colored_vertices: 0,
-        faces: 0,
-        corners_without_normal: 0,
-        corners_without_texcoord: 0,
-        without_texcoord: HashSet::new(),
-        mtllibs: Vec::new(),
-        used_materials: HashSet::new(),
-    };
+    let mut s = Scan::default();
     let mut buf = Vec::new();
     let mut line_no = 0u64;
-    let mut current_material = String::new();
     loop {
         buf.clear();
         if r.read_until(b'\n', &mut buf)
@@ -95,180 +86,226 @@ fn scan(path: &Path) -> Result<Scan, IngestError> {
                 ))
             }
         };
+        s.line(path, at, line)?;
+    }
+    Ok(s)
+}
+
+impl Scan {
+    /// One line, by its keyword; lines of other kinds are left to tobj.
+    fn line(&mut self, path: &Path, at: Location, line: &str) -> Result<(), IngestError> {
         let mut t = tokens(line);
         match t.next() {
-            Some("v") => {
-                let vals: Vec<&str> = t.collect();
-                if vals.len() < 3 {
-                    return Err(IngestError::malformed(
-                        path,
-                        at,
-                        "a vertex needs at least 3 coordinates",
-                    ));
-                }
-                // what tobj accepts after x y z: nothing, a weight w ≠ 0, or a colour r g b
-                if !matches!(vals.len(), 3 | 4 | 6) {
-                    return Err(IngestError::malformed(
-                        path,
-                        at,
-                        format!(
-                            "a vertex has {} values; expected x y z, x y z w or x y z r g b",
-                            vals.len()
-                        ),
-                    ));
-                }
-                if vals.len() == 4 && vals[3].parse::<f32>().map_or(true, |w| w == 0.0) {
-                    return Err(IngestError::malformed(
-                        path,
-                        at,
-                        format!(
-                            "the vertex weight w = {} is not a non-zero number",
-                            crate::error::quoted(vals[3])
-                        ),
-                    ));
-                }
-                let mut p = [0f64; 3];
-                for (k, v) in vals[..3].iter().enumerate() {
-                    p[k] = v.parse::<f32>().map_err(|_| {
-                        IngestError::malformed(
-                            path,
-                            at.clone(),
-                            format!("{} is not a number", crate::error::quoted(v)),
-                        )
-                    })? as f64;
-                }
-                if !p.iter().all(|x| x.is_finite()) {
-                    return Err(IngestError::NonFinite {
-                        path: path.to_path_buf(),
-                        at,
-                        vertex: s.vertices,
-                        coords: p,
-                    });
-                }
-                if vals.len() >= 6 {
-                    s.colored_vertices += 1;
-                }
-                s.vertices += 1;
-            }
-            Some(kw @ ("vn" | "vt")) => {
-                let (need, what) = if kw == "vn" {
-                    (3, "a normal needs 3 numbers (vn x y z)")
-                } else {
-                    (2, "a texture coordinate needs 2 numbers (vt u v)")
-                };
-                let vals: Vec<&str> = t.take(need).collect();
-                if vals.len() < need || vals.iter().any(|v| v.parse::<f32>().is_err()) {
-                    return Err(IngestError::malformed(path, at, what));
-                }
-                if kw == "vn" {
-                    s.normals += 1;
-                } else {
-                    s.texcoords += 1;
-                }
-            }
-            Some("f") => {
-                for (corner, c) in t.enumerate() {
-                    let corner = corner as u64;
-                    let parts: Vec<&str> = c.split('/').collect();
-                    if parts.len() > 3 {
-                        return Err(IngestError::malformed(
-                            path,
-                            at,
-                            format!(
-                                "face corner {} has more than three /-separated indices (v/vt/vn)",
-                                crate::error::quoted(c)
-                            ),
-                        ));
-                    }
-                    // texture coordinate and normal indices: tobj checks them only after the
-                    // whole file, without a line number
-                    for (k, kind, count) in [
-                        (1, "texture coordinate", s.texcoords),
-                        (2, "normal", s.normals),
-                    ] {
-                        let Some(p) = parts.get(k).filter(|p| !p.is_empty()) else {
-                            continue;
-                        };
-                        let idx: Option<i64> = p.parse().ok();
-                        let ok = idx.is_some_and(|i| {
-                            let r = if i < 0 { count as i64 + i } else { i - 1 };
-                            i != 0 && r >= 0 && (r as u64) < count
-                        });
-                        if !ok {
-                            return Err(IngestError::malformed(
-                                path,
-                                at,
-                                format!(
-                                    "face corner {} refers to {kind} {}, but {count} {kind}s are defined before this line (indices are 1..={count}, or -1..=-{count} counting back)",
-                                    crate::error::quoted(c),
-                                    crate::error::quoted(p)
-                                ),
-                            ));
-                        }
-                    }
-                    let v = parts[0];
-                    let has_normal = parts.get(2).is_some_and(|n| !n.is_empty());
-                    let idx: i64 = v.parse().map_err(|_| {
-                        IngestError::malformed(
-                            path,
-                            at.clone(),
-                            format!(
-                                "face corner {} has no vertex index",
-                                crate::error::quoted(c)
-                            ),
-                        )
-                    })?;
-                    // 1-based, or negative: relative to the vertices read so far
-                    let resolved = if idx < 0 {
-                        s.vertices as i64 + idx
-                    } else {
-                        idx - 1
-                    };
-                    if idx == 0 || resolved < 0 || resolved as u64 >= s.vertices {
-                        return Err(IngestError::IndexOutOfRange {
-                            path: path.to_path_buf(),
-                            at,
-                            face: s.faces,
-                            corner,
-                            index: idx,
-                            vertices: s.vertices,
-                        });
-                    }
-                    if !has_normal {
-                        s.corners_without_normal += 1;
-                    }
-                    if parts.get(1).is_none_or(|t| t.is_empty()) {
-                        s.corners_without_texcoord += 1;
-                        if !s.without_texcoord.contains(&current_material) {
-                            s.without_texcoord.insert(current_material.clone());
-                        }
-                    }
-                }
-                s.faces += 1;
-            }
+            Some("v") => self.vertex(path, at, t)?,
+            Some(kw @ ("vn" | "vt")) => self.coordinate(path, at, kw, t)?,
+            Some("f") => self.face(path, at, t)?,
             Some("mtllib") => {
                 let rest = line.trim().strip_prefix("mtllib").unwrap_or("").trim();
                 if !rest.is_empty() {
-                    s.mtllibs.push(rest.to_string());
+                    self.mtllibs.push(rest.to_string());
                 }
             }
             Some("usemtl") => {
                 // the name as tobj takes it: the rest of the line
                 let name = line.trim().strip_prefix("usemtl").unwrap_or("").trim();
                 if !name.is_empty() {
-                    s.used_materials.insert(name.to_string());
-                    current_material = name.to_string();
+                    self.used_materials.insert(name.to_string());
+                    self.current_material = name.to_string();
                 }
             }
             _ => {}
         }
+        Ok(())
     }
-    Ok(s)
+
+    /// A `v` record: x y z, then nothing, a weight w ≠ 0, or a colour r g b (what tobj
+    /// accepts); the position must be finite.
+    fn vertex(
+        &mut self,
+        path: &Path,
+        at: Location,
+        t: std::str::SplitAsciiWhitespace<'_>,
+    ) -> Result<(), IngestError> {
+        let vals: Vec<&str> = t.collect();
+        if vals.len() < 3 {
+            return Err(IngestError::malformed(
+                path,
+                at,
+                "a vertex needs at least 3 coordinates",
+            ));
+        }
+        if !matches!(vals.len(), 3 | 4 | 6) {
+            return Err(IngestError::malformed(
+                path,
+                at,
+                format!(
+                    "a vertex has {} values; expected x y z, x y z w or x y z r g b",
+                    vals.len()
+                ),
+            ));
+        }
+        if vals.len() == 4 && vals[3].parse::<f32>().map_or(true, |w| w == 0.0) {
+            return Err(IngestError::malformed(
+                path,
+                at,
+                format!(
+                    "the vertex weight w = {} is not a non-zero number",
+                    crate::error::quoted(vals[3])
+                ),
+            ));
+        }
+        let mut p = [0f64; 3];
+        for (k, v) in vals[..3].iter().enumerate() {
+            p[k] = v.parse::<f32>().map_err(|_| {
+                IngestError::malformed(
+                    path,
+                    at.clone(),
+                    format!("{} is not a number", crate::error::quoted(v)),
+                )
+            })? as f64;
+        }
+        if !p.iter().all(|x| x.is_finite()) {
+            return Err(IngestError::NonFinite {
+                path: path.to_path_buf(),
+                at,
+                vertex: self.vertices,
+                coords: p,
+            });
+        }
+        if vals.len() >= 6 {
+            self.colored_vertices += 1;
+        }
+        self.vertices += 1;
+        Ok(())
+    }
+
+    /// A `vn` (3 numbers) or `vt` (2 numbers) record.
+    fn coordinate(
+        &mut self,
+        path: &Path,
+        at: Location,
+        kw: &str,
+        t: std::str::SplitAsciiWhitespace<'_>,
+    ) -> Result<(), IngestError> {
+        let (need, what) = if kw == "vn" {
+            (3, "a normal needs 3 numbers (vn x y z)")
+        } else {
+            (2, "a texture coordinate needs 2 numbers (vt u v)")
+        };
+        let vals: Vec<&str> = t.take(need).collect();
+        if vals.len() < need || vals.iter().any(|v| v.parse::<f32>().is_err()) {
+            return Err(IngestError::malformed(path, at, what));
+        }
+        if kw == "vn" {
+            self.normals += 1;
+        } else {
+            self.texcoords += 1;
+        }
+        Ok(())
+    }
+
+    /// An `f` record: every corner's indices refer to records defined before this line.
+    fn face(
+        &mut self,
+        path: &Path,
+        at: Location,
+        t: std::str::SplitAsciiWhitespace<'_>,
+    ) -> Result<(), IngestError> {
+        for (corner, c) in t.enumerate() {
+            self.corner(path, &at, corner as u64, c)?;
+        }
+        self.faces += 1;
+        Ok(())
+    }
+
+    /// Corner `corner` (`v`, `v/vt`, `v//vn` or `v/vt/vn`) of the face being read.
+    fn corner(
+        &mut self,
+        path: &Path,
+        at: &Location,
+        corner: u64,
+        c: &str,
+    ) -> Result<(), IngestError> {
+        let parts: Vec<&str> = c.split('/').collect();
+        if parts.len() > 3 {
+            return Err(IngestError::malformed(
+                path,
+                at.clone(),
+                format!(
+                    "face corner {} has more than three /-separated indices (v/vt/vn)",
+                    crate::error::quoted(c)
+                ),
+            ));
+        }
+        // texture coordinate and normal indices: tobj checks them only after the whole file,
+        // without a line number
+        for (k, kind, count) in [
+            (1, "texture coordinate", self.texcoords),
+            (2, "normal", self.normals),
+        ] {
+            let Some(p) = parts.get(k).filter(|p| !p.is_empty()) else {
+                continue;
+            };
+            let idx: Option<i64> = p.parse().ok();
+            let ok = idx.is_some_and(|i| {
+                let r = if i < 0 { count as i64 + i } else { i - 1 };
+                i != 0 && r >= 0 && (r as u64) < count
+            });
+            if !ok {
+                return Err(IngestError::malformed(
+                    path,
+                    at.clone(),
+                    format!(
+                        "face corner {} refers to {kind} {}, but {count} {kind}s are defined before this line (indices are 1..={count}, or -1..=-{count} counting back)",
+                        crate::error::quoted(c),
+                        crate::error::quoted(p)
+                    ),
+                ));
+            }
+        }
+        let v = parts[0];
+        let has_normal = parts.get(2).is_some_and(|n| !n.is_empty());
+        let idx: i64 = v.parse().map_err(|_| {
+            IngestError::malformed(
+                path,
+                at.clone(),
+                format!(
+                    "face corner {} has no vertex index",
+                    crate::error::quoted(c)
+                ),
+            )
+        })?;
+        // 1-based, or negative: relative to the vertices read so far
+        let resolved = if idx < 0 {
+            self.vertices as i64 + idx
+        } else {
+            idx - 1
+        };
+        if idx == 0 || resolved < 0 || resolved as u64 >= self.vertices {
+            return Err(IngestError::IndexOutOfRange {
+                path: path.to_path_buf(),
+                at: at.clone(),
+                face: self.faces,
+                corner,
+                index: idx,
+                vertices: self.vertices,
+            });
+        }
+        if !has_normal {
+            self.corners_without_normal += 1;
+        }
+        if parts.get(1).is_none_or(|t| t.is_empty()) {
+            self.corners_without_texcoord += 1;
+            if !self.without_texcoord.contains(&self.current_material) {
+                self.without_texcoord.insert(self.current_material.clone());
+            }
+        }
+        Ok(())
+    }
 }
 
 impl ObjSource {
     pub fn open(path: &Path) -> Result<(ObjSource, MeshInfo), IngestError> {
-        // Reads best whole: tobj's load joined with the pre-scan's lines.
         let s = scan(path)?;
         let mut warnings = Vec::new();
         let mut has_colors = s.colored_vertices > 0 && s.colored_vertices == s.vertices;
@@ -392,7 +429,6 @@ impl ObjSource {
     }
 
     pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
-        // Reads best whole: one pass over tobj's meshes, faces in file order, into the emitter.
         let path = &self.path;
         // `..Default::default()` covers fields that tobj features enabled elsewhere may add
         #[allow(clippy::needless_update)]

@@ -8,10 +8,10 @@
 //! are fanned from corner 0, as the plain face reader does: the same triangles, each with the
 //! record's material, colour and its corners' texture coordinates.
 
-use crate::ply_faces::{gather, repeats, Sink};
+use crate::batch::{repeats, Sink};
 use crate::ply_header::{Element, Kind};
 use crate::ply_records::Records;
-use crate::ply_vertices::{color_byte, non_finite, VertexSource};
+use crate::ply_vertices::{color_byte, gather, non_finite, VertexSource};
 use crate::{IngestError, Location};
 use std::path::Path;
 use voxlod_geom::{TRI_HAS_COLORS, TRI_HAS_UV};

@@ -3,84 +3,14 @@
 //! Indices are read one at a time and only the last two are kept, so a polygon or strip
 //! of any length needs no buffer.
 
-use crate::batch::{Emitter, Prepared};
+use crate::batch::{repeats, Emitter, LocalBatch, Sink};
 use crate::ply_face_data::FaceRecords;
 use crate::ply_header::{Element, Kind, Scalar};
 use crate::ply_records::{Records, SliceRecords};
-use crate::ply_vertices::{non_finite, VertexSource};
+use crate::ply_vertices::{gather, non_finite, VertexSource};
 use crate::IngestError;
 use std::path::Path;
-use voxlod_geom::{Triangle, DEFAULT_COLOR, TRI_HAS_COLORS, TRI_HAS_NORMALS, TRI_HAS_UV};
-
-/// Where decoded triangles go: the [`Emitter`] (sequential reading) or a [`LocalBatch`] (one
-/// worker's share of a parallel read).
-pub(crate) trait Sink {
-    fn polygon(&mut self);
-    fn repeated_index(&mut self);
-    fn push(&mut self, t: Triangle) -> Result<(), IngestError>;
-    fn bytes_done(&mut self, bytes: u64);
-}
-
-impl Sink for Emitter<'_> {
-    #[inline]
-    fn polygon(&mut self) {
-        self.stats.polygons += 1;
-    }
-    #[inline]
-    fn repeated_index(&mut self) {
-        Emitter::repeated_index(self)
-    }
-    #[inline]
-    fn push(&mut self, t: Triangle) -> Result<(), IngestError> {
-        Emitter::push(self, t)
-    }
-    #[inline]
-    fn bytes_done(&mut self, bytes: u64) {
-        self.bytes_done = bytes;
-    }
-}
-
-/// Triangles and counts of a range of face records decoded by one worker, handed to the
-/// emitter in record order afterwards ([`Emitter::push_local`]).
-#[derive(Default)]
-pub(crate) struct LocalBatch {
-    pub tris: Vec<Triangle>,
-    pub polygons: u64,
-    pub degenerate: u64,
-    pub repeated: u64,
-    /// The emitter's `prepare` step run on `tris` by the worker, once they are complete.
-    pub prepared: Option<Prepared>,
-}
-
-impl Sink for LocalBatch {
-    #[inline]
-    fn polygon(&mut self) {
-        self.polygons += 1;
-    }
-    #[inline]
-    fn repeated_index(&mut self) {
-        self.repeated += 1;
-    }
-    #[inline]
-    fn push(&mut self, t: Triangle) -> Result<(), IngestError> {
-        self.add(t);
-        Ok(())
-    }
-    #[inline]
-    fn bytes_done(&mut self, _: u64) {}
-}
-
-impl LocalBatch {
-    /// Keeps `t` unless it has zero area (the same test as `Emitter::push`).
-    #[inline]
-    fn add(&mut self, t: Triangle) {
-        if t.is_degenerate() {
-            self.degenerate += 1;
-        } else {
-            self.tris.push(t);
-        }
-    }
-}
+use voxlod_geom::{TRI_HAS_COLORS, TRI_HAS_NORMALS, TRI_HAS_UV};
 
 /// Face records per worker and round of [`stream_triangles_parallel`]. A round is cut into
 /// [`PARTS_PER_THREAD`] parts per worker, each handed on as one batch, so a share must not
@@ -117,7 +47,6 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     off: usize,
     em: &mut Emitter,
 ) -> Result<(), IngestError> {
-    // Reads best whole: one pipelined algorithm; its closures share state.
     use rayon::prelude::*;
     let (path, el, list, verts, flags) =
         (faces.path, faces.el, faces.list, faces.verts, faces.flags);
@@ -379,40 +308,4 @@ fn emit<R: Records, V: VertexSource, S: Sink>(
         Ok(t) => em.push(t),
         Err((vi, p)) => Err(non_finite(path, src.location(), vi as u64, p)),
     }
-}
-
-/// A corner index repeated: the triangle has zero area.
-#[inline]
-pub(crate) fn repeats(tri: [usize; 3]) -> bool {
-    tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]
-}
-
-/// The triangle of vertices `tri`, or the first vertex with a non-finite position.
-#[inline]
-pub(crate) fn gather<V: VertexSource>(
-    verts: &V,
-    tri: [usize; 3],
-    flags: u32,
-) -> Result<Triangle, (usize, [f32; 3])> {
-    // filled corner by corner: `array::map` here compiled to slow copies
-    let mut t = Triangle {
-        v: [[0.0; 3]; 3],
-        n: [[0.0; 3]; 3],
-        c: [DEFAULT_COLOR; 3],
-        flags,
-        uv: [[0.0; 2]; 3],
-    };
-    for (k, &vi) in tri.iter().enumerate() {
-        let c = verts.corner(vi);
-        if !(c.p[0].is_finite() && c.p[1].is_finite() && c.p[2].is_finite()) {
-            return Err((vi, c.p));
-        }
-        t.v[k] = c.p;
-        t.n[k] = c.n;
-        t.c[k] = c.c;
-        if flags & TRI_HAS_UV != 0 {
-            t.uv[k] = c.uv;
-        }
-    }
-    Ok(t)
 }

@@ -212,7 +212,7 @@ pub(crate) struct Header {
 
 /// Reads the header from `r`, leaving `r` at the first body byte.
 pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, IngestError> {
-    // Reads best whole: the header grammar, line by line, in one match over the keywords.
+    // The header grammar, line by line: one match over the keywords.
     let herr = |line: u64, message: String| IngestError::Header {
         path: path.to_path_buf(),
         line,
@@ -353,7 +353,6 @@ pub(crate) fn parse_header(path: &Path, r: &mut dyn BufRead) -> Result<Header, I
 
 /// Finds the vertex attributes and the triangle-bearing elements.
 fn layout(elements: &mut [Element]) -> Result<Layout, String> {
-    // Reads best whole: one pass over the elements for vertices and faces.
     let vertex = elements
         .iter()
         .position(|e| e.name == "vertex")

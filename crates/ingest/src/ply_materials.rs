@@ -57,7 +57,7 @@ pub(crate) fn material_table(
     header: &mut Header,
     scan: &mut dyn FnMut(&Header, usize, usize, Scalar) -> Result<BTreeSet<i64>, IngestError>,
 ) -> Result<PlyMaterials, IngestError> {
-    // Reads best whole: the material rules in their order of precedence.
+    // The material rules in their order of precedence.
     let file = path.display().to_string();
     let mut out = PlyMaterials::default();
     let warn = |out: &mut PlyMaterials, w: String| out.warnings.push(format!("{file}: {w}"));

@@ -7,7 +7,7 @@ use crate::ply_header::{Element, Kind, Layout, Role, Scalar};
 use crate::ply_records::{decode_f32, decode_f64, Records};
 use crate::{IngestError, Location};
 use std::path::Path;
-use voxlod_geom::DEFAULT_COLOR;
+use voxlod_geom::{Triangle, DEFAULT_COLOR, TRI_HAS_UV};
 
 /// One vertex's attributes as a triangle corner.
 #[derive(Clone, Copy, Debug)]
@@ -316,6 +316,36 @@ pub(crate) fn non_finite(path: &Path, at: Location, vertex: u64, p: [f32; 3]) ->
         vertex,
         coords: p.map(|x| x as f64),
     }
+}
+
+/// The triangle of vertices `tri`, or the first vertex with a non-finite position.
+#[inline]
+pub(crate) fn gather<V: VertexSource>(
+    verts: &V,
+    tri: [usize; 3],
+    flags: u32,
+) -> Result<Triangle, (usize, [f32; 3])> {
+    // filled corner by corner: `array::map` here compiled to slow copies
+    let mut t = Triangle {
+        v: [[0.0; 3]; 3],
+        n: [[0.0; 3]; 3],
+        c: [DEFAULT_COLOR; 3],
+        flags,
+        uv: [[0.0; 2]; 3],
+    };
+    for (k, &vi) in tri.iter().enumerate() {
+        let c = verts.corner(vi);
+        if !(c.p[0].is_finite() && c.p[1].is_finite() && c.p[2].is_finite()) {
+            return Err((vi, c.p));
+        }
+        t.v[k] = c.p;
+        t.n[k] = c.n;
+        t.c[k] = c.c;
+        if flags & TRI_HAS_UV != 0 {
+            t.uv[k] = c.uv;
+        }
+    }
+    Ok(t)
 }
 
 #[cfg(test)]

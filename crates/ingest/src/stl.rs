@@ -191,7 +191,7 @@ impl StlSource {
     }
 
     fn stream_ascii(&self, em: &mut Emitter) -> Result<(), IngestError> {
-        // Reads best whole: the ASCII STL grammar as one state machine.
+        // The ASCII STL grammar as one state machine.
         let path = &self.path;
         let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
         let counter: Counter = Rc::new(Cell::new(0));

@@ -30,18 +30,31 @@ pub fn sync_dir(dir: &Path) {
 /// Writes `bytes` to `path` atomically: [`temp_path`], fsync, rename over `path`, fsync of
 /// the folder. On an error the temporary file is removed and `path` is as it was.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let tmp = temp_path(path);
+    write_atomic_via(&temp_path(path), path, bytes)
+}
+
+/// [`write_atomic`] staged under the temporary name `tmp` (in `path`'s folder), for a caller
+/// whose temporary name must differ from [`temp_path`]'s, e.g. one per process when several
+/// processes may write the same file at once.
+pub fn write_atomic_via(tmp: &Path, path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let r = (|| {
-        let mut f = File::create(&tmp)?;
+        let mut f = File::create(tmp)?;
         f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
+        commit(f, tmp, path)
     })();
     if r.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+        let _ = std::fs::remove_file(tmp);
     }
-    r?;
+    r
+}
+
+/// The end of a file streamed to `tmp` (in `path`'s folder): fsync `file`, rename `tmp` over
+/// `path`, fsync the folder. The caller removes `tmp` on an error (it still holds what was
+/// written).
+pub fn commit(file: File, tmp: &Path, path: &Path) -> std::io::Result<()> {
+    file.sync_all()?;
+    drop(file);
+    std::fs::rename(tmp, path)?;
     sync_dir(path.parent().unwrap_or(Path::new(".")));
     Ok(())
 }
@@ -58,6 +71,20 @@ mod tests {
         write_atomic(&p, b"new").unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"new");
         assert!(!temp_path(&p).exists());
+    }
+
+    #[test]
+    fn a_streamed_file_is_committed_under_its_name() {
+        let d = tempfile::tempdir().unwrap();
+        let (p, tmp) = (d.path().join("out.ply"), d.path().join("out.ply.7.tmp"));
+        let mut f = File::create(&tmp).unwrap();
+        f.write_all(b"streamed").unwrap();
+        commit(f, &tmp, &p).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"streamed");
+        assert!(!tmp.exists());
+        write_atomic_via(&tmp, &p, b"again").unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"again");
+        assert!(!tmp.exists());
     }
 
     #[test]

@@ -2,6 +2,7 @@
 //! section 4, Figures 4 and 5).
 
 use voxlod_format::voxel::{border_caps, morton8, pack_normals, Voxel};
+use voxlod_geom::morton::morton8_word_by_table;
 
 /// Parent position and its Morton key for a child voxel at `pos` in child `octant`
 /// (`octant = dx | dy<<1 | dz<<2`): each coordinate without its last bit, offset by the octant.
@@ -151,7 +152,7 @@ impl Runs {
         let mut sorted = true;
         let mut last_code = *prev_code;
         for v in block {
-            let code = Some(morton_of_word(v.pos_mask));
+            let code = Some(morton8_word_by_table(v.pos_mask));
             sorted &= code > last_code;
             last_code = code;
             let parent = v.pos_mask & 0x00fe_fefe;
@@ -204,29 +205,6 @@ impl Runs {
         }));
     }
 }
-
-/// `morton8` of a position word by table (bits 0–23: x, y, z), for the order check.
-#[inline]
-fn morton_of_word(w: u32) -> u32 {
-    SPREAD[(w & 0xff) as usize]
-        | SPREAD[(w >> 8 & 0xff) as usize] << 1
-        | SPREAD[(w >> 16 & 0xff) as usize] << 2
-}
-
-/// Byte `v` with its bits moved to every third bit (bit `b` → bit `3b`).
-static SPREAD: [u32; 256] = {
-    let mut t = [0u32; 256];
-    let mut v = 0;
-    while v < 256 {
-        let mut b = 0;
-        while b < 8 {
-            t[v] |= ((v as u32 >> b) & 1) << (3 * b);
-            b += 1;
-        }
-        v += 1;
-    }
-    t
-};
 
 /// A normal word's components `q + 512` (0…1023: the sign bit flipped) in 16-bit lanes, and 1
 /// in bits 48–63 to count the run. Eight of them cannot carry between lanes (8·1023 < 2^16).

@@ -13,60 +13,11 @@ use voxlod_format::Reader;
 
 use crate::camera::Shot;
 use crate::faces::{face_direction, node_faces_by, ColorBy};
+use crate::pass::{pass_pipeline, Targets};
 use crate::picture::Picture;
 use crate::source_draw;
 use crate::RenderError;
 
-const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
-const SAMPLES: u32 = 4;
-
-/// A pipeline of the picture's pass (the voxel faces', the source triangles'): `module`'s `vs`
-/// and `fs` entries over one vertex buffer with `layout`'s uniforms, depth tested (less) and
-/// written, into the pass's targets ([`COLOR_FORMAT`], [`DEPTH_FORMAT`], [`SAMPLES`]).
-pub(crate) fn pass_pipeline(
-    device: &wgpu::Device,
-    label: &str,
-    layout: &wgpu::PipelineLayout,
-    module: &wgpu::ShaderModule,
-    buffer: wgpu::VertexBufferLayout,
-    primitive: wgpu::PrimitiveState,
-) -> wgpu::RenderPipeline {
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: Some(layout),
-        vertex: wgpu::VertexState {
-            module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[Some(buffer)],
-        },
-        primitive,
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: wgpu::MultisampleState {
-            count: SAMPLES,
-            ..Default::default()
-        },
-        fragment: Some(wgpu::FragmentState {
-            module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::ColorTargetState {
-                format: COLOR_FORMAT,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
-}
 /// Background of the picture (light grey); covered pixels have alpha 255, the rest 0.
 pub const BACKGROUND: [u8; 3] = [236, 238, 242];
 
@@ -251,7 +202,6 @@ impl Renderer {
         shot: &Shot,
         color: ColorBy,
     ) -> Result<Picture, RenderError> {
-        // Reads best whole: one picture: cull, upload, draw both kinds of geometry.
         let centre = shot.target;
         let tris = source_draw::gather(reader, source, centre, color)?;
         let mut faces: Vec<FaceInstance> = Vec::new();
@@ -359,8 +309,6 @@ impl Renderer {
         batches: &[Batch],
         sources: &[SourceBatch],
     ) -> Result<(u32, u32, Vec<u8>), RenderError> {
-        // Reads best whole: one wgpu frame: targets, uniforms, pass, read-back.
-        let centre = origin;
         let (w, h) = (shot.width, shot.height);
         let max_dim = self.gpu.device.limits().max_texture_dimension_2d;
         if w > max_dim || h > max_dim {
@@ -368,18 +316,29 @@ impl Renderer {
                 "image {w}x{h} exceeds the adapter's {max_dim} pixels per side"
             )));
         }
-        let view_proj = shot.view_proj(centre).as_mat4();
+        let (_uniforms, bind) = self.uniforms(shot, origin);
+        let targets = Targets::new(&self.gpu.device, w, h);
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        self.encode_pass(&mut enc, &targets, &bind, batches, sources);
+        let rgba = self.read_back(enc, &targets, w, h)?;
+        Ok((w, h, rgba))
+    }
+
+    /// The uniform buffer of `shot` (positions relative to `origin`) and its bind group:
+    /// view_proj, the light (vec4), the eye relative to the origin (vec4; read by
+    /// source.wgsl).
+    fn uniforms(&self, shot: &Shot, origin: DVec3) -> (wgpu::Buffer, wgpu::BindGroup) {
+        let view_proj = shot.view_proj(origin).as_mat4();
         // light from the upper left behind the eye, fixed relative to the camera
         let fwd = (shot.target - shot.eye).normalize();
         let right = fwd.cross(shot.up).normalize();
         let light = (-fwd * 0.8 + shot.up * 0.7 - right * 0.45)
             .normalize()
             .as_vec3();
-        // view_proj, light (vec4), eye relative to the origin (vec4; read by source.wgsl)
         let mut uniforms = [0f32; 24];
         uniforms[..16].copy_from_slice(&view_proj.to_cols_array());
         uniforms[16..19].copy_from_slice(&light.to_array());
-        uniforms[20..23].copy_from_slice(&(shot.eye - centre).as_vec3().to_array());
+        uniforms[20..23].copy_from_slice(&(shot.eye - origin).as_vec3().to_array());
 
         use wgpu::util::DeviceExt;
         let ubuf = self
@@ -401,90 +360,75 @@ impl Renderer {
                     resource: ubuf.as_entire_binding(),
                 }],
             });
-        let size = wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: 1,
-        };
-        let texture = |format, samples, usage| {
-            self.gpu.device.create_texture(&wgpu::TextureDescriptor {
-                label: None,
-                size,
-                mip_level_count: 1,
-                sample_count: samples,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage,
-                view_formats: &[],
-            })
-        };
-        let msaa = texture(
-            COLOR_FORMAT,
-            SAMPLES,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        );
-        let resolved = texture(
-            COLOR_FORMAT,
-            1,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-        );
-        let depth = texture(
-            DEPTH_FORMAT,
-            SAMPLES,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        );
-        let (msaa_view, resolved_view, depth_view) = (
-            msaa.create_view(&Default::default()),
-            resolved.create_view(&Default::default()),
-            depth.create_view(&Default::default()),
-        );
+        (ubuf, bind)
+    }
+
+    /// The render pass into `targets`: cleared to [`BACKGROUND`] (alpha 0) and depth 1, the
+    /// face instances of `batches`, then the source triangles of `sources`.
+    fn encode_pass(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        targets: &Targets,
+        bind: &wgpu::BindGroup,
+        batches: &[Batch],
+        sources: &[SourceBatch],
+    ) {
         let bg = BACKGROUND.map(|c| c as f64 / 255.0);
-        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("voxel faces"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &msaa_view,
-                    depth_slice: None,
-                    resolve_target: Some(&resolved_view),
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color {
-                            r: bg[0],
-                            g: bg[1],
-                            b: bg[2],
-                            a: 0.0,
-                        }),
-                        store: wgpu::StoreOp::Discard,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Discard,
+        let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("voxel faces"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &targets.msaa_view,
+                depth_slice: None,
+                resolve_target: Some(&targets.resolved_view),
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color {
+                        r: bg[0],
+                        g: bg[1],
+                        b: bg[2],
+                        a: 0.0,
                     }),
-                    stencil_ops: None,
+                    store: wgpu::StoreOp::Discard,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &targets.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
                 }),
-                ..Default::default()
-            });
-            if !batches.is_empty() {
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &bind, &[]);
-            }
-            for (vbuf, range) in batches {
-                pass.set_vertex_buffer(0, vbuf.slice(..));
-                pass.draw(0..6, range.clone());
-            }
-            if !sources.is_empty() {
-                pass.set_pipeline(&self.source_pipeline);
-                pass.set_bind_group(0, &bind, &[]);
-            }
-            for (vertices, indices, count) in sources {
-                pass.set_vertex_buffer(0, *vertices);
-                pass.set_index_buffer(*indices, wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..*count, 0, 0..1);
-            }
+                stencil_ops: None,
+            }),
+            ..Default::default()
+        });
+        if !batches.is_empty() {
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, bind, &[]);
         }
+        for (vbuf, range) in batches {
+            pass.set_vertex_buffer(0, vbuf.slice(..));
+            pass.draw(0..6, range.clone());
+        }
+        if !sources.is_empty() {
+            pass.set_pipeline(&self.source_pipeline);
+            pass.set_bind_group(0, bind, &[]);
+        }
+        for (vertices, indices, count) in sources {
+            pass.set_vertex_buffer(0, *vertices);
+            pass.set_index_buffer(*indices, wgpu::IndexFormat::Uint32);
+            pass.draw_indexed(0..*count, 0, 0..1);
+        }
+    }
+
+    /// Copies the resolved picture of `targets` (`w`×`h`) into a mapped buffer after the
+    /// commands of `enc`, submits them, waits, and returns its RGBA rows without the row
+    /// padding the copy needs.
+    fn read_back(
+        &self,
+        mut enc: wgpu::CommandEncoder,
+        targets: &Targets,
+        w: u32,
+        h: u32,
+    ) -> Result<Vec<u8>, RenderError> {
         let row = (4 * w).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
             * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -495,7 +439,7 @@ impl Renderer {
         });
         enc.copy_texture_to_buffer(
             wgpu::TexelCopyTextureInfo {
-                texture: &resolved,
+                texture: &targets.resolved,
                 mip_level: 0,
                 origin: wgpu::Origin3d::ZERO,
                 aspect: wgpu::TextureAspect::All,
@@ -508,7 +452,7 @@ impl Renderer {
                     rows_per_image: Some(h),
                 },
             },
-            size,
+            targets.size,
         );
         self.gpu.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
@@ -538,6 +482,6 @@ impl Renderer {
             }
         }
         staging.unmap();
-        Ok((w, h, rgba))
+        Ok(rgba)
     }
 }

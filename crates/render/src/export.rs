@@ -52,7 +52,7 @@ pub fn export_ply_with(
     path: &Path,
     before_write: &mut dyn FnMut(&ExportSummary) -> Result<(), RenderError>,
 ) -> Result<ExportSummary, RenderError> {
-    // Reads best whole: two passes (count, write) over the same nodes.
+    // Two passes over the same nodes: count, then write.
     let nodes = level_nodes(reader, level)?;
     let mut buf = Vec::new();
     let mut quads = 0u64;
@@ -70,26 +70,24 @@ pub fn export_ply_with(
     let spec = reader.spec();
     let materials = reader.has_materials();
     let vertex_bytes = VERTEX_BYTES + if materials { 4 } else { 0 };
-    let material_property = if materials {
-        "property uint material\n"
-    } else {
-        ""
-    };
-    let header = format!(
-        "ply\nformat binary_little_endian 1.0\n\
-         comment voxlod export: level {level} of {}³ grid, voxel edge {}, {voxels} voxels\n\
-         comment one quad per active voxel face; vertex normal = voxel normal\n\
-         element vertex {vertices}\n\
-         property float x\nproperty float y\nproperty float z\n\
-         property float nx\nproperty float ny\nproperty float nz\n\
-         property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n\
-         {material_property}\
-         element face {quads}\n\
-         property list uchar int vertex_indices\n\
-         end_header\n",
-        spec.resolution,
-        spec.voxel_size_at(level)
-    );
+    let mut header = voxlod_io::PlyHeader::binary_le();
+    header
+        .comment(&format!(
+            "voxlod export: level {level} of {}³ grid, voxel edge {}, {voxels} voxels",
+            spec.resolution,
+            spec.voxel_size_at(level)
+        ))
+        .comment("one quad per active voxel face; vertex normal = voxel normal")
+        .element("vertex", vertices)
+        .properties("float", &["x", "y", "z", "nx", "ny", "nz"])
+        .properties("uchar", &["red", "green", "blue", "alpha"]);
+    if materials {
+        header.property("uint", "material");
+    }
+    let header = header
+        .element("face", quads)
+        .list("uchar", "int", "vertex_indices")
+        .end();
     let summary = ExportSummary {
         voxels,
         quads,

@@ -128,25 +128,25 @@ pub fn export_source_ply(
 
 fn ply_header(reader: &Reader, vertices: u64, triangles: u64, attrs: u32) -> String {
     let spec = reader.spec();
-    let mut h = format!(
-        "ply\nformat binary_little_endian 1.0\n\
-         comment voxlod export: source triangles of {}³ grid, voxel edge {}, positions within 1/256 voxel\n\
-         element vertex {vertices}\n\
-         property float x\nproperty float y\nproperty float z\n",
+    let mut h = voxlod_io::PlyHeader::binary_le();
+    h.comment(&format!(
+        "voxlod export: source triangles of {}³ grid, voxel edge {}, positions within 1/256 voxel",
         spec.resolution, spec.voxel_size
-    );
+    ))
+    .element("vertex", vertices)
+    .properties("float", &["x", "y", "z"]);
     if attrs & ATTR_NORMALS != 0 {
-        h += "property float nx\nproperty float ny\nproperty float nz\n";
+        h.properties("float", &["nx", "ny", "nz"]);
     }
     if attrs & ATTR_COLORS != 0 {
-        h +=
-            "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n";
+        h.properties("uchar", &["red", "green", "blue", "alpha"]);
     }
-    h += &format!("element face {triangles}\nproperty list uchar int vertex_indices\n");
+    h.element("face", triangles)
+        .list("uchar", "int", "vertex_indices");
     if attrs & ATTR_MATERIALS != 0 {
-        h += "property ushort material\n";
+        h.property("ushort", "material");
     }
-    h + "end_header\n"
+    h.end()
 }
 
 fn write_vertices(

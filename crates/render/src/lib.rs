@@ -42,6 +42,7 @@ mod error;
 mod export;
 mod export_source;
 mod faces;
+mod pass;
 mod picture;
 mod source_draw;
 pub mod view;

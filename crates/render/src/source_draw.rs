@@ -1,4 +1,4 @@
-//! Source triangles in the picture (issue 15; Chajdas, Reitinger & Westermann, "Scalable
+//! Source triangles in the picture (Chajdas, Reitinger & Westermann, "Scalable
 //! rendering for very large meshes", WSCG 2014, section 5: where the finest voxels still
 //! project above the pixel error, the original geometry is drawn instead). The leaves that
 //! [`crate::cut::CutNode::over`] marks are drawn from their stored source triangles
@@ -11,9 +11,9 @@ use glam::DVec3;
 use voxlod_format::triangles::oct_decode;
 use voxlod_format::Reader;
 
-use crate::draw::pass_pipeline;
 use crate::export_source::source_world_position;
 use crate::faces::{material_color, ColorBy};
+use crate::pass::pass_pipeline;
 use crate::RenderError;
 
 /// The colour of a vertex without a stored colour: the voxels' default (`voxlod_geom::DEFAULT_COLOR`).

@@ -148,7 +148,7 @@ impl Bin {
 /// Writes the scene (one scene of roots `roots`, the default) to `path`: a `.glb` if it ends
 /// in `.glb`, else a `.gltf` whose buffer is `NAME.bin` beside it.
 pub fn write(path: &Path, meshes: &[Vec<Prim>], nodes: &[Node], roots: &[usize], mats: &[Mat]) {
-    // Reads best whole: test support: the glTF writer's JSON in the specification's order.
+    // The glTF JSON in the specification's order.
     let mut bin = Bin {
         data: Vec::new(),
         views: Vec::new(),

@@ -5,8 +5,8 @@
 //!   `CI=true`, where missing is a failure.
 //! * [`python_ready`]: whether python3 with numpy and zstandard (the Python reader's needs)
 //!   runs, with the same rule: missing is a skip elsewhere, a failure under `CI=true`.
-//! * [`Rng`]: a deterministic SplitMix64 generator (no dependency, same numbers on every
-//!   platform), with the draws the tests need (floats, ranges, integers, points, rotations).
+//! * [`Rng`]: a deterministic SplitMix64 generator (`voxlod_io::splitmix64`, same numbers on
+//!   every platform), with the draws the tests need (floats, ranges, integers, points, rotations).
 //! * [`gltf`]: a minimal glTF 2.0 writer (`.gltf` + `.bin`, `.glb`).
 //! * [`textured`]: a textured OBJ converted to textured PLY (both texture coordinate conventions).
 //! * [`mesh`]: made-up meshes (icosphere, cube, transforms) and a minimal PLY/OBJ reader
@@ -14,8 +14,8 @@
 //! * [`suite`]: the check that every test file of a crate's one test binary (`tests/all/`) is
 //!   declared in its `main.rs`.
 //!
-//! It depends on nothing, not even the other voxlod crates, so any crate can take it as a
-//! dev-dependency without a cycle.
+//! It depends on nothing but `voxlod-io` (which depends on nothing but `std`), so any crate
+//! can take it as a dev-dependency without a cycle.
 //!
 //! ```
 //! use voxlod_testkit::{mesh, Rng};

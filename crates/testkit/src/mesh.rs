@@ -185,7 +185,6 @@ struct Element {
 /// `x y z` by name among any scalar vertex properties; the face element's `vertex_indices`
 /// (or `vertex_index`) list; other elements skipped. Panics on anything else (a test helper).
 pub fn read_ply(path: &Path) -> Indexed {
-    // Reads best whole: test support: an independent PLY reader kept in one piece, as a reference.
     let d = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     // the header may end its lines with \r\n (bun_zipper.ply does)
     let at = d
@@ -323,12 +322,13 @@ pub fn read_obj(path: &Path) -> Indexed {
 /// Writes a binary little-endian PLY with `float x y z` vertices and `list uchar uint`
 /// triangles (what the bundled sample and most scans use).
 pub fn write_ply(path: &Path, m: &Indexed) {
-    let mut out = format!(
-        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar uint vertex_indices\nend_header\n",
-        m.0.len(),
-        m.1.len()
-    )
-    .into_bytes();
+    let mut out = voxlod_io::PlyHeader::binary_le()
+        .element("vertex", m.0.len() as u64)
+        .properties("float", &["x", "y", "z"])
+        .element("face", m.1.len() as u64)
+        .list("uchar", "uint", "vertex_indices")
+        .end()
+        .into_bytes();
     for p in &m.0 {
         for c in p {
             out.extend_from_slice(&(*c as f32).to_le_bytes());

@@ -1,5 +1,5 @@
-//! SplitMix64 (Steele, Lea & Flood, "Fast splittable pseudorandom number generators",
-//! OOPSLA 2014): a 64-bit state, every seed (including 0) good, the same numbers everywhere.
+//! The tests' random draws on [`voxlod_io::splitmix64`] (Steele, Lea & Flood, OOPSLA 2014):
+//! a 64-bit state, every seed (including 0) good, the same numbers everywhere.
 
 /// A deterministic random generator for tests; the field is the state (any seed is fine).
 #[derive(Clone, Debug)]
@@ -8,11 +8,7 @@ pub struct Rng(pub u64);
 impl Rng {
     /// The next 64 random bits.
     pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
+        voxlod_io::splitmix64(&mut self.0)
     }
 
     /// Uniform in [0, 1), 53 random bits.

@@ -143,8 +143,7 @@ impl TileWriter {
         self.out.write_all(&crc.to_le_bytes())?;
         self.out.write_all(MAGIC)?;
         let file = self.out.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        std::fs::rename(&self.part, &self.path)?;
+        voxlod_io::commit(file, &self.part, &self.path)?;
         Ok(entries)
     }
 }

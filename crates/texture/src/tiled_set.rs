@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use voxlod_geom::{Material, Wrap};
+use voxlod_io::{fnv1a, mtime_ns, FNV1A_OFFSET};
 
 use crate::pyramid::pyramid_bytes;
 use crate::tile_cache::{CacheStats, TileCache, MIN_CAPACITY};
@@ -73,15 +74,6 @@ fn distinct_sources(materials: &[Material]) -> (Vec<Source<'_>>, Vec<Option<usiz
     (sources, of_material)
 }
 
-/// FNV-1a, 64 bit (stable across Rust releases, unlike std's hasher).
-fn fnv1a(bytes: &[u8], mut h: u64) -> u64 {
-    for b in bytes {
-        h ^= *b as u64;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    h
-}
-
 impl Source<'_> {
     /// The image's size from its header alone.
     fn probe(&self) -> Result<(u32, u32), String> {
@@ -110,19 +102,13 @@ impl Source<'_> {
     /// The identity the tile file records: the path with the file's size and modification
     /// time, or the embedded bytes.
     fn key(&self) -> u64 {
-        let h = fnv1a(
-            self.path.as_os_str().as_encoded_bytes(),
-            0xcbf2_9ce4_8422_2325,
-        );
+        let h = fnv1a(self.path.as_os_str().as_encoded_bytes(), FNV1A_OFFSET);
         match &self.m.embedded {
             Some(b) => fnv1a(&b.0, h),
             None => {
                 let meta = std::fs::metadata(self.path).ok();
                 let len = meta.as_ref().map_or(0, |m| m.len());
-                let mtime = meta
-                    .and_then(|m| m.modified().ok())
-                    .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-                    .map_or(0, |d| d.as_nanos() as u64);
+                let mtime = meta.as_ref().map_or(0, |m| mtime_ns(m) as u64);
                 fnv1a(&mtime.to_le_bytes(), fnv1a(&len.to_le_bytes(), h))
             }
         }

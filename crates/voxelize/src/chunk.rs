@@ -11,6 +11,7 @@ use std::sync::Arc;
 use voxlod_format::voxel::{
     border_caps, face_mask, morton8, pack_color, pack_normal_f64, Voxel, NORMAL_SCALE,
 };
+use voxlod_geom::morton::unmorton8;
 use voxlod_geom::{Triangle, CHUNK, TRI_HAS_NORMALS};
 use voxlod_texture::{linear_to_srgb, TextureSet};
 
@@ -26,39 +27,6 @@ use crate::{scanline, single, Method, Mode};
 /// ([`crate::single`]); a chunk with more clips every pair instead (a mesh with very many
 /// triangles per chunk, e.g. a fine scan at a coarse resolution).
 pub const DEFER_BYTES: usize = 32 << 20;
-
-/// The position of an in-chunk Morton code (24 bits), by three table lookups: for byte `b` of
-/// the code and each of its values, the coordinate bits it holds as `x | y << 8 | z << 16`.
-#[inline]
-fn unmorton8(m: u32) -> [u8; 3] {
-    let w = UNMORTON[0][(m & 0xff) as usize]
-        | UNMORTON[1][(m >> 8 & 0xff) as usize]
-        | UNMORTON[2][(m >> 16 & 0xff) as usize];
-    [w as u8, (w >> 8) as u8, (w >> 16) as u8]
-}
-
-/// The tables of [`unmorton8`]: Morton bit `i` (bit `j` of byte `b`, `i = 8b + j`) is bit
-/// `i / 3` of axis `i % 3`.
-static UNMORTON: [[u32; 256]; 3] = {
-    let mut t = [[0u32; 256]; 3];
-    let mut b = 0;
-    while b < 3 {
-        let mut v = 0;
-        while v < 256 {
-            let mut j = 0;
-            while j < 8 {
-                if v >> j & 1 == 1 {
-                    let i = 8 * b + j;
-                    t[b][v] |= 1 << ((i % 3) * 8 + i / 3);
-                }
-                j += 1;
-            }
-            v += 1;
-        }
-        b += 1;
-    }
-    t
-};
 
 /// Bricks of 8³ voxels per chunk, slots per brick.
 const BRICKS: usize = 32 * 32 * 32;
@@ -488,7 +456,6 @@ impl ChunkVoxelizer {
     /// contribution comes from a triangle with flat attributes gets weight 1 and that triangle's
     /// values, without clipping; every other pair is clipped as before.
     fn accumulate(&mut self, skip: bool) {
-        // Reads best whole: one loop over the marked pairs.
         let ChunkVoxelizer {
             mode,
             origin,
@@ -933,18 +900,6 @@ fn record_words(x: &[f32; 8]) -> [u32; 2] {
 mod tests {
     use super::*;
     use voxlod_testkit::Rng;
-
-    /// [`unmorton8`] inverts `morton8` on every in-chunk position.
-    #[test]
-    fn unmorton8_inverts_morton8() {
-        for x in 0..=255u8 {
-            for y in 0..=255u8 {
-                for z in (0..=255u8).step_by(5).chain([255]) {
-                    assert_eq!(unmorton8(morton8(x, y, z)), [x, y, z]);
-                }
-            }
-        }
-    }
 
     /// The batched encoding equals the scalar [`encode`] bit for bit: on random sums of every
     /// scale, on zero, tiny (subnormal products) and huge sums, on colour means at rounding

@@ -280,7 +280,7 @@ impl TriSetup {
     ///   `≥ 2⁻²⁹⁸`, times a vertex `≥ 2⁻⁴⁴⁷`, all normal in f64; no overflow: `|v| < 2¹²⁸`,
     ///   products `< 2³⁸⁸`. [`TINY`] is added anyway.
     pub fn new(v: &[[f32; 3]; 3], mode: Mode) -> Option<TriSetup> {
-        // Reads best whole: the paper's triangle setup, in order.
+        // The paper's triangle setup, in order.
         if !v.iter().flatten().all(|c| c.is_finite()) {
             return None;
         }
@@ -635,7 +635,7 @@ impl TriSetup {
     /// evaluated incrementally.
     #[inline]
     pub fn scan(&self, lo: [i32; 3], hi: [i32; 3], mut emit: impl FnMut([i32; 3], bool)) {
-        // Reads best whole: the appendix routine, one loop nest.
+        // The paper's appendix routine.
         let lo = [
             lo[0].max(self.bmin[0]),
             lo[1].max(self.bmin[1]),

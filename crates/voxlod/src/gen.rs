@@ -72,18 +72,12 @@ fn load_base(path: &Path) -> Result<Base> {
     Ok(Base { positions, faces })
 }
 
-/// SplitMix64: a tiny, well-known deterministic generator (no dependency needed for this).
+/// Random placements from [`voxlod_io::splitmix64`] (the same numbers on every platform).
 struct Rng(u64);
 impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
+    /// Uniform in [0, 1), 53 random bits.
     fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        (voxlod_io::splitmix64(&mut self.0) >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
@@ -137,7 +131,7 @@ pub fn generate(
     colors: bool,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<(u64, u64, u64)> {
-    let tmp = out.with_extension("ply.tmp");
+    let tmp = voxlod_io::temp_path(out);
     let r = write(base_path, out, &tmp, triangles, seed, colors, progress);
     if r.is_err() {
         let _ = std::fs::remove_file(&tmp);
@@ -168,19 +162,24 @@ fn write(
     let f = std::fs::File::create(tmp).with_context(|| format!("creating {}", tmp.display()))?;
     let mut w = BufWriter::with_capacity(8 << 20, f);
     let werr = |e: std::io::Error| anyhow::anyhow!("writing {}: {e}", tmp.display());
-    write!(
-        w,
-        "ply\nformat binary_little_endian 1.0\ncomment voxlod gen: {copies} copies of {} (seed {seed})\n\
-         element vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n{}\
-         element face {triangles}\nproperty list uchar uint vertex_indices\nend_header\n",
-        base_path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default(),
-        if colors {
-            "property uchar red\nproperty uchar green\nproperty uchar blue\n"
-        } else {
-            ""
-        }
-    )
-    .map_err(werr)?;
+    let mut header = voxlod_io::PlyHeader::binary_le();
+    header
+        .comment(&format!(
+            "voxlod gen: {copies} copies of {} (seed {seed})",
+            base_path
+                .file_name()
+                .map(|n| n.to_string_lossy())
+                .unwrap_or_default()
+        ))
+        .element("vertex", vertices)
+        .properties("float", &["x", "y", "z"]);
+    if colors {
+        header.properties("uchar", &["red", "green", "blue"]);
+    }
+    header
+        .element("face", triangles)
+        .list("uchar", "uint", "vertex_indices");
+    w.write_all(header.end().as_bytes()).map_err(werr)?;
     let total = vertices + triangles;
     let mut done = 0u64;
     let mut rec = Vec::with_capacity(15);
@@ -219,8 +218,7 @@ fn write(
         progress(done, total);
     }
     let f = w.into_inner().map_err(|e| werr(e.into_error()))?;
-    f.sync_all().map_err(werr)?;
-    std::fs::rename(tmp, out)
+    voxlod_io::commit(f, tmp, out)
         .with_context(|| format!("renaming {} to {}", tmp.display(), out.display()))?;
     Ok((vertices, triangles, copies))
 }

@@ -455,7 +455,6 @@ fn warn_extension(output: &Path, ext: &str, quiet: bool) {
 }
 
 fn print_summary(s: &BuildSummary, input: &str) {
-    // Reads best whole: one printed line per summary field, in the order the reader sees them.
     println!("wrote {}", s.output.display());
     println!("  input        {input} ({})", s.input_format);
     println!(
@@ -609,9 +608,10 @@ fn bundled_sample() -> Result<PathBuf> {
     let p = dir.join(SAMPLE_NAME);
     if std::fs::read(&p).map_or(true, |b| b != SAMPLE) {
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        // a temporary name per process: several may write the sample at once
         let tmp = dir.join(format!("{SAMPLE_NAME}.{}.tmp", std::process::id()));
-        std::fs::write(&tmp, SAMPLE).with_context(|| format!("writing {}", tmp.display()))?;
-        std::fs::rename(&tmp, &p).with_context(|| format!("writing {}", p.display()))?;
+        voxlod_io::write_atomic_via(&tmp, &p, SAMPLE)
+            .with_context(|| format!("writing {}", p.display()))?;
     }
     Ok(p)
 }

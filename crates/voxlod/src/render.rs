@@ -25,7 +25,7 @@ pub struct RenderArgs {
     #[arg(long)]
     error: Option<f64>,
     /// Image size, WIDTHxHEIGHT.
-    #[arg(long, default_value = "1024x768", value_parser = parse_size)]
+    #[arg(long, default_value = "1024x768", value_parser = parse_image_size)]
     size: (u32, u32),
     /// Direction from the model towards the camera, x,y,z.
     #[arg(long, default_value = "0.55,0.35,1", value_parser = parse_vec3, allow_hyphen_values = true)]
@@ -67,15 +67,11 @@ fn parse_color(s: &str) -> Result<ColorBy, String> {
     }
 }
 
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("'{s}' is not WIDTHxHEIGHT (e.g. 1024x768)"))?;
-    let p = |v: &str| {
-        v.trim()
-            .parse::<u32>()
-            .map_err(|_| format!("'{s}' is not WIDTHxHEIGHT (e.g. 1024x768)"))
-    };
+/// An image size `WIDTHxHEIGHT` (`x` or `X`), for `--size` of `render` and `view`.
+pub(crate) fn parse_image_size(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("'{s}' is not WIDTHxHEIGHT (e.g. 1024x768)");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let p = |v: &str| v.trim().parse::<u32>().map_err(|_| bad());
     Ok((p(w)?, p(h)?))
 }
 

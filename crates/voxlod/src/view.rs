@@ -41,7 +41,7 @@ pub struct ViewArgs {
     #[arg(long, requires = "fly")]
     frames: Option<PathBuf>,
     /// Image (or window) size, WIDTHxHEIGHT.
-    #[arg(long, default_value = "800x600", value_parser = parse_size)]
+    #[arg(long, default_value = "800x600", value_parser = crate::render::parse_image_size)]
     size: (u32, u32),
     /// GPU cache budget for node face buffers, MiB; least recently used nodes are evicted.
     #[arg(long, default_value_t = 256.0)]
@@ -66,13 +66,6 @@ fn interactive(reader: &Reader, config: StreamConfig, size: (u32, u32)) -> Resul
 #[cfg(not(feature = "window"))]
 fn interactive(_: &Reader, _: StreamConfig, _: (u32, u32)) -> Result<()> {
     bail!("this build of voxlod has no window (feature `window`); render a camera path with --fly PATH.json --frames DIR")
-}
-
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let bad = || format!("'{s}' is not WIDTHxHEIGHT (e.g. 800x600)");
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let p = |v: &str| v.trim().parse::<u32>().map_err(|_| bad());
-    Ok((p(w)?, p(h)?))
 }
 
 /// Bytes of `amount` units of `unit` bytes, or an error naming the option.

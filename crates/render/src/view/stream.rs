@@ -332,7 +332,7 @@ impl Stream {
         renderer: &Renderer,
         shot: &Shot,
     ) -> Result<(FrameStats, Vec<Drawn>), RenderError> {
-        // Reads best whole: the per-frame loop's steps (cut, requests, upload, draw list) in order.
+        // The per-frame steps in order: cut, requests, upload, draw list.
         let tick = self.frame + 1;
         let px = self.config.max_error_px;
         let mut stats = FrameStats {
