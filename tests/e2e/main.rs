@@ -4,7 +4,7 @@
 //! All of the `voxlod` crate's integration tests are this one test binary (one link; the tests
 //! of every module run in parallel threads of one process), split by subject into modules:
 //! `cli`, `octree`, `resume`, `gpu`, `gen`, `gen_blocks`, `view` share the helpers here; the
-//! others (`cluster`, `faults`, `json_schema`, `materials`, `python_reader`, `shard`,
+//! others (`cluster`, `faults`, `hostile`, `json_schema`, `materials`, `python_reader`, `shard`,
 //! `textures`, `tools`, `validation`) were test binaries of their own and keep their own
 //! helpers. A new test file goes into this folder with a `mod` line here
 //! (`every_file_is_a_module` fails otherwise); run one module with
@@ -16,6 +16,7 @@ mod faults;
 mod gen;
 mod gen_blocks;
 mod gpu;
+mod hostile;
 mod json_schema;
 mod materials;
 mod octree;

@@ -106,6 +106,17 @@ pub struct BuildSettings {
     /// whole build.
     #[serde(skip)]
     pub shard: Option<ShardScope>,
+    /// Folders besides the input's own that files the mesh refers to (MTL, textures, glTF
+    /// buffers and images) may be read from (`--allow-path`; docs/INGEST.md).
+    #[serde(skip)]
+    pub allow_paths: Vec<PathBuf>,
+}
+
+/// How the input's referenced files are read: inside its folder and `s.allow_paths`.
+fn read_options(s: &BuildSettings) -> voxlod_ingest::ReadOptions {
+    voxlod_ingest::ReadOptions {
+        allow: s.allow_paths.clone(),
+    }
 }
 
 impl Default for BuildSettings {
@@ -122,6 +133,7 @@ impl Default for BuildSettings {
             gpu_method: GpuMethod::default(),
             cutoff: Cutoff::default(),
             source_geometry: false,
+            allow_paths: Vec::new(),
             progress: false,
             force: false,
             interrupt_after_chunks: None,
@@ -303,7 +315,7 @@ pub fn build(input: &Path, output: &Path, s: &BuildSettings) -> Result<BuildSumm
         None => OutputKind::Octree,
     };
     let guard = OutputGuard::acquire(output, &[input], kind, s.force)?;
-    let source = MeshSource::open(input)?;
+    let source = MeshSource::open_with(input, &read_options(s))?;
     let out_dir = crate::output::output_dir(output);
     let tmp_parent = s.tmp_dir.as_deref().unwrap_or(out_dir);
     let key = WorkDir::key(input, s)?;
@@ -370,6 +382,7 @@ pub fn build_shard(
     s.threads = runtime.threads;
     s.memory = runtime.memory;
     s.tmp_dir = runtime.tmp_dir.clone();
+    s.allow_paths = runtime.allow_paths.clone();
     s.progress = runtime.progress;
     s.force = runtime.force;
     s.interrupt_after_chunks = runtime.interrupt_after_chunks;
@@ -391,7 +404,7 @@ pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> R
     let mplan = MemoryPlan::new(s.memory, threads)?;
     let guard = OutputGuard::acquire(plan_path, &[input], OutputKind::Plan, s.force)?;
     let fingerprint = Fingerprint::of(input)?;
-    let source = MeshSource::open(input)?;
+    let source = MeshSource::open_with(input, &read_options(s))?;
     let tmp_parent = s
         .tmp_dir
         .as_deref()
