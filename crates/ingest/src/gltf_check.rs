@@ -274,6 +274,19 @@ pub(crate) fn document(json: &str, bin: Option<&[u8]>) -> Result<(), String> {
         }
         views.push((len, stride));
     }
+    // 3.9.1: an image has a uri or a bufferView (then also a mimeType), not both
+    for (i, im) in d.list("images").iter().enumerate() {
+        let what = format!("image {i}");
+        index(im, "bufferView", &what, views.len(), "bufferView")?;
+        match (im.get("uri").is_some(), im.get("bufferView").is_some()) {
+            (true, true) => return Err(format!("{what} has both a uri and a bufferView")),
+            (false, false) => return Err(format!("{what} has neither a uri nor a bufferView")),
+            (false, true) if im.get("mimeType").and_then(Value::as_str).is_none() => {
+                return Err(format!("{what} is in a bufferView but has no mimeType"))
+            }
+            _ => {}
+        }
+    }
     let mut accs = Vec::new();
     for (i, a) in d.list("accessors").iter().enumerate() {
         accs.push(accessor(a, i, &views)?);
