@@ -15,6 +15,7 @@ mod faults;
 mod gen;
 mod gen_blocks;
 mod gpu;
+mod hostile;
 mod json_schema;
 mod materials;
 mod octree;

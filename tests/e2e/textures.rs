@@ -263,7 +263,13 @@ fn banana_as_ply_equals_obj() {
     );
     let (a, b) = (d.path().join("obj.voxlod"), d.path().join("ply.voxlod"));
     build(&obj, &a, &["-r", "256"]);
-    let s = build(&ply, &b, &["-r", "256"]);
+    // the texture lies outside the PLY's folder: allowed explicitly
+    let allow = dir.join("ycb-banana-textured");
+    let s = build(
+        &ply,
+        &b,
+        &["-r", "256", "--allow-path", allow.to_str().unwrap()],
+    );
     assert!(warnings(&s).is_empty(), "{:?}", warnings(&s));
     let (va, vb) = (level0_voxels(&a), level0_voxels(&b));
     assert!(va.len() > 10_000, "{}", va.len());
@@ -523,4 +529,132 @@ fn textures_over_their_memory_share_give_the_same_bytes() {
         true,
     );
     // (a corrupt or truncated tile file is rebuilt: crates/texture/tests/tile_cache.rs)
+}
+
+/// An 8×8 PNG of four 4×4 quadrants: red top left, green top right, blue bottom left, white
+/// bottom right (top = the image's first row).
+fn quadrants_png(path: &Path) {
+    image::RgbImage::from_fn(8, 8, |x, y| {
+        image::Rgb(match (x < 4, y < 4) {
+            (true, true) => [255, 0, 0],
+            (false, true) => [0, 255, 0],
+            (true, false) => [0, 0, 255],
+            (false, false) => [255, 255, 255],
+        })
+    })
+    .save(path)
+    .unwrap();
+}
+
+/// Every level-0 voxel of `out` is red: the texture's top-left quadrant, nothing else.
+fn all_red(out: &Path, what: &str) {
+    let c = level0_colors(out);
+    assert!(c.len() > 10_000, "{what}: {} voxels", c.len());
+    let other: HashSet<[u8; 4]> = c
+        .iter()
+        .copied()
+        .filter(|&c| c != [255, 0, 0, 255])
+        .collect();
+    assert!(
+        other.is_empty(),
+        "{what}: the quad addressing the top-left (red) quadrant has voxels of {other:?}"
+    );
+}
+
+/// Each format's texture coordinate convention, with a texture no flip leaves unchanged: a quad
+/// whose coordinates address the inside of the top-left (red) quadrant comes out red. OBJ
+/// (`vt`) and PLY (`s t`, as MeshLab writes them from OBJ) put `v = 0` at the image's last
+/// row, glTF at its first.
+#[test]
+fn each_format_reads_its_own_v_convention() {
+    use voxlod_testkit::gltf::{write, Image, Mat, Node, Prim};
+    use voxlod_testkit::textured::{obj_to_textured_ply, Convention};
+    let d = tempfile::tempdir().unwrap();
+    quadrants_png(&d.path().join("q.png"));
+    std::fs::write(
+        d.path().join("q.mtl"),
+        "newmtl m\nKd 1 1 1\nmap_Kd -clamp on q.png\n",
+    )
+    .unwrap();
+    // OBJ: u 0.1–0.4, v 0.6–0.9 (v up): inside the top-left quadrant
+    let obj = d.path().join("q.obj");
+    std::fs::write(
+        &obj,
+        "mtllib q.mtl\nv 0 0 0.5\nv 256 0 0.5\nv 256 256 0.5\nv 0 256 0.5\n\
+         vt 0.1 0.6\nvt 0.4 0.6\nvt 0.4 0.9\nvt 0.1 0.9\nusemtl m\nf 1/1 2/2 3/3 4/4\n",
+    )
+    .unwrap();
+    let out = d.path().join("obj.voxlod");
+    build(&obj, &out, &["-r", "256"]);
+    all_red(&out, "OBJ");
+    let ply = d.path().join("q.ply");
+    obj_to_textured_ply(&obj, &ply, "q.png", Convention::VertexST, [255; 4]);
+    let out = d.path().join("ply.voxlod");
+    build(&ply, &out, &["-r", "256"]);
+    all_red(&out, "PLY");
+    // glTF: the same quadrant is v 0.1–0.4 (v down)
+    let quad = Prim {
+        uv: Some(vec![[0.1, 0.4], [0.4, 0.4], [0.4, 0.1], [0.1, 0.1]]),
+        ..Prim::textured_quad()
+    };
+    let mat = Mat {
+        name: "m".into(),
+        base_color: [1.0; 4],
+        texture: Some(Image::Uri("q.png".into())),
+        wrap: [33071; 2],
+    };
+    let node = Node {
+        mesh: Some(0),
+        ..Node::default()
+    };
+    for name in ["q.gltf", "q.glb"] {
+        let p = d.path().join(name);
+        write(
+            &p,
+            &[vec![quad.clone()]],
+            std::slice::from_ref(&node),
+            &[0],
+            std::slice::from_ref(&mat),
+        );
+        let out = d.path().join(format!("{name}.voxlod"));
+        let s = build(&p, &out, &["-r", "256"]);
+        assert!(warnings(&s).is_empty(), "{name}: {:?}", warnings(&s));
+        all_red(&out, name);
+    }
+}
+
+/// `KHR_texture_transform` (offset, rotation, scale and its `texCoord`) is applied: the quad's
+/// coordinates 0–1 mapped by a rotation of π, a scale of 0.3 and an offset of 0.4 land in glTF's
+/// 0.1–0.4 square, the red quadrant; the extension's `texCoord` 0 replaces the texture's set 1
+/// (which the primitive does not have).
+#[test]
+fn khr_texture_transform_is_applied() {
+    use voxlod_testkit::gltf::{write, Image, Mat, Node, Prim};
+    let d = tempfile::tempdir().unwrap();
+    quadrants_png(&d.path().join("q.png"));
+    let mat = Mat {
+        name: "m".into(),
+        base_color: [1.0; 4],
+        texture: Some(Image::Uri("q.png".into())),
+        wrap: [33071; 2],
+    };
+    let node = Node {
+        mesh: Some(0),
+        ..Node::default()
+    };
+    let p = d.path().join("t.gltf");
+    write(&p, &[vec![Prim::textured_quad()]], &[node], &[0], &[mat]);
+    let json = std::fs::read_to_string(&p).unwrap();
+    let with = json
+        .replace(
+            r#""baseColorTexture":{"index":0}"#,
+            r#""baseColorTexture":{"index":0,"texCoord":1,"extensions":{"KHR_texture_transform":{"offset":[0.4,0.4],"rotation":3.141592653589793,"scale":[0.3,0.3],"texCoord":0}}}"#,
+        )
+        .replacen('{', r#"{"extensionsUsed":["KHR_texture_transform"],"#, 1);
+    assert_ne!(with, json);
+    std::fs::write(&p, with).unwrap();
+    let out = d.path().join("t.voxlod");
+    let s = build(&p, &out, &["-r", "256"]);
+    assert!(warnings(&s).is_empty(), "{:?}", warnings(&s));
+    all_red(&out, "KHR_texture_transform");
 }

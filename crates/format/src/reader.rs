@@ -71,20 +71,24 @@ impl Reader {
                 source,
             }
         };
-        let file = File::open(path).map_err(io("opening"))?;
-        let meta = file.metadata().map_err(io("reading the file size"))?;
         let head = |what: String| FormatError::Header {
             path: path.to_owned(),
             what,
         };
-        if meta.is_dir() {
-            return Err(head("it is a directory, not a voxlod file".into()));
-        }
-        if !meta.is_file() {
-            return Err(head(
-                "it is not a regular file (a device, FIFO or socket), not a voxlod file".into(),
-            ));
-        }
+        // opened without blocking: a FIFO with no writer is refused, not waited on
+        let file = match voxlod_io::open_regular(path) {
+            Ok(f) => f,
+            Err(voxlod_io::BoundError::Io(e)) => return Err(io("opening")(e)),
+            Err(voxlod_io::BoundError::NotRegular("a folder")) => {
+                return Err(head("it is a directory, not a voxlod file".into()))
+            }
+            Err(_) => {
+                return Err(head(
+                    "it is not a regular file (a device, FIFO or socket), not a voxlod file".into(),
+                ))
+            }
+        };
+        let meta = file.metadata().map_err(io("reading the file size"))?;
         let len = meta.len();
         if len < HEADER_SIZE as u64 {
             return Err(head(format!(

@@ -9,8 +9,19 @@
 //! (both linear in glTF), stored sRGB-encoded as every voxlod colour is; the texture
 //! `baseColorTexture` with its sampler's wrap modes and its `texCoord` set. Each glTF material
 //! is an entry of the material table, by name. glTF is Y-up (`MeshInfo::up`).
+//!
+//! Texture coordinates: glTF puts `v = 0` at the image's first (top) row, OBJ and voxlod's
+//! sampler at its last (bottom) row, so `v` is stored as `1 − v` (after `KHR_texture_transform`,
+//! which is applied: offset, rotation, scale and its `texCoord` set, spec of the extension).
+//!
+//! Before the `gltf` crate reads anything, the file is checked by `gltf_check` (GLB chunk
+//! lengths, UTF-8 JSON, every accessor, view and buffer against the specification's tables,
+//! node cycles); a panic of the crate's readers all the same is caught and becomes an error
+//! naming the file. Buffers and images named by URI are read only inside the mesh's folder
+//! (or folders the caller allows: `refs`), only regular files, and only the declared bytes.
 
 use crate::batch::Emitter;
+use crate::refs::Scope;
 use crate::{IngestError, Location, MeshInfo};
 use gltf::mesh::Mode;
 use std::path::{Path, PathBuf};
@@ -22,8 +33,9 @@ pub(crate) struct GltfSource {
     path: PathBuf,
     doc: gltf::Document,
     buffers: Vec<Vec<u8>>,
-    /// Per glTF material: the texture coordinate set of its base colour texture, if usable.
-    uv_set: Vec<Option<u32>>,
+    /// Per glTF material: the texture coordinate set of its base colour texture and its
+    /// `KHR_texture_transform`, if the texture is usable.
+    uv_set: Vec<Option<(u32, Option<UvTransform>)>>,
     /// The material table is kept (two or more materials, or a texture): triangles carry their
     /// material index.
     keep_materials: bool,
@@ -70,7 +82,7 @@ fn unescape(uri: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-fn load_buffers(path: &Path, g: &gltf::Gltf) -> Result<Vec<Vec<u8>>, IngestError> {
+fn load_buffers(path: &Path, g: &gltf::Gltf, scope: &Scope) -> Result<Vec<Vec<u8>>, IngestError> {
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
     for b in g.document.buffers() {
@@ -87,13 +99,15 @@ fn load_buffers(path: &Path, g: &gltf::Gltf) -> Result<Vec<Vec<u8>>, IngestError
             gltf::buffer::Source::Uri(uri) => match data_uri(path, uri) {
                 Some(d) => d?,
                 None => {
-                    let f = crate::texpath::resolve(dir, &unescape(uri)).map_err(|e| {
+                    // only the declared bytes are read: a URI naming a huge file costs no more
+                    let cannot = |e: String| {
                         bad(
                             path,
                             format!("buffer {} ({uri:?}) cannot be read: {e}", b.index()),
                         )
-                    })?;
-                    std::fs::read(&f).map_err(|e| IngestError::io(&f, e))?
+                    };
+                    let f = crate::texpath::resolve(dir, &unescape(uri)).map_err(cannot)?;
+                    scope.read_prefix(&f, b.length() as u64).map_err(cannot)?
                 }
             },
         };
@@ -113,6 +127,32 @@ fn load_buffers(path: &Path, g: &gltf::Gltf) -> Result<Vec<Vec<u8>>, IngestError
     Ok(out)
 }
 
+/// A `KHR_texture_transform` as the affine map `(u, v) ↦ (a·u + b·v + c, d·u + e·v + f)` in
+/// glTF's texture space: `T(offset) · R(rotation) · S(scale)`, the extension's matrix.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct UvTransform([f64; 6]);
+
+impl UvTransform {
+    fn new(offset: [f32; 2], rotation: f32, scale: [f32; 2]) -> UvTransform {
+        let (s, c) = (rotation as f64).sin_cos();
+        let (sx, sy) = (scale[0] as f64, scale[1] as f64);
+        UvTransform([
+            c * sx,
+            s * sy,
+            offset[0] as f64,
+            -s * sx,
+            c * sy,
+            offset[1] as f64,
+        ])
+    }
+
+    fn apply(&self, [u, v]: [f32; 2]) -> [f32; 2] {
+        let [a, b, c, d, e, f] = self.0;
+        let (u, v) = (u as f64, v as f64);
+        [(a * u + b * v + c) as f32, (d * u + e * v + f) as f32]
+    }
+}
+
 fn wrap(m: gltf::texture::WrappingMode) -> Wrap {
     match m {
         gltf::texture::WrappingMode::ClampToEdge => Wrap::Clamp,
@@ -126,8 +166,9 @@ fn material(
     path: &Path,
     m: &gltf::Material,
     buffers: &[Vec<u8>],
+    scope: &Scope,
     warnings: &mut Vec<String>,
-) -> (Material, Option<u32>) {
+) -> (Material, Option<(u32, Option<UvTransform>)>) {
     let name = m.name().map_or(
         format!("material {}", m.index().unwrap_or(0)),
         str::to_string,
@@ -155,19 +196,26 @@ fn material(
         gltf::image::Source::Uri { uri, .. } => match data_uri(path, uri) {
             Some(Ok(d)) => Ok((label, Some(Embedded(d.into())))),
             Some(Err(err)) => Err(err.to_string()),
-            None => crate::texpath::resolve(dir, &unescape(uri)).map(|f| (f, None)),
+            None => crate::texpath::resolve(dir, &unescape(uri))
+                .and_then(|f| scope.check(&f).map(|()| (f, None))),
         },
     };
     match found {
         Ok((file, embedded)) => {
             e.texture = Some(file);
             e.embedded = embedded;
-            (e, Some(info.tex_coord()))
+            let (set, transform) = match info.texture_transform() {
+                Some(t) => (
+                    t.tex_coord().unwrap_or(info.tex_coord()),
+                    Some(UvTransform::new(t.offset(), t.rotation(), t.scale())),
+                ),
+                None => (info.tex_coord(), None),
+            };
+            (e, Some((set, transform)))
         }
         Err(err) => {
             warnings.push(format!(
-                "{}: the base colour texture of material {:?} cannot be used ({err}); its baseColorFactor is used",
-                path.display(),
+                "the base colour texture of material {:?} cannot be used ({err}); its baseColorFactor is used",
                 e.name
             ));
             (e, None)
@@ -212,24 +260,51 @@ fn mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
     m
 }
 
+/// The extensions voxlod reads.
+const READ_EXTENSIONS: [&str; 1] = ["KHR_texture_transform"];
+
+/// A panic of the `gltf` crate (which the checks should leave none of) as an error naming the
+/// file, so that no input ends the process.
+fn caught<T>(path: &Path, f: impl FnOnce() -> Result<T, IngestError>) -> Result<T, IngestError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|_| {
+        Err(bad(
+            path,
+            "the glTF reader failed on this file (a panic of the gltf crate, caught): it is malformed in a way voxlod's checks do not name",
+        ))
+    })
+}
+
 impl GltfSource {
-    pub fn open(path: &Path) -> Result<(GltfSource, MeshInfo), IngestError> {
-        // The glTF document's checks, in the specification's order.
-        let bytes = std::fs::read(path).map_err(|e| IngestError::io(path, e))?;
+    pub fn open(path: &Path, scope: &Scope) -> Result<(GltfSource, MeshInfo), IngestError> {
+        caught(path, || Self::open_checked(path, scope))
+    }
+
+    fn open_checked(path: &Path, scope: &Scope) -> Result<(GltfSource, MeshInfo), IngestError> {
+        // The container and document checked, then the gltf crate's parse.
+        let bytes = voxlod_io::read_bounded(path, u64::MAX).map_err(|e| match e {
+            voxlod_io::BoundError::Io(e) => IngestError::io(path, e),
+            e => bad(path, e.to_string()),
+        })?;
+        let c = crate::gltf_check::container(&bytes).map_err(|m| bad(path, m))?;
+        crate::gltf_check::document(c.json, c.bin).map_err(|m| bad(path, m))?;
         let g = gltf::Gltf::from_slice(&bytes)
             .map_err(|e| bad(path, format!("not a valid glTF 2.0 file: {e}")))?;
-        if let Some(ext) = g.document.extensions_required().next() {
+        if let Some(ext) = g
+            .document
+            .extensions_required()
+            .find(|e| !READ_EXTENSIONS.contains(e))
+        {
             return Err(bad(
                 path,
                 format!("the file requires the extension {ext:?}, which voxlod does not read"),
             ));
         }
-        let buffers = load_buffers(path, &g)?;
+        let buffers = load_buffers(path, &g, scope)?;
         let mut warnings = Vec::new();
         let mut materials = vec![Material::default()];
         let mut uv_set = Vec::new();
         for m in g.document.materials() {
-            let (e, set) = material(path, &m, &buffers, &mut warnings);
+            let (e, set) = material(path, &m, &buffers, scope, &mut warnings);
             materials.push(e);
             uv_set.push(set);
         }
@@ -267,22 +342,23 @@ impl GltfSource {
         }
         if no_uv > 0 {
             warnings.push(format!(
-                "{}: {no_uv} primitives of textured materials lack the texture coordinate set the texture reads; their baseColorFactor is used",
-                path.display()
+                "{no_uv} primitives of textured materials lack the texture coordinate set the texture reads; their baseColorFactor is used"
             ));
         }
-        let used: Vec<&str> = src.doc.extensions_used().collect();
+        let used: Vec<&str> = src
+            .doc
+            .extensions_used()
+            .filter(|e| !READ_EXTENSIONS.contains(e))
+            .collect();
         if !used.is_empty() {
             warnings.push(format!(
-                "{}: extensions used by the file are not read: {}",
-                path.display(),
+                "extensions used by the file are not read: {}",
                 used.join(", ")
             ));
         }
         if skipped > 0 {
             warnings.push(format!(
-                "{}: {skipped} primitives of points or lines are not triangles and are skipped",
-                path.display()
+                "{skipped} primitives of points or lines are not triangles and are skipped"
             ));
         }
         if !has_uv {
@@ -296,8 +372,7 @@ impl GltfSource {
         }
         if materials.len() > MAX_MATERIAL as usize + 1 {
             warnings.push(format!(
-                "{}: more than {MAX_MATERIAL} materials: the others count as no material (id 0)",
-                path.display()
+                "more than {MAX_MATERIAL} materials: the others count as no material (id 0)"
             ));
             materials.truncate(MAX_MATERIAL as usize + 1);
         }
@@ -319,12 +394,16 @@ impl GltfSource {
 
     /// The texture coordinate set primitive `p` reads, if its material has a usable texture
     /// and the primitive has that set.
-    fn uv_of(&self, p: &gltf::Primitive) -> Option<u32> {
-        let set = (*self.uv_set.get(p.material().index()?)?)?;
-        p.get(&gltf::Semantic::TexCoords(set)).map(|_| set)
+    fn uv_of(&self, p: &gltf::Primitive) -> Option<(u32, Option<UvTransform>)> {
+        let (set, t) = (*self.uv_set.get(p.material().index()?)?)?;
+        p.get(&gltf::Semantic::TexCoords(set)).map(|_| (set, t))
     }
 
     pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
+        caught(&self.path, || self.stream_checked(em))
+    }
+
+    fn stream_checked(&self, em: &mut Emitter) -> Result<(), IngestError> {
         for (node, world) in scene_nodes(&self.doc) {
             for p in node.mesh().iter().flat_map(|m| m.primitives()) {
                 self.primitive(&p, &world, em)?;
@@ -407,9 +486,16 @@ impl GltfSource {
         let colored = p.material().index().is_some() || p.get(&gltf::Semantic::Colors(0)).is_some();
         let col: Option<Vec<[f32; 4]>> = r.read_colors(0).map(|c| c.into_rgba_f32().collect());
         let uv_set = self.uv_of(p);
+        // glTF's v runs down the image, voxlod's (OBJ's) up: v becomes 1 − v, after the
+        // material's KHR_texture_transform
         let uv: Option<Vec<[f32; 2]>> = uv_set
-            .and_then(|s| r.read_tex_coords(s))
-            .map(|t| t.into_f32().collect());
+            .and_then(|(s, t)| Some((r.read_tex_coords(s)?, t)))
+            .map(|(c, t)| {
+                c.into_f32()
+                    .map(|uv| t.map_or(uv, |t| t.apply(uv)))
+                    .map(|[u, v]| [u, 1.0 - v])
+                    .collect()
+            });
         let n = pos.len();
         let idx: Vec<u32> = match (r.read_indices(), p.indices()) {
             (Some(i), _) => i.into_u32().collect(),

@@ -60,6 +60,7 @@ mod batch;
 mod bounds;
 mod error;
 mod gltf;
+mod gltf_check;
 mod map_guard;
 mod obj;
 mod ply;
@@ -69,6 +70,7 @@ mod ply_header;
 mod ply_materials;
 mod ply_records;
 mod ply_vertices;
+mod refs;
 mod stl;
 mod texpath;
 
@@ -111,6 +113,17 @@ pub struct MeshInfo {
     /// The up axis the format defines, if it defines one (glTF: `+Y`); the build's manifest
     /// gives it to `render` as `input.up`.
     pub up: Option<[f32; 3]>,
+}
+
+/// How [`MeshSource::open_with`] reads the files a mesh refers to (OBJ `mtllib` and `map_Kd`,
+/// PLY `comment TextureFile`, glTF buffer and image URIs).
+#[derive(Debug, Clone, Default)]
+pub struct ReadOptions {
+    /// Folders besides the mesh's own that referenced files may lie in. A referenced file is
+    /// read only if, after resolving symlinks, it lies inside the mesh's folder or one of
+    /// these; otherwise it is refused (a warning for a texture or MTL, an error for a glTF
+    /// buffer) with a message that names it and says how to allow it.
+    pub allow: Vec<PathBuf>,
 }
 
 /// Counts of one [`MeshSource::stream`] run.
@@ -199,8 +212,16 @@ fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
 
 impl MeshSource {
     /// Opens a mesh: detects the format by extension (and magic bytes) and reads the header
-    /// (PLY), the counts (OBJ: one pass over the file) or the facet count (binary STL).
+    /// (PLY), the counts (OBJ: one pass over the file) or the facet count (binary STL). Files
+    /// the mesh refers to are read only inside its folder ([`MeshSource::open_with`] allows
+    /// more).
     pub fn open(path: &Path) -> Result<MeshSource, IngestError> {
+        Self::open_with(path, &ReadOptions::default())
+    }
+
+    /// [`MeshSource::open`] with the files the mesh refers to read as `opts` says.
+    pub fn open_with(path: &Path, opts: &ReadOptions) -> Result<MeshSource, IngestError> {
+        let scope = refs::Scope::new(path, &opts.allow);
         let meta = std::fs::metadata(path).map_err(|e| IngestError::io(path, e))?;
         // A mesh is read more than once (header, then passes) and its size sets the plan: a
         // directory, device (/dev/zero) or FIFO cannot be, and has no meaningful size.
@@ -235,15 +256,15 @@ impl MeshSource {
             .map_err(|e| IngestError::io(path, e))?;
         let (reader, info) = match detect(path, &head, file_len)? {
             Format::Ply { gz } => {
-                let (s, i) = ply::PlySource::open(path, gz, file_len)?;
+                let (s, i) = ply::PlySource::open(path, gz, file_len, &scope)?;
                 (Reader::Ply(s), i)
             }
             Format::Obj => {
-                let (s, i) = obj::ObjSource::open(path)?;
+                let (s, i) = obj::ObjSource::open(path, &scope)?;
                 (Reader::Obj(s), i)
             }
             Format::Gltf => {
-                let (s, i) = gltf::GltfSource::open(path)?;
+                let (s, i) = gltf::GltfSource::open(path, &scope)?;
                 (Reader::Gltf(Box::new(s)), i)
             }
             Format::Stl => {

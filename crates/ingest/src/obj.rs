@@ -11,6 +11,7 @@
 //! common errors name their line.
 
 use crate::batch::Emitter;
+use crate::refs::Scope;
 use crate::{IngestError, Location, MeshInfo};
 use std::collections::{HashMap, HashSet};
 use std::fs::File;
@@ -31,6 +32,8 @@ pub(crate) struct ObjSource {
     /// Material name → index in the material table, for every material faces use (empty for a
     /// mesh with at most one material and no texture).
     ids: HashMap<String, u32>,
+    /// Where its MTL files may be read from.
+    scope: Scope,
 }
 
 /// What [`scan`] found: the counts of the file's records, and the materials it names.
@@ -305,7 +308,7 @@ impl Scan {
 }
 
 impl ObjSource {
-    pub fn open(path: &Path) -> Result<(ObjSource, MeshInfo), IngestError> {
+    pub fn open(path: &Path, scope: &Scope) -> Result<(ObjSource, MeshInfo), IngestError> {
         let s = scan(path)?;
         let mut warnings = Vec::new();
         let mut has_colors = s.colored_vertices > 0 && s.colored_vertices == s.vertices;
@@ -319,7 +322,10 @@ impl ObjSource {
         let mut too_many = false;
         for lib in &s.mtllibs {
             let p = dir.join(lib);
-            match tobj::load_mtl(&p) {
+            let loaded = scope
+                .load_mtl(&p)
+                .and_then(|r| r.map_err(|e| e.to_string()));
+            match loaded {
                 Ok((mats, _)) => {
                     has_colors |= mats.iter().any(|m| m.diffuse.is_some() && s.used_materials.contains(&m.name));
                     let mtl_dir = p.parent().unwrap_or(Path::new("."));
@@ -346,7 +352,8 @@ impl ObjSource {
                             continue;
                         }
                         let found = crate::texpath::split_mtl_map(map).and_then(|(file, clamp)| {
-                            crate::texpath::resolve(mtl_dir, &file).map(|f| (f, clamp))
+                            let f = crate::texpath::resolve(mtl_dir, &file)?;
+                            scope.check(&f).map(|()| (f, clamp))
                         });
                         match found {
                             Ok((file, clamp)) => {
@@ -423,6 +430,7 @@ impl ObjSource {
                 use_normals,
                 textured,
                 ids,
+                scope: scope.clone(),
             },
             info,
         ))
@@ -451,14 +459,16 @@ impl ObjSource {
             },
         );
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-        let (models, materials) =
-            tobj::load_obj_buf(&mut reader, &opts, |m| tobj::load_mtl(dir.join(m))).map_err(
-                |e| IngestError::Obj {
-                    path: path.to_path_buf(),
-                    // the scan at open checks each line for what tobj refuses, so this is rare
-                    message: format!("{e} (tobj does not say on which line)"),
-                },
-            )?;
+        let (models, materials) = tobj::load_obj_buf(&mut reader, &opts, |m| {
+            // refused at open with a warning; the same refusal here
+            let refused = |_| Err(tobj::LoadError::OpenFileFailed);
+            self.scope.load_mtl(&dir.join(m)).unwrap_or_else(refused)
+        })
+        .map_err(|e| IngestError::Obj {
+            path: path.to_path_buf(),
+            // the scan at open checks each line for what tobj refuses, so this is rare
+            message: format!("{e} (tobj does not say on which line)"),
+        })?;
         // a missing MTL was reported as a warning at open; its materials get the default colour
         let materials = materials.unwrap_or_default();
         em.report(em.bytes_total / 2);

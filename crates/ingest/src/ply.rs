@@ -44,6 +44,7 @@ impl PlySource {
         path: &Path,
         gz: bool,
         file_len: u64,
+        scope: &crate::refs::Scope,
     ) -> Result<(PlySource, MeshInfo), IngestError> {
         let file = File::open(path).map_err(|e| IngestError::io(path, e))?;
         let header = if gz {
@@ -89,7 +90,7 @@ impl PlySource {
             table_flags: 0,
         };
         let mut header = src.header.clone();
-        let table = material_table(path, &mut header, &mut |h, ei, pi, ty| {
+        let table = material_table(path, scope, &mut header, &mut |h, ei, pi, ty| {
             src.scan_values(h, ei, pi, ty)
         })?;
         src.header = header;

@@ -54,13 +54,14 @@ fn texture_files(header: &Header) -> Vec<String> {
 /// returns the distinct values of an integer property over the element's records.
 pub(crate) fn material_table(
     path: &Path,
+    scope: &crate::refs::Scope,
     header: &mut Header,
     scan: &mut dyn FnMut(&Header, usize, usize, Scalar) -> Result<BTreeSet<i64>, IngestError>,
 ) -> Result<PlyMaterials, IngestError> {
     // The material rules in their order of precedence.
-    let file = path.display().to_string();
     let mut out = PlyMaterials::default();
-    let warn = |out: &mut PlyMaterials, w: String| out.warnings.push(format!("{file}: {w}"));
+    // the caller prefixes the input's name to every warning
+    let warn = |out: &mut PlyMaterials, w: String| out.warnings.push(w);
     let names: BTreeMap<i64, String> = header
         .comments
         .iter()
@@ -70,7 +71,7 @@ pub(crate) fn material_table(
     let textures: Vec<(String, Result<PathBuf, String>)> = texture_files(header)
         .into_iter()
         .map(|n| {
-            let found = crate::texpath::resolve(dir, &n);
+            let found = crate::texpath::resolve(dir, &n).and_then(|f| scope.check(&f).map(|()| f));
             (n, found)
         })
         .collect();

@@ -85,7 +85,11 @@ pub fn open_regular(path: &Path) -> Result<File, BoundError> {
 /// `O_NONBLOCK` on Linux (every architecture Rust supports there uses 0o4000 except alpha,
 /// mips, parisc and sparc, which voxlod does not target). On a regular file it changes nothing.
 const fn libc_o_nonblock() -> i32 {
-    if cfg!(any(target_arch = "mips", target_arch = "mips64", target_arch = "sparc64")) {
+    if cfg!(any(
+        target_arch = "mips",
+        target_arch = "mips64",
+        target_arch = "sparc64"
+    )) {
         0x80
     } else {
         0o4000
@@ -101,7 +105,7 @@ pub fn read_bounded(path: &Path, limit: u64) -> Result<Vec<u8>, BoundError> {
         return Err(BoundError::TooLarge { size, limit });
     }
     let mut out = Vec::with_capacity(size as usize);
-    f.take(limit + 1).read_to_end(&mut out)?;
+    f.take(limit.saturating_add(1)).read_to_end(&mut out)?;
     if out.len() as u64 > limit {
         return Err(BoundError::TooLarge {
             size: out.len() as u64,

@@ -50,6 +50,7 @@ pub fn build_shard(
     s.threads = runtime.threads;
     s.memory = runtime.memory;
     s.tmp_dir = runtime.tmp_dir.clone();
+    s.allow_paths = runtime.allow_paths.clone();
     s.progress = runtime.progress;
     s.force = runtime.force;
     run_build(

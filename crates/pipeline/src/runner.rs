@@ -112,7 +112,7 @@ impl Runner {
                     Scope::Plan => Some(Fingerprint::of(input)?),
                     Scope::Whole | Scope::Shard(_) => None,
                 };
-                let source = MeshSource::open(input)?;
+                let source = MeshSource::open_with(input, &s.read_options())?;
                 let tmp_parent = s.tmp_dir.as_deref().unwrap_or(output_dir(output));
                 let key = WorkDir::key(input, s, scope.shard())?;
                 let (work, resumed) = WorkDir::open(tmp_parent, output, &key)?;

@@ -41,12 +41,25 @@ pub struct BuildSettings {
     pub cutoff: Cutoff,
     /// Store each leaf chunk's source triangles beside its voxels (FORMAT.md 14.4).
     pub source_geometry: bool,
+    /// Folders besides the input's own that files the mesh refers to (MTL, textures, glTF
+    /// buffers and images) may be read from (`--allow-path`; docs/INGEST.md).
+    #[serde(skip)]
+    pub allow_paths: Vec<PathBuf>,
     /// Show progress bars on stderr.
     #[serde(skip)]
     pub progress: bool,
     /// Replace an existing output file that is not a voxlod octree.
     #[serde(skip)]
     pub force: bool,
+}
+
+impl BuildSettings {
+    /// How the input's referenced files are read: inside its folder and `allow_paths`.
+    pub fn read_options(&self) -> voxlod_ingest::ReadOptions {
+        voxlod_ingest::ReadOptions {
+            allow: self.allow_paths.clone(),
+        }
+    }
 }
 
 impl Default for BuildSettings {
@@ -63,6 +76,7 @@ impl Default for BuildSettings {
             gpu_method: GpuMethod::default(),
             cutoff: Cutoff::default(),
             source_geometry: false,
+            allow_paths: Vec::new(),
             progress: false,
             force: false,
         }

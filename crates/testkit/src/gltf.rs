@@ -26,7 +26,9 @@ pub struct Prim {
 impl Prim {
     /// The textured quad the texture tests share (a 256-unit square in z = 0.5, texture
     /// coordinates 0–1 across it, material 0), as two indexed triangles fanned from corner 0 as
-    /// an OBJ `f 1/1 2/2 3/3 4/4` is.
+    /// an OBJ `f 1/1 2/2 3/3 4/4` is. Its texture coordinates are glTF's (`v = 0` at the
+    /// image's top row), so that it maps the image as the OBJ quad with `vt 0 0`, `vt 1 0`,
+    /// `vt 1 1`, `vt 0 1` (OBJ's `v = 0` is the bottom row) does.
     pub fn textured_quad() -> Prim {
         Prim {
             positions: vec![
@@ -36,7 +38,7 @@ impl Prim {
                 [0., 256., 0.5],
             ],
             indices: Some(vec![0, 1, 2, 0, 2, 3]),
-            uv: Some(vec![[0., 0.], [1., 0.], [1., 1.], [0., 1.]]),
+            uv: Some(vec![[0., 1.], [1., 1.], [1., 0.], [0., 0.]]),
             mode: 4,
             material: Some(0),
             ..Prim::default()

@@ -310,11 +310,17 @@ pub(crate) fn read_image(
     if let Some(b) = embedded {
         return decode_bytes(&b.0);
     }
-    image::ImageReader::open(path)
-        .map_err(|e| e.to_string())?
+    open_image(path)?.decode().map_err(|e| e.to_string())
+}
+
+/// A reader of the image file `path`, its format guessed from the content; only a regular
+/// file is opened (a FIFO would block the reader, a device never end).
+pub(crate) fn open_image(
+    path: &Path,
+) -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>, String> {
+    let f = voxlod_io::open_regular(path).map_err(|e| e.to_string())?;
+    image::ImageReader::new(std::io::BufReader::new(f))
         .with_guessed_format()
-        .map_err(|e| e.to_string())?
-        .decode()
         .map_err(|e| e.to_string())
 }
 

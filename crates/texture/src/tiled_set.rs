@@ -82,11 +82,7 @@ impl Source<'_> {
                 .with_guessed_format()
                 .map_err(|e| e.to_string())?
                 .into_dimensions(),
-            None => image::ImageReader::open(self.path)
-                .map_err(|e| e.to_string())?
-                .with_guessed_format()
-                .map_err(|e| e.to_string())?
-                .into_dimensions(),
+            None => crate::open_image(self.path)?.into_dimensions(),
         };
         size.map_err(|e| e.to_string())
     }

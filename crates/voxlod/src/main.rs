@@ -278,6 +278,10 @@ struct SettingsArgs {
     /// Folder for temporary files [default: the output's folder].
     #[arg(long)]
     tmp: Option<PathBuf>,
+    /// Also read files the mesh refers to (MTL, textures, glTF buffers and images) inside DIR;
+    /// by default only those inside the mesh's own folder are read (repeatable).
+    #[arg(long = "allow-path", value_name = "DIR")]
+    allow_path: Vec<PathBuf>,
 }
 
 #[derive(Args)]
@@ -315,8 +319,11 @@ fn main() -> ExitCode {
 }
 
 fn load_config(path: &Path) -> Result<BuildSettings> {
-    let text = std::fs::read_to_string(path)
+    // a settings file is a few lines of TOML: a regular file, read with a bound
+    let bytes = voxlod_io::read_bounded(path, 16 << 20)
         .with_context(|| format!("reading settings file {}", path.display()))?;
+    let text = String::from_utf8(bytes)
+        .with_context(|| format!("settings file {} is not UTF-8 text", path.display()))?;
     toml::from_str(&text).with_context(|| format!("settings file {}", path.display()))
 }
 
@@ -357,6 +364,7 @@ fn settings(a: &SettingsArgs) -> Result<BuildSettings> {
     if a.tmp.is_some() {
         s.tmp_dir = a.tmp.clone();
     }
+    s.allow_paths = a.allow_path.clone();
     if a.source_geometry {
         s.source_geometry = true;
     }

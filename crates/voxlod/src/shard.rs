@@ -25,7 +25,7 @@ A missing, corrupt or stale shard is refused, naming its file; nothing is writte
 #[derive(Args)]
 pub(crate) struct ShardArgs {
     /// Build one shard of a plan written by `voxlod plan` (input and settings come from the
-    /// plan; only -j, --memory, --tmp, --out-dir, -q, --json, --force may be given).
+    /// plan; only -j, --memory, --tmp, --allow-path, --out-dir, -q, --json, --force may be given).
     #[arg(long, requires = "index")]
     pub plan: Option<PathBuf>,
     /// The shard to build, 0-based (Slurm: $SLURM_ARRAY_TASK_ID; a Kubernetes Indexed Job:
@@ -149,6 +149,7 @@ pub(crate) fn run_build_shard(a: &super::BuildArgs) -> Result<()> {
         threads: st.threads.unwrap_or(defaults.threads),
         memory: st.memory.unwrap_or(defaults.memory),
         tmp_dir: st.tmp.clone(),
+        allow_paths: st.allow_path.clone(),
         progress: !a.quiet,
         force: a.force,
         ..defaults

@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use voxlod_format::Reader;
 use voxlod_render::view::{fly, FlyPath, StreamConfig, Viewer};
-use voxlod_render::Renderer;
+use voxlod_render::{RenderError, Renderer};
 
 /// Examples shown by `voxlod view --help`.
 pub const EXAMPLES: &str = "\
@@ -102,9 +102,19 @@ pub fn run(a: ViewArgs) -> Result<()> {
     let renderer = Renderer::new()?;
     let mut viewer = Viewer::new(&reader, renderer, config)?;
     fly(&mut viewer, &path, a.size, &mut |i, frame| {
-        frame
-            .picture
-            .write_png(&dir.join(format!("frame_{i:05}.png")))?;
+        // each frame as every output of voxlod: not the octree viewed (nor a link to it), not
+        // a file of another kind, written under a temporary name and renamed into place
+        let out = dir.join(format!("frame_{i:05}.png"));
+        let refused = |e: anyhow::Error| RenderError::Option(voxlod_pipeline::chain_text(&e));
+        let guard = voxlod_pipeline::OutputGuard::acquire(
+            &out,
+            &[&a.file],
+            voxlod_pipeline::OutputKind::Png,
+            false,
+        )
+        .map_err(refused)?;
+        frame.picture.write_png(guard.staged())?;
+        guard.commit().map_err(refused)?;
         println!(
             "{}",
             serde_json::to_string(&frame.stats).expect("plain numbers")

@@ -23,7 +23,10 @@ const BLOCK: usize = 4 << 20;
 /// XXH3-64 of the file at `path`, or `None` if `stop` was set before the end (checked between
 /// blocks of 4 MiB).
 pub(crate) fn xxh3_of_file(path: &Path, stop: &AtomicBool) -> Result<Option<u64>, StageError> {
-    let mut f = std::fs::File::open(path).map_err(StageError::io("opening", path))?;
+    let mut f = voxlod_io::open_regular(path).map_err(|e| match e {
+        voxlod_io::BoundError::Io(e) => StageError::io("opening", path)(e),
+        e => StageError::io("opening", path)(std::io::Error::other(e.to_string())),
+    })?;
     let mut h = Xxh3Default::new();
     let mut buf = vec![0u8; BLOCK];
     loop {

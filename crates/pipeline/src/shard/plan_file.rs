@@ -46,7 +46,7 @@ pub struct Fingerprint {
 impl Fingerprint {
     /// The fingerprint of the file at `path`.
     pub fn of(path: &Path) -> Result<Fingerprint> {
-        let mut f = std::fs::File::open(path)
+        let mut f = voxlod_io::open_regular(path)
             .with_context(|| format!("{}: cannot open the input", path.display()))?;
         let meta = f
             .metadata()
@@ -239,10 +239,13 @@ pub struct LoadedPlan {
     pub path: PathBuf,
 }
 
+/// The largest plan file read (a plan is a few kilobytes of JSON).
+const PLAN_LIMIT: u64 = 64 << 20;
+
 impl LoadedPlan {
     /// Reads and checks a plan file.
     pub fn load(path: &Path) -> Result<LoadedPlan> {
-        let bytes = std::fs::read(path)
+        let bytes = voxlod_io::read_bounded(path, PLAN_LIMIT)
             .with_context(|| format!("{}: cannot read the plan", path.display()))?;
         let plan: ShardPlan = serde_json::from_slice(&bytes)
             .with_context(|| format!("{}: not a voxlod plan", path.display()))?;

@@ -225,7 +225,9 @@ fn u64_at(b: &[u8], at: usize) -> u64 {
 impl ShardReader {
     /// Opens `path`; any damage to the header or the index is an error naming the file.
     pub fn open(path: &Path) -> Result<ShardReader> {
-        let file = File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+        // only a regular file: a FIFO would block the merge forever
+        let file = voxlod_io::open_regular(path)
+            .with_context(|| format!("{}: cannot open", path.display()))?;
         let r = Self::read(path, file);
         r.with_context(|| format!("{}: not a complete shard file", path.display()))
     }

@@ -52,14 +52,22 @@ fn default_fov() -> f64 {
     45.0
 }
 
+/// The largest camera path file read (a keyframe is about a hundred bytes of JSON).
+pub const FLY_PATH_LIMIT: u64 = 64 << 20;
+
 impl FlyPath {
     /// Reads and checks a path file.
     pub fn load(path: &Path) -> Result<FlyPath, RenderError> {
-        let text = std::fs::read_to_string(path).map_err(|source| RenderError::Io {
-            path: path.to_owned(),
-            op: "reading the camera path",
-            source,
+        // a camera path is a small JSON file: a regular file, read with a bound
+        let bytes = voxlod_io::read_bounded(path, FLY_PATH_LIMIT).map_err(|e| match e {
+            voxlod_io::BoundError::Io(source) => RenderError::Io {
+                path: path.to_owned(),
+                op: "reading the camera path",
+                source,
+            },
+            e => RenderError::Option(format!("{}: cannot be a camera path: {e}", path.display())),
         })?;
+        let text = String::from_utf8_lossy(&bytes);
         let p: FlyPath = serde_json::from_str(&text).map_err(|e| {
             RenderError::Option(format!(
                 "{}: not a camera path ({e}); expected {{\"keyframes\": [{{\"eye\": [x,y,z], \"target\": [x,y,z]}}, ...], \"frames\": N}}",
