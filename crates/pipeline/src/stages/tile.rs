@@ -1,6 +1,6 @@
 //! The tile stage: counts the triangles per leaf chunk (unless the ingest stage did), then
-//! scatters them into pre-sized on-disk bins (`bins.tri`), one contiguous run per chunk in
-//! Morton order (`voxlod_tile`). Reads the spool, or the memory-mapped input again.
+//! scatters them into on-disk bins (`bins.tri`): per chunk, pieces of blocks (`voxlod_tile`).
+//! Reads the spool, or the memory-mapped input again.
 //!
 //! Artifact: the open [`Bins`]; resume marker: their layout, [`BinsMarker`] (`bins.json`).
 
@@ -17,13 +17,13 @@ use crate::progress::Stage;
 use crate::size::format_size;
 use crate::work::{Marker, WorkFile};
 
-/// The bins layout (`bins.json`): `[x, y, z, start, count]` per non-empty chunk, and for bins
-/// written in runs during the ingest pass each chunk's pieces `[first record, records]`.
+/// The bins layout (`bins.json`): `[x, y, z, start, count]` per non-empty chunk (`start`: the
+/// byte offset of its first piece) and each chunk's pieces `[byte offset, bytes, triangles]`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) struct BinsMarker {
     chunks: Vec<[u64; 5]>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pieces: Option<Vec<Vec<[u64; 2]>>>,
+    #[serde(default)]
+    pieces: Vec<Vec<[u64; 3]>>,
 }
 
 impl Marker for BinsMarker {
@@ -43,17 +43,14 @@ impl BinsMarker {
             .collect();
         BinsMarker {
             chunks,
-            pieces: bins.pieces().map(<[_]>::to_vec),
+            pieces: bins.pieces().to_vec(),
         }
     }
 
     /// The bins this marker describes, opened (None if the file does not match it).
     pub(crate) fn open(self, path: &std::path::Path, layout: RecordLayout) -> Option<Bins> {
         let chunks = self.chunks()?;
-        match self.pieces {
-            Some(p) => Bins::open_pieces(path, chunks, layout, p).ok(),
-            None => Bins::open(path, chunks, layout).ok(),
-        }
+        Bins::open_pieces(path, chunks, layout, self.pieces).ok()
     }
 
     /// The chunks of the layout (None if a coordinate is out of range: the marker is not ours).
@@ -84,7 +81,8 @@ pub(crate) struct Tiled {
 }
 
 /// Runs the tile stage, or opens the bins its marker describes. Takes the chunk counts the
-/// ingest stage left, if any. Removes the spool once the bins are complete.
+/// ingest stage left, if any. Removes the spool once the bins are complete. Bins written here
+/// add their bytes to `ingested.temp_written`.
 pub(crate) fn run(ctx: &mut BuildContext, ingested: &mut Ingested) -> Result<Tiled, StageError> {
     let t = Instant::now();
     let bins_path = ctx.work.file(WorkFile::Bins);
@@ -103,7 +101,9 @@ pub(crate) fn run(ctx: &mut BuildContext, ingested: &mut Ingested) -> Result<Til
                 Some(b) => b,
                 None => {
                     let counts = ingested.early_counts.take();
-                    tile(ctx, ingested, counts)?
+                    let bins = tile(ctx, ingested, counts)?;
+                    ingested.temp_written += bins.bytes();
+                    bins
                 }
             };
             ctx.work.set_marker(&BinsMarker::of(&bins))?;
@@ -208,19 +208,20 @@ fn tile(
     })
 }
 
-/// Refuses the scatter pass if the bins, whose exact size the counts give, cannot fit.
+/// Refuses the scatter pass if the bins, whose largest size the counts give (blocks are never
+/// larger than their records), cannot fit.
 fn check_bins_space(
     ctx: &BuildContext,
     counts: &ChunkCounts,
     layout: RecordLayout,
 ) -> Result<(), StageError> {
     let rec = layout.bytes() as u64;
-    let bins_bytes = counts.total() * rec;
+    let bins_bytes = voxlod_tile::scatter_bound(counts, layout, ctx.plan.scatter_buffer);
     let work = ctx.work.path();
     if let Some(free) = crate::system::free_disk(work) {
         if bins_bytes > free {
             return Err(StageError::TempDisk(format!(
-                "not enough disk space for the chunk bins: {} needed in {} ({} records of {} bytes), {} free (choose another folder with --tmp)",
+                "not enough disk space for the chunk bins: up to {} needed in {} ({} records of {} bytes), {} free (choose another folder with --tmp)",
                 format_size(bins_bytes),
                 work.display(),
                 counts.total(),
@@ -231,7 +232,7 @@ fn check_bins_space(
     }
     if ctx.progress {
         eprintln!(
-            "chunk bins: {} ({} triangle records)",
+            "chunk bins: at most {} ({} triangle records)",
             format_size(bins_bytes),
             counts.total()
         );
