@@ -58,6 +58,13 @@ fn gen_without_colors_has_the_same_geometry() {
         ok(&o);
         let s: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
         assert_eq!(s["record_bytes"], rec, "{name}");
+        // the bins' blocks share the corners of a scan-like mesh: well under a record each
+        let written = s["temp_bytes_written"].as_u64().unwrap();
+        let binned = s["binned_triangles"].as_u64().unwrap();
+        assert!(
+            written > 0 && written * 2 < binned * rec,
+            "{name}: {written} temporary bytes for {binned} binned triangles"
+        );
         let (_, nodes) = read_nodes(&out);
         let p: Vec<_> = nodes
             .iter()

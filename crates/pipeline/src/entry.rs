@@ -218,6 +218,7 @@ fn summarize(ctx: BuildContext, built: Built, resumed: bool, t0: Instant) -> Bui
         texture_cache: voxelized.texture_cache,
         peak_rss: crate::system::peak_rss(),
         temp_disk: ingested.temp_disk,
+        temp_bytes_written: ingested.temp_written,
         tile_source: if ingested.marker.spooled {
             "spool"
         } else {

@@ -84,6 +84,9 @@ pub struct BuildSummary {
     pub peak_rss: u64,
     /// Largest temporary disk use planned (bytes): spool (if one is written) plus bins.
     pub temp_disk: u64,
+    /// Bytes this process wrote to the temporary triangle files, spool plus bins (a stage
+    /// taken from the work folder of an interrupted build adds nothing).
+    pub temp_bytes_written: u64,
     /// How the tile stage read the triangles: `"input"` (passes over the memory-mapped input,
     /// no spool) or `"spool"` (the input was parsed once into a spool).
     pub tile_source: &'static str,
@@ -95,8 +98,8 @@ pub struct BuildSummary {
     /// before it: `voxlod_tile::RunScatter`), so the tile stage read nothing: one parse of the
     /// input in all.
     pub binned_during_ingest: bool,
-    /// Bytes of one triangle record in the spool and bins (40–112: only the attributes the
-    /// mesh has).
+    /// Bytes of one triangle record in the spool and in the bins' blocks before they are
+    /// indexed (40–112: only the attributes the mesh has).
     pub record_bytes: usize,
     /// `--source-geometry`: the leaves' source triangles; `None` without it.
     pub source_geometry: Option<SourceSummary>,

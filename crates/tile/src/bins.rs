@@ -1,5 +1,6 @@
-//! Passes 2 and 3 of tiling: per-chunk counts, the layout of the bins file (one pre-sized
-//! region per non-empty chunk, chunks in Morton order) and the budgeted scatter into it.
+//! Passes 2 and 3 of tiling: per-chunk counts, the non-empty chunks in Morton order, and the
+//! budgeted scatter of the triangles into the bins file (each chunk's triangles as
+//! [blocks](crate::block) appended in pieces).
 
 use std::fs::File;
 use std::os::unix::fs::FileExt;
@@ -7,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use voxlod_geom::{morton3, Grid, Triangle, CHUNK};
 
+use crate::block::{BlockEncoder, BlockHeader, BLOCK_HEADER};
 use crate::{Passes, RecordLayout, TileError};
 
 /// Pass 2: counts, per leaf chunk, the triangles of `src` whose chunk range (see
@@ -218,8 +220,8 @@ impl ChunkCounts {
         self.counts.iter().sum()
     }
 
-    /// The non-empty chunks, in Morton order of their coordinates, with their regions laid out
-    /// back to back.
+    /// The non-empty chunks, in Morton order of their coordinates (`start` is the first
+    /// triangle of each as if their triangles were laid out back to back).
     pub fn layout(&self) -> Vec<ChunkBin> {
         let mut chunks: Vec<ChunkBin> = Vec::new();
         for z in 0..self.n {
@@ -326,16 +328,16 @@ impl ChunkKeys {
     }
 }
 
-/// One non-empty leaf chunk and its region in the bins file (in triangles).
+/// One non-empty leaf chunk of the bins.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ChunkBin {
     /// Chunk coordinates (units of [`CHUNK`] voxels).
     pub coord: [u32; 3],
     /// `morton3(coord)`.
     pub morton: u64,
-    /// First triangle of the region.
+    /// In finished [`Bins`]: the byte offset of the chunk's first piece in the bins file.
     pub start: u64,
-    /// Triangles in the region.
+    /// Triangles binned to the chunk.
     pub count: u64,
 }
 
@@ -347,9 +349,9 @@ impl ChunkBin {
 }
 
 /// The scatter pass in progress: one arena of at most the byte budget, cut into one slice per
-/// non-empty chunk in proportion to its count (at least one record). A chunk's slice is written
-/// to its region when it fills up and at the end, so nothing is allocated per triangle and
-/// every write is a whole slice.
+/// non-empty chunk in proportion to its count (at least one record). A chunk's slice is
+/// encoded as blocks and appended to the file as one of its pieces when it fills up and at
+/// the end, so nothing is allocated per triangle.
 pub(crate) struct Scatter<'g> {
     grid: &'g Grid,
     path: PathBuf,
@@ -363,6 +365,13 @@ pub(crate) struct Scatter<'g> {
     layout: RecordLayout,
     /// Triangles already written per chunk.
     written: Vec<u64>,
+    /// Per chunk: its pieces `[byte offset, bytes, triangles]`.
+    pieces: Vec<Vec<[u64; 3]>>,
+    /// Bytes written to the file (its end).
+    end: u64,
+    encoder: BlockEncoder,
+    /// The blocks of the slice being written.
+    out: Vec<u8>,
     arena: Vec<u8>,
     /// Per chunk: first record of its slice in the arena, slice capacity, records in it.
     slice_start: Vec<u64>,
@@ -384,7 +393,6 @@ impl<'g> Scatter<'g> {
             slot[counts.index(c.coord)] = i as u32;
         }
         let rec = layout.bytes() as u64;
-        let total: u64 = chunks.iter().map(|c| c.count).sum();
         let file = std::fs::OpenOptions::new()
             .read(true)
             .write(true)
@@ -392,16 +400,11 @@ impl<'g> Scatter<'g> {
             .truncate(true)
             .open(path)
             .map_err(TileError::io("create", path))?;
-        file.set_len(total * rec)
-            .map_err(TileError::io("resize", path))?;
-        // slices in proportion to the counts; a chunk whose triangles all fit is written once
-        let arena_records = (buffer_bytes.max(rec * 1024) / rec).min(total.max(1));
+        let caps = slice_caps(&chunks, rec, buffer_bytes);
         let mut slice_start = Vec::with_capacity(chunks.len());
         let mut slice_cap = Vec::with_capacity(chunks.len());
         let mut at = 0u64;
-        for c in &chunks {
-            let cap = ((c.count as u128 * arena_records as u128 / total.max(1) as u128) as u64)
-                .clamp(1, c.count.min(u32::MAX as u64));
+        for cap in caps {
             slice_start.push(at);
             slice_cap.push(cap as u32);
             at += cap;
@@ -417,6 +420,10 @@ impl<'g> Scatter<'g> {
             n: counts.n,
             layout,
             written: vec![0; k],
+            pieces: vec![Vec::new(); k],
+            end: 0,
+            encoder: BlockEncoder::new(layout),
+            out: Vec::new(),
             arena: vec![0u8; (at * rec) as usize],
             slice_start,
             slice_cap,
@@ -456,7 +463,7 @@ impl<'g> Scatter<'g> {
         Ok(())
     }
 
-    /// Writes chunk `s`'s slice to the next part of its region and empties it.
+    /// Appends chunk `s`'s slice to the file as blocks (one piece of the chunk) and empties it.
     fn write_slice(&mut self, s: usize) -> Result<(), TileError> {
         let n = self.slice_len[s] as u64;
         if n == 0 {
@@ -470,14 +477,21 @@ impl<'g> Scatter<'g> {
                 counted: c.count,
             });
         }
-        let rec = self.layout.bytes() as u64;
-        let from = (self.slice_start[s] * rec) as usize;
+        let rec = self.layout.bytes();
+        let from = self.slice_start[s] as usize * rec;
+        let arena = &self.arena;
+        self.out.clear();
+        self.encoder.encode(
+            n as usize,
+            |i| &arena[from + i * rec..from + (i + 1) * rec],
+            &mut self.out,
+        );
         self.file
-            .write_all_at(
-                &self.arena[from..from + (n * rec) as usize],
-                (c.start + self.written[s]) * rec,
-            )
+            .write_all_at(&self.out, self.end)
             .map_err(TileError::io("write", &self.path))?;
+        let bytes = self.out.len() as u64;
+        self.pieces[s].push([self.end, bytes, n]);
+        self.end += bytes;
         self.written[s] += n;
         self.slice_len[s] = 0;
         Ok(())
@@ -499,88 +513,96 @@ impl<'g> Scatter<'g> {
         self.file
             .sync_data()
             .map_err(TileError::io("sync", &self.path))?;
+        for (c, ps) in self.chunks.iter_mut().zip(&self.pieces) {
+            c.start = ps[0][0];
+        }
         Ok(Bins {
             path: self.path,
             file: self.file,
             chunks: self.chunks,
             layout: self.layout,
-            pieces: None,
+            pieces: self.pieces,
+            bytes: self.end,
         })
     }
 }
 
+/// Records per chunk in the scatter's arena (same order as `chunks`): slices in proportion to
+/// the counts, at least one record; a chunk whose triangles all fit is written once.
+fn slice_caps(chunks: &[ChunkBin], rec: u64, buffer_bytes: u64) -> Vec<u64> {
+    let total: u64 = chunks.iter().map(|c| c.count).sum();
+    let arena_records = (buffer_bytes.max(rec * 1024) / rec).min(total.max(1));
+    chunks
+        .iter()
+        .map(|c| {
+            ((c.count as u128 * arena_records as u128 / total.max(1) as u128) as u64)
+                .clamp(1, c.count.min(u32::MAX as u64))
+        })
+        .collect()
+}
+
+/// Largest size of the bins file [`scatter`] writes for `counts` with records of `layout` and
+/// a buffer of `buffer_bytes`: blocks are never larger than their records plus a header, and
+/// each flush of a chunk's slice is one piece.
+pub fn scatter_bound(counts: &ChunkCounts, layout: RecordLayout, buffer_bytes: u64) -> u64 {
+    let chunks = counts.layout();
+    let rec = layout.bytes() as u64;
+    let caps = slice_caps(&chunks, rec, buffer_bytes);
+    let pieces: u64 = chunks
+        .iter()
+        .zip(&caps)
+        .map(|(c, &cap)| c.count.div_ceil(cap))
+        .sum();
+    layout.blocks_bound(counts.total(), pieces)
+}
+
 /// The finished bins file: non-empty leaf chunks in Morton order, each with its triangles
-/// (grid coordinates, in input order), as records of one [`RecordLayout`]. A chunk's records
-/// are one contiguous region (`start`, `count` of its [`ChunkBin`], what [`scatter`] writes)
-/// or, for bins written in runs ([`crate::RunScatter`]), a list of pieces read one after another.
+/// (grid coordinates, in input order) as [blocks](crate::block) of one [`RecordLayout`], in
+/// pieces: runs of consecutive blocks, `[byte offset, bytes, triangles]`, read one after
+/// another. [`scatter`] writes a piece per flush of a chunk's slice, [`crate::RunScatter`] a
+/// piece per chunk per run.
 pub struct Bins {
     path: PathBuf,
     file: File,
     chunks: Vec<ChunkBin>,
     layout: RecordLayout,
-    /// Per chunk (same order as `chunks`): its pieces `[first record, records]`, in input
-    /// order; None when every chunk is the one region its `ChunkBin` gives.
-    pieces: Option<Vec<Vec<[u64; 2]>>>,
+    /// Per chunk (same order as `chunks`): its pieces `[byte offset, bytes, triangles]`, in
+    /// input order.
+    pieces: Vec<Vec<[u64; 3]>>,
+    /// Length of the file.
+    bytes: u64,
 }
 
 impl Bins {
-    /// Reopens a finished bins file with its layout (e.g. to resume a build). The file length
-    /// must match the layout exactly.
-    pub fn open(
-        path: &Path,
-        chunks: Vec<ChunkBin>,
-        layout: RecordLayout,
-    ) -> Result<Bins, TileError> {
-        let file = File::open(path).map_err(TileError::io("open", path))?;
-        let len = file.metadata().map_err(TileError::io("stat", path))?.len();
-        let total: u64 = chunks.iter().map(|c| c.count).sum();
-        let contiguous = chunks.iter().scan(0u64, |next, c| {
-            let ok = c.start == *next;
-            *next += c.count;
-            Some(ok)
-        });
-        if len != total * layout.bytes() as u64 || !contiguous.into_iter().all(|ok| ok) {
-            return Err(TileError::Truncated {
-                path: path.to_path_buf(),
-                len,
-                record: layout.bytes() as u64,
-            });
-        }
-        Ok(Bins {
-            path: path.to_path_buf(),
-            file,
-            chunks,
-            layout,
-            pieces: None,
-        })
-    }
-
-    /// Reopens a finished bins file written in runs, with its chunks and each chunk's pieces
-    /// (what [`Bins::pieces`] gave). The pieces must add up to each chunk's count, lie inside
-    /// the file and cover it exactly.
+    /// Reopens a finished bins file with its chunks and each chunk's pieces (what
+    /// [`Bins::pieces`] gave; e.g. to resume a build). The pieces must add up to each chunk's
+    /// count, lie inside the file and cover it exactly (their bytes add up to its length).
     pub fn open_pieces(
         path: &Path,
         chunks: Vec<ChunkBin>,
         layout: RecordLayout,
-        pieces: Vec<Vec<[u64; 2]>>,
+        pieces: Vec<Vec<[u64; 3]>>,
     ) -> Result<Bins, TileError> {
         let file = File::open(path).map_err(TileError::io("open", path))?;
         let len = file.metadata().map_err(TileError::io("stat", path))?.len();
-        let rec = layout.bytes() as u64;
-        let records = len / rec;
-        let total: u64 = chunks.iter().map(|c| c.count).sum();
         let fits = pieces.len() == chunks.len()
             && chunks.iter().zip(&pieces).all(|(c, ps)| {
-                ps.iter().map(|p| p[1]).sum::<u64>() == c.count
+                !ps.is_empty()
+                    && c.start == ps[0][0]
+                    && ps.iter().map(|p| p[2]).sum::<u64>() == c.count
                     && ps
                         .iter()
-                        .all(|p| p[0].checked_add(p[1]).is_some_and(|e| e <= records))
+                        .all(|p| p[0].checked_add(p[1]).is_some_and(|e| e <= len))
             });
-        if len % rec != 0 || records != total || !fits {
-            return Err(TileError::Truncated {
+        let covered: u64 = pieces.iter().flatten().map(|p| p[1]).sum();
+        if !fits || covered != len {
+            return Err(TileError::BadBins {
                 path: path.to_path_buf(),
-                len,
-                record: rec,
+                problem: format!(
+                    "its {len} bytes do not match the {} pieces of its {} chunks",
+                    pieces.iter().map(Vec::len).sum::<usize>(),
+                    chunks.len()
+                ),
             });
         }
         Ok(Bins {
@@ -588,7 +610,8 @@ impl Bins {
             file,
             chunks,
             layout,
-            pieces: Some(pieces),
+            pieces,
+            bytes: len,
         })
     }
 
@@ -597,7 +620,8 @@ impl Bins {
         file: File,
         chunks: Vec<ChunkBin>,
         layout: RecordLayout,
-        pieces: Vec<Vec<[u64; 2]>>,
+        pieces: Vec<Vec<[u64; 3]>>,
+        bytes: u64,
     ) -> Bins {
         debug_assert_eq!(chunks.len(), pieces.len());
         Bins {
@@ -605,17 +629,17 @@ impl Bins {
             file,
             chunks,
             layout,
-            pieces: Some(pieces),
+            pieces,
+            bytes,
         }
     }
 
-    /// Each chunk's pieces `[first record, records]` for bins written in runs (for a resume
-    /// marker); None for bins of one region per chunk.
-    pub fn pieces(&self) -> Option<&[Vec<[u64; 2]>]> {
-        self.pieces.as_deref()
+    /// Each chunk's pieces `[byte offset, bytes, triangles]` (for a resume marker).
+    pub fn pieces(&self) -> &[Vec<[u64; 3]>] {
+        &self.pieces
     }
 
-    /// The layout of the records.
+    /// The layout of the records the blocks encode.
     pub fn layout(&self) -> RecordLayout {
         self.layout
     }
@@ -630,14 +654,19 @@ impl Bins {
         &self.path
     }
 
+    /// Bytes of the bins file (what was written to it).
+    pub fn bytes(&self) -> u64 {
+        self.bytes
+    }
+
     /// Total triangle records in the file.
     pub fn total(&self) -> u64 {
         self.chunks.iter().map(|c| c.count).sum()
     }
 
-    /// Hands chunk `i`'s triangles to `f` in input order, `batch` at a time, through a buffer of
-    /// that size (memory is bounded whatever the chunk holds). The batches are the same whether
-    /// the chunk is one region or several pieces: a batch is filled across pieces.
+    /// Hands chunk `i`'s triangles to `f` in input order, `batch` at a time (the last batch
+    /// may be smaller), decoding one block at a time (memory is bounded whatever the chunk
+    /// holds). A block that does not match its piece or the layout is a [`TileError::BadBins`].
     pub fn read_chunk(
         &self,
         i: usize,
@@ -646,42 +675,60 @@ impl Bins {
     ) -> Result<(), TileError> {
         assert!(batch > 0);
         let c = self.chunks[i];
-        let region = [[c.start, c.count]];
-        let pieces: &[[u64; 2]] = match &self.pieces {
-            Some(p) => &p[i],
-            None => &region,
-        };
-        let rec = self.layout.bytes();
         let cap = batch.min(c.count as usize).max(1);
-        let mut raw = vec![0u8; cap * rec];
-        let mut tris = Vec::with_capacity(cap);
-        // records in `raw`; the piece being read and how far
-        let (mut filled, mut p, mut in_piece) = (0usize, 0usize, 0u64);
+        let mut tris: Vec<Triangle> = Vec::with_capacity(cap);
+        let mut body = Vec::new();
+        let bad = |at: u64, problem: String| TileError::BadBins {
+            path: self.path.clone(),
+            problem: format!("chunk {:?}, byte {at}: {problem}", c.coord),
+        };
         let mut done = 0u64;
-        while done < c.count {
-            while filled < cap && p < pieces.len() {
-                let [start, count] = pieces[p];
-                let n = (count - in_piece).min((cap - filled) as u64) as usize;
+        for &[start, bytes, count] in &self.pieces[i] {
+            let (mut at, end, mut got) = (start, start + bytes, 0u64);
+            while at < end {
+                let mut h = [0u8; BLOCK_HEADER];
                 self.file
-                    .read_exact_at(
-                        &mut raw[filled * rec..(filled + n) * rec],
-                        (start + in_piece) * rec as u64,
-                    )
+                    .read_exact_at(&mut h, at)
                     .map_err(TileError::io("read", &self.path))?;
-                filled += n;
-                in_piece += n as u64;
-                if in_piece == count {
-                    (p, in_piece) = (p + 1, 0);
+                let head = BlockHeader::parse(&h).map_err(|e| bad(at, e))?;
+                let n = head.body_bytes(self.layout);
+                let next = at + (BLOCK_HEADER + n) as u64;
+                if next > end {
+                    return Err(bad(
+                        at,
+                        format!("a block of {n} bytes past its piece's end"),
+                    ));
+                }
+                body.resize(n, 0);
+                self.file
+                    .read_exact_at(&mut body, at + BLOCK_HEADER as u64)
+                    .map_err(TileError::io("read", &self.path))?;
+                head.decode(self.layout, &body, &mut tris)
+                    .map_err(|e| bad(at, e))?;
+                got += head.triangles as u64;
+                at = next;
+                if tris.len() >= cap {
+                    let mut from = 0;
+                    while tris.len() - from >= cap {
+                        f(&tris[from..from + cap])?;
+                        from += cap;
+                    }
+                    tris.drain(..from);
                 }
             }
-            assert!(
-                filled > 0,
-                "chunk {i}: its pieces hold fewer records than its count"
-            );
-            self.layout.decode_all(&raw[..filled * rec], &mut tris);
+            if got != count {
+                return Err(bad(
+                    start,
+                    format!("a piece of {got} triangles where {count} were written"),
+                ));
+            }
+            done += got;
+        }
+        if done != c.count {
+            return Err(bad(c.start, format!("{done} triangles, not {}", c.count)));
+        }
+        if !tris.is_empty() {
             f(&tris)?;
-            done += filled as u64;
-            filled = 0;
         }
         Ok(())
     }
@@ -772,10 +819,8 @@ mod tests {
                 &mut |_, _| {},
             )
             .unwrap();
-            assert_eq!(
-                std::fs::metadata(&path).unwrap().len(),
-                bins.total() * layout.bytes() as u64
-            );
+            assert_eq!(std::fs::metadata(&path).unwrap().len(), bins.bytes());
+            assert!(bins.bytes() <= scatter_bound(&counts, layout, budget));
             let mut all = Vec::new();
             let mut last = None;
             for (i, c) in bins.chunks().iter().enumerate() {

@@ -10,15 +10,16 @@
 //!    format. Both are [`Passes`]: something that can hand out the same triangles any number
 //!    of times, in the same order.
 //! 2. [`count`]: with the grid known, each triangle's chunk range is counted per chunk.
-//! 3. [`scatter`]: the bins file is laid out as one pre-sized region per non-empty chunk, in
-//!    Morton order of the chunks; triangles (now in grid coordinates) are encoded as compact
-//!    records ([`RecordLayout`]: only the attributes the mesh has), buffered in memory up to a
-//!    fixed budget and flushed to their regions with positioned writes.
+//! 3. [`scatter`]: triangles (now in grid coordinates) are encoded as compact records
+//!    ([`RecordLayout`]: only the attributes the mesh has) into one slice per non-empty chunk
+//!    of a buffer of fixed budget; a full slice is appended to the bins file as
+//!    [blocks](block) (each distinct corner once, 16-bit indices, flags once), one *piece* of
+//!    the chunk's bin.
 //!
 //! When the grid is known before the triangles are read, [`RunScatter`] bins them without
 //! the counts, in the same pass that reads them for their bounds: the buffer is written in
-//! runs, each sorted by chunk, and a chunk's bin is its pieces in the runs (same triangles,
-//! same order for [`Bins::read_chunk`]).
+//! runs, each sorted by chunk and encoded as blocks, and a chunk's bin is its pieces in the
+//! runs (same triangles, same order for [`Bins::read_chunk`]).
 //!
 //! Per-triangle work that does not depend on the order (the move to grid coordinates, the
 //! chunk ranges as [`ChunkKeys`]) runs in each pass's prepare step
@@ -44,15 +45,22 @@
 //! let mut n = 0;
 //! bins.read_chunk(0, 1024, &mut |tris| { n += tris.len(); Ok(()) }).unwrap();
 //! assert_eq!(n, 1);
-//! assert_eq!(std::fs::metadata(dir.path().join("bins")).unwrap().len(), 8 * 40);
+//! // one block per chunk: a 16-byte header and the 40-byte record (for one triangle, a vertex
+//! // table and indices would be larger)
+//! assert_eq!(bins.bytes(), 8 * (16 + 40));
+//! assert_eq!(std::fs::metadata(dir.path().join("bins")).unwrap().len(), bins.bytes());
 //! ```
+
+pub mod block;
 
 mod bins;
 mod record;
 mod run_scatter;
 mod spool;
 
-pub use bins::{count, scatter, Bins, ChunkBin, ChunkCounts, ChunkKeys, DROPPED, SPANS};
+pub use bins::{
+    count, scatter, scatter_bound, Bins, ChunkBin, ChunkCounts, ChunkKeys, DROPPED, SPANS,
+};
 pub use record::RecordLayout;
 pub use run_scatter::{RunScatter, RUN_SCATTER_MAX_CHUNKS};
 pub use spool::{Spool, Spooler};
@@ -113,7 +121,7 @@ pub enum TileError {
         source: std::io::Error,
     },
     #[error("{path} is {len} bytes, not the expected whole number of {record}-byte triangle records (truncated temporary file?)")]
-    /// A spool or bins file is not a whole number of records.
+    /// A spool file is not a whole number of records.
     Truncated {
         /// The file.
         path: PathBuf,
@@ -121,6 +129,14 @@ pub enum TileError {
         len: u64,
         /// Bytes per record.
         record: u64,
+    },
+    #[error("{path}: {problem} (a damaged temporary bins file?)")]
+    /// A bins file's blocks do not match its pieces or its record layout.
+    BadBins {
+        /// The file.
+        path: PathBuf,
+        /// What does not match, and where.
+        problem: String,
     },
     #[error("the grid has {0} chunks; at most 2^32 are supported")]
     /// The grid has more chunks than a `u32` index holds.

@@ -11,29 +11,30 @@
 //! [`Bins::read_chunk`] hands out the same triangles, in the same order and the same batches,
 //! as the bins of [`crate::scatter`].
 //!
-//! The sorted run is written without a second copy: one vectored write names the buffer's
-//! stretches of consecutive records in sorted order (long in a scan, whose input order is
-//! mostly spatial), and the kernel copies them to the file (appended, so the file is always a
-//! whole number of runs).
+//! The writer thread encodes each chunk's records of the sorted run as [blocks](crate::block)
+//! (each distinct corner once, 16-bit indices) into a bounded output buffer appended to the
+//! file; a chunk's part of a run is one piece `[byte offset, bytes, triangles]`.
 //!
 //! Memory is bounded by design: the buffer (records, their keys and the sort's permutation)
-//! has a byte budget and the pieces cost 16 bytes per chunk per run; the grid may have at most
+//! has a byte budget, the writer's output buffer is [`OUT_BYTES`] plus a chunk's blocks, and
+//! the pieces cost 24 bytes per chunk per run; the grid may have at most
 //! [`RUN_SCATTER_MAX_CHUNKS`] chunks (dense per-chunk arrays).
 
 use std::fs::File;
-use std::io::{IoSlice, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use voxlod_geom::{morton3, Grid, Triangle};
 
+use crate::block::BlockEncoder;
 use crate::{Bins, ChunkBin, RecordLayout, TileError};
 
 /// Most chunks a grid may have for [`RunScatter`] (its per-chunk arrays are dense): 32³, a
 /// grid of 8192³ voxels.
 pub const RUN_SCATTER_MAX_CHUNKS: u64 = 32 * 32 * 32;
 
-/// Stretches of records per vectored write (Linux's `IOV_MAX`).
-const SLICES_PER_WRITE: usize = 1024;
+/// The writer's output buffer is written to the file once it holds this many bytes.
+const OUT_BYTES: usize = 4 << 20;
 
 /// One run's records, in arrival order, and their chunks' Morton ranks.
 #[derive(Default)]
@@ -68,13 +69,16 @@ struct Writer {
     path: PathBuf,
     file: File,
     rec: usize,
-    /// Per Morton rank: its pieces so far, `[first record, records]`.
-    pieces: Vec<Vec<[u64; 2]>>,
-    /// Records written to the file.
+    /// Per Morton rank: its pieces so far, `[byte offset, bytes, triangles]`.
+    pieces: Vec<Vec<[u64; 3]>>,
+    /// Bytes written to the file.
     written: u64,
     /// Scratch of the sort: records per rank, then each rank's next slot; the permutation.
     slots: Vec<u32>,
     perm: Vec<u32>,
+    encoder: BlockEncoder,
+    /// Blocks not yet written to the file (they start at `written`).
+    out: Vec<u8>,
 }
 
 impl RunScatter {
@@ -121,6 +125,8 @@ impl RunScatter {
             written: 0,
             slots: vec![0; total as usize + 1],
             perm: Vec::new(),
+            encoder: BlockEncoder::new(layout),
+            out: Vec::new(),
         };
         let (to_writer, runs) = std::sync::mpsc::sync_channel::<Run>(1);
         let (back, from_writer) = std::sync::mpsc::channel::<Run>();
@@ -242,11 +248,18 @@ impl RunScatter {
                 coord,
                 morton: morton3(coord[0], coord[1], coord[2]),
                 start: ps[0][0],
-                count: ps.iter().map(|p| p[1]).sum(),
+                count: ps.iter().map(|p| p[2]).sum(),
             });
             pieces.push(ps);
         }
-        Ok(Bins::from_runs(w.path, w.file, chunks, self.layout, pieces))
+        Ok(Bins::from_runs(
+            w.path,
+            w.file,
+            chunks,
+            self.layout,
+            pieces,
+            w.written,
+        ))
     }
 }
 
@@ -262,8 +275,9 @@ impl Drop for RunScatter {
 }
 
 impl Writer {
-    /// Writes `run` appended to the file, chunk after chunk in Morton order (a counting sort
-    /// by rank, stable: input order inside a chunk), and notes each chunk's piece.
+    /// Appends `run` to the file, chunk after chunk in Morton order (a counting sort by rank,
+    /// stable: input order inside a chunk), each chunk's records as blocks, and notes each
+    /// chunk's piece.
     fn write_run(&mut self, run: &Run) -> Result<(), TileError> {
         if run.ranks.is_empty() {
             return Ok(());
@@ -274,11 +288,6 @@ impl Writer {
             self.slots[r as usize + 1] += 1;
         }
         for r in 0..self.pieces.len() {
-            let k = self.slots[r + 1];
-            if k > 0 {
-                let first = self.written + self.slots[r] as u64;
-                self.pieces[r].push([first, k as u64]);
-            }
             self.slots[r + 1] += self.slots[r];
         }
         self.perm.clear();
@@ -288,42 +297,42 @@ impl Writer {
             self.perm[*s as usize] = i as u32;
             *s += 1;
         }
-        // the sorted order as stretches of consecutive records, appended at the file's end
-        let (mut file, recs, perm) = (&self.file, &run.recs, &self.perm);
-        let mut slices = Vec::with_capacity(SLICES_PER_WRITE);
-        let mut i = 0;
-        while i < perm.len() {
-            let first = perm[i] as usize;
-            let mut end = first + 1;
-            i += 1;
-            while i < perm.len() && perm[i] as usize == end {
-                (end, i) = (end + 1, i + 1);
+        // now `slots[r]` is the end of rank r's records in `perm`
+        let mut first = 0usize;
+        for r in 0..self.pieces.len() {
+            let end = self.slots[r] as usize;
+            if end == first {
+                continue;
             }
-            slices.push(IoSlice::new(&recs[first * rec..end * rec]));
-            if slices.len() == SLICES_PER_WRITE || i == perm.len() {
-                write_all_vectored(&mut file, &mut slices)
-                    .map_err(TileError::io("write", &self.path))?;
-                slices.clear();
+            let (recs, perm) = (&run.recs, &self.perm[first..end]);
+            let at = self.out.len();
+            self.encoder.encode(
+                perm.len(),
+                |i| {
+                    let j = perm[i] as usize;
+                    &recs[j * rec..(j + 1) * rec]
+                },
+                &mut self.out,
+            );
+            let bytes = (self.out.len() - at) as u64;
+            self.pieces[r].push([self.written + at as u64, bytes, perm.len() as u64]);
+            first = end;
+            if self.out.len() >= OUT_BYTES {
+                self.flush()?;
             }
         }
-        self.written += perm.len() as u64;
+        self.flush()
+    }
+
+    /// Appends the output buffer to the file.
+    fn flush(&mut self) -> Result<(), TileError> {
+        (&self.file)
+            .write_all(&self.out)
+            .map_err(TileError::io("write", &self.path))?;
+        self.written += self.out.len() as u64;
+        self.out.clear();
         Ok(())
     }
-}
-
-/// Writes every byte of `slices` at the file's position (`Write::write_all_vectored` is not
-/// stable).
-fn write_all_vectored(file: &mut &File, slices: &mut [IoSlice<'_>]) -> std::io::Result<()> {
-    let mut rest = slices;
-    while !rest.is_empty() {
-        match file.write_vectored(rest) {
-            Ok(0) => return Err(std::io::ErrorKind::WriteZero.into()),
-            Ok(n) => IoSlice::advance_slices(&mut rest, n),
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(e),
-        }
-    }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -416,7 +425,7 @@ mod tests {
                 rs.push_keyed(&moved, &keys.of_grid(&moved)).unwrap();
             }
             let bins = rs.finish().unwrap();
-            let runs = bins.pieces().unwrap().iter().map(Vec::len).max().unwrap();
+            let runs = bins.pieces().iter().map(Vec::len).max().unwrap();
             assert!(
                 (buffer == 1 << 30) == (runs == 1),
                 "buffer {buffer}: at most {runs} pieces per chunk"
@@ -431,15 +440,18 @@ mod tests {
                 assert_eq!(g.1, w.1, "chunk {:?}: other triangles or order", w.0.coord);
                 assert_eq!(g.2, w.2, "chunk {:?}: other batches", w.0.coord);
             }
-            assert_eq!(
-                std::fs::metadata(&path).unwrap().len(),
-                reference.total() * rec
-            );
+            // blocks: never more than the records and their headers (these triangles share no
+            // corners: raw blocks)
+            let len = std::fs::metadata(&path).unwrap().len();
+            assert_eq!(len, bins.bytes());
+            let pieces = bins.pieces().iter().map(Vec::len).sum::<usize>() as u64;
+            assert!(len <= layout.blocks_bound(reference.total(), pieces));
+            assert!(len >= reference.total() * rec, "{len} bytes");
             let again = Bins::open_pieces(
                 &path,
                 bins.chunks().to_vec(),
                 layout,
-                bins.pieces().unwrap().to_vec(),
+                bins.pieces().to_vec(),
             )
             .unwrap();
             assert_eq!(read_all(&again, 1000), read_all(&bins, 1000));
@@ -466,18 +478,31 @@ mod tests {
         let keys = ChunkCounts::new(&grid).unwrap().keys().of_grid(&moved);
         rs.push_keyed(&moved, &keys).unwrap();
         let bins = rs.finish().unwrap();
-        let (chunks, pieces) = (bins.chunks().to_vec(), bins.pieces().unwrap().to_vec());
+        let (chunks, pieces) = (bins.chunks().to_vec(), bins.pieces().to_vec());
         assert!(Bins::open_pieces(&path, chunks.clone(), layout, pieces.clone()).is_ok());
         let mut short = pieces.clone();
         short[0][0][1] -= 1;
         let e = Bins::open_pieces(&path, chunks.clone(), layout, short)
             .err()
             .unwrap();
-        assert!(matches!(e, TileError::Truncated { .. }), "{e:?}");
+        assert!(matches!(e, TileError::BadBins { .. }), "{e:?}");
+        let mut fewer = pieces.clone();
+        fewer[0][0][2] -= 1;
+        assert!(Bins::open_pieces(&path, chunks.clone(), layout, fewer).is_err());
         let mut past = pieces.clone();
         past[0][0][0] += 1 << 40;
         assert!(Bins::open_pieces(&path, chunks.clone(), layout, past).is_err());
-        assert!(Bins::open_pieces(&path, chunks[1..].to_vec(), layout, pieces).is_err());
+        assert!(Bins::open_pieces(&path, chunks[1..].to_vec(), layout, pieces.clone()).is_err());
+        // a damaged block header is found when the chunk is read, naming the file
+        drop(bins);
+        let mut bytes = std::fs::read(&path).unwrap();
+        let at = pieces[0][0][0] as usize;
+        bytes[at..at + 4].copy_from_slice(&0u32.to_le_bytes());
+        std::fs::write(&path, bytes).unwrap();
+        let bins = Bins::open_pieces(&path, chunks, layout, pieces).unwrap();
+        let e = bins.read_chunk(0, 100, &mut |_| Ok(())).unwrap_err();
+        assert!(matches!(e, TileError::BadBins { .. }), "{e:?}");
+        assert!(e.to_string().contains("bins"), "{e}");
     }
 
     /// A grid with more chunks than the dense arrays allow is refused with a typed error.

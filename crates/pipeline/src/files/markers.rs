@@ -34,13 +34,13 @@ impl Marker for IngestMarker {
     const FILE: WorkFile = WorkFile::IngestMarker;
 }
 
-/// The bins layout (`bins.json`): `[x, y, z, start, count]` per non-empty chunk, and for bins
-/// written in runs during the ingest pass each chunk's pieces `[first record, records]`.
+/// The bins layout (`bins.json`): `[x, y, z, start, count]` per non-empty chunk (`start`: the
+/// byte offset of its first piece) and each chunk's pieces `[byte offset, bytes, triangles]`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) struct BinsMarker {
     chunks: Vec<[u64; 5]>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pieces: Option<Vec<Vec<[u64; 2]>>>,
+    #[serde(default)]
+    pieces: Vec<Vec<[u64; 3]>>,
 }
 
 impl Marker for BinsMarker {
@@ -60,17 +60,14 @@ impl BinsMarker {
             .collect();
         BinsMarker {
             chunks,
-            pieces: bins.pieces().map(<[_]>::to_vec),
+            pieces: bins.pieces().to_vec(),
         }
     }
 
     /// The bins this marker describes, opened (None if the file does not match it).
     pub(crate) fn open(self, path: &std::path::Path, layout: RecordLayout) -> Option<Bins> {
         let chunks = self.chunks()?;
-        match self.pieces {
-            Some(p) => Bins::open_pieces(path, chunks, layout, p).ok(),
-            None => Bins::open(path, chunks, layout).ok(),
-        }
+        Bins::open_pieces(path, chunks, layout, self.pieces).ok()
     }
 
     /// The chunks of the layout (None if a coordinate is out of range: the marker is not ours).

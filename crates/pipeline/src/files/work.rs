@@ -19,8 +19,9 @@ use crate::shard::plan_file::ShardScope;
 /// no spool for memory-mapped inputs. 3: OBJ material ids for every used material, and in a
 /// build with the material channel each leaf log record holds a second zstd frame (the
 /// materials). 4: leaf log records hold the leaf's half and its encoded node's fields (the
-/// LOD stage does not decode the leaves).
-pub const WORK_FORMAT: u32 = 4;
+/// LOD stage does not decode the leaves). 5: bins as blocks (`voxlod_tile::block`: a vertex
+/// table and 16-bit indices per block), in pieces `[byte offset, bytes, triangles]`.
+pub const WORK_FORMAT: u32 = 5;
 
 /// The files of a work folder: the one place that names them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

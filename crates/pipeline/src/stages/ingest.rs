@@ -40,6 +40,9 @@ pub(crate) struct Ingested {
     pub binned_during_ingest: bool,
     /// Largest temporary disk use planned (bytes): spool (if one is written) plus bins.
     pub temp_disk: u64,
+    /// Bytes this process wrote to the spool and bins files (a stage taken from the work
+    /// folder adds nothing); the tile stage adds the bins it writes.
+    pub temp_written: u64,
 }
 
 impl Ingested {
@@ -85,6 +88,7 @@ pub(crate) fn run(ctx: &mut BuildContext, resume: &Resume) -> Result<Ingested, S
                 || std::fs::metadata(ctx.work.file(WorkFile::Spool))
                     .is_ok_and(|md| md.len() == m.count * layout.bytes() as u64))
     });
+    let mut temp_written = 0;
     let (marker, early) = match resumed {
         Some(m) => {
             ctx.stage_done(Stage::Ingest, t, true);
@@ -92,6 +96,12 @@ pub(crate) fn run(ctx: &mut BuildContext, resume: &Resume) -> Result<Ingested, S
         }
         None => {
             let (m, early) = read_input(ctx, layout, spooled, !later_done, temp_disk)?;
+            if m.spooled {
+                temp_written += m.count * layout.bytes() as u64;
+            }
+            if let Early::Bins(b, _) = &early {
+                temp_written += b.bytes();
+            }
             ctx.work.set_marker(&m)?;
             ctx.stage_done(Stage::Ingest, t, false);
             (m, early)
@@ -126,6 +136,7 @@ pub(crate) fn run(ctx: &mut BuildContext, resume: &Resume) -> Result<Ingested, S
         early_counts,
         early_bins,
         temp_disk,
+        temp_written,
     })
 }
 
@@ -187,14 +198,15 @@ fn from_plan(
         counted_during_ingest: true,
         binned_during_ingest: false,
         temp_disk,
+        temp_written: 0,
     })
 }
 
 /// Temporary disk: the bins (the triangles plus those that straddle chunk borders, at most
 /// about 1.5× for fine meshes; faces counted twice in case they are quads), and the spool if
 /// one is written, which exists during the scatter pass too. This is an upper bound: the build
-/// is refused here only if even one record per face cannot fit, and the exact size of the bins
-/// is checked once the count pass knows it (before anything is written to them). Returns the
+/// is refused here only if even one record per face cannot fit, and the largest size of the
+/// bins is checked once the count pass knows it (before anything is written to them). Returns the
 /// upper bound.
 fn check_temp_disk(
     ctx: &mut BuildContext,

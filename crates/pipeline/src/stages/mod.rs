@@ -96,7 +96,7 @@ mod tests {
     use crate::context::Scope;
     use crate::files::markers::{BinsMarker, IngestMarker, LeavesMarker};
     use crate::files::output::{OutputGuard, OutputKind};
-    use crate::files::work::{Marker, WorkDir};
+    use crate::files::work::{Marker, WorkDir, WorkFile};
     use crate::memory::MemoryPlan;
     use crate::settings::BuildSettings;
     use crate::stages::voxelize::backend::{ChunkSource, ChunkVoxels, CpuVoxelizers, Voxelize};
@@ -117,6 +117,12 @@ mod tests {
     /// An ASCII PLY of a tetrahedron and a triangle across the unit cube: at 512³ its
     /// triangles touch several of the 2×2×2 leaf chunks.
     fn fixture() -> Fixture {
+        fixture_of(false)
+    }
+
+    /// The fixture's mesh, as ASCII PLY (spooled) or binary PLY (memory-mapped, binned during
+    /// the ingest pass).
+    fn fixture_of(binary: bool) -> Fixture {
         let dir = tempfile::tempdir().unwrap();
         let input = dir.path().join("t.ply");
         let v = [
@@ -132,13 +138,29 @@ mod tests {
             v.len(),
             f.len()
         );
-        for p in v {
-            text += &format!("{} {} {}\n", p[0], p[1], p[2]);
+        if binary {
+            let mut bytes = text
+                .replace("format ascii", "format binary_little_endian")
+                .into_bytes();
+            for p in v {
+                p.iter()
+                    .for_each(|&c: &f32| bytes.extend_from_slice(&c.to_le_bytes()));
+            }
+            for t in f {
+                bytes.push(3);
+                t.iter()
+                    .for_each(|&i: &i32| bytes.extend_from_slice(&i.to_le_bytes()));
+            }
+            std::fs::write(&input, bytes).unwrap();
+        } else {
+            for p in v {
+                text += &format!("{} {} {}\n", p[0], p[1], p[2]);
+            }
+            for t in f {
+                text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
+            }
+            std::fs::write(&input, text).unwrap();
         }
-        for t in f {
-            text += &format!("3 {} {} {}\n", t[0], t[1], t[2]);
-        }
-        std::fs::write(&input, text).unwrap();
         let settings = BuildSettings {
             resolution: 512,
             backend: crate::settings::Backend::Cpu,
@@ -193,6 +215,38 @@ mod tests {
     /// Each stage's artifact, saved as its marker, is what a resumed build takes back: the
     /// markers round-trip, the bins marker reopens the same bins, and a second run of each
     /// stage reports itself resumed instead of running again.
+    /// `temp_written` (the summary's `temp_bytes_written`) is the size of the spool and bins
+    /// files the build wrote, spooled or binned during the ingest pass; a resumed build wrote
+    /// none.
+    #[test]
+    fn temp_bytes_written_are_the_sizes_of_the_files_written() {
+        for binary in [false, true] {
+            let fx = fixture_of(binary);
+            let mut ctx = fx.ctx(flag());
+            let mut ingested = ingest::run(&mut ctx).unwrap();
+            assert_eq!(ingested.binned_during_ingest, binary);
+            let len = |f: WorkFile| std::fs::metadata(ctx.work.file(f)).map_or(0, |m| m.len());
+            let spool = len(WorkFile::Spool);
+            assert_eq!(spool > 0, !binary);
+            let early_bins = len(WorkFile::Bins);
+            assert_eq!(
+                ingested.temp_written,
+                spool + early_bins,
+                "binary: {binary}"
+            );
+            let tiled = tile::run(&mut ctx, &mut ingested).unwrap();
+            let bins = len(WorkFile::Bins);
+            assert!(bins > 0);
+            assert_eq!(tiled.bins.bytes(), bins);
+            assert_eq!(ingested.temp_written, spool + bins, "binary: {binary}");
+            drop(tiled);
+            let mut again = fx.ctx(flag());
+            let mut resumed = ingest::run(&mut again).unwrap();
+            let _ = tile::run(&mut again, &mut resumed).unwrap();
+            assert_eq!(resumed.temp_written, 0);
+        }
+    }
+
     #[test]
     fn stage_artifacts_round_trip_as_resume_markers() {
         let fx = fixture();

@@ -1,6 +1,6 @@
 //! The tile stage: counts the triangles per leaf chunk (unless the ingest stage did), then
-//! scatters them into pre-sized on-disk bins (`bins.tri`), one contiguous run per chunk in
-//! Morton order (`voxlod_tile`). Reads the spool, or the memory-mapped input again.
+//! scatters them into on-disk bins (`bins.tri`): per chunk, pieces of blocks (`voxlod_tile`).
+//! Reads the spool, or the memory-mapped input again.
 //!
 //! Artifact: the open [`Bins`]; resume marker: their layout, [`BinsMarker`] (`bins.json`).
 
@@ -27,7 +27,8 @@ pub(crate) struct Tiled {
 }
 
 /// Runs the tile stage, or opens the bins its marker describes. Takes the chunk counts the
-/// ingest stage left, if any. Removes the spool once the bins are complete.
+/// ingest stage left, if any. Removes the spool once the bins are complete. Bins written here
+/// add their bytes to `ingested.temp_written`.
 pub(crate) fn run(
     ctx: &mut BuildContext,
     resume: &Resume,
@@ -50,7 +51,9 @@ pub(crate) fn run(
                 Some(b) => b,
                 None => {
                     let counts = ingested.early_counts.take();
-                    tile(ctx, ingested, counts)?
+                    let bins = tile(ctx, ingested, counts)?;
+                    ingested.temp_written += bins.bytes();
+                    bins
                 }
             };
             ctx.work.set_marker(&BinsMarker::of(&bins))?;
@@ -155,19 +158,20 @@ fn tile(
     })
 }
 
-/// Refuses the scatter pass if the bins, whose exact size the counts give, cannot fit.
+/// Refuses the scatter pass if the bins, whose largest size the counts give (blocks are never
+/// larger than their records), cannot fit.
 fn check_bins_space(
     ctx: &BuildContext,
     counts: &ChunkCounts,
     layout: RecordLayout,
 ) -> Result<(), StageError> {
     let rec = layout.bytes() as u64;
-    let bins_bytes = counts.total() * rec;
+    let bins_bytes = voxlod_tile::scatter_bound(counts, layout, ctx.memory.scatter_buffer);
     let work = ctx.work.path();
     if let Some(free) = crate::system::free_disk(work) {
         if bins_bytes > free {
             return Err(StageError::TempDisk(format!(
-                "not enough disk space for the chunk bins: {} needed in {} ({} records of {} bytes), {} free (choose another folder with --tmp)",
+                "not enough disk space for the chunk bins: up to {} needed in {} ({} records of {} bytes), {} free (choose another folder with --tmp)",
                 format_size(bins_bytes),
                 work.display(),
                 counts.total(),
@@ -178,7 +182,7 @@ fn check_bins_space(
     }
     if ctx.progress {
         eprintln!(
-            "chunk bins: {} ({} triangle records)",
+            "chunk bins: at most {} ({} triangle records)",
             format_size(bins_bytes),
             counts.total()
         );
