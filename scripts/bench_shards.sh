@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A sharded build timed step by step on one machine, for what a cluster of one node per shard
-# would see (docs/BENCHMARKS.md, issue 16): plan, then every shard one after another, then the
+# would see (docs/BENCHMARKS.md, "Sharded build"): plan, then every shard one after another, then the
 # merge, each under `/usr/bin/time` with the load average before it, the shards' and the
 # merge's `--json` summaries kept for their stage times; at the end the merged file's SHA-256
 # and size against a one-machine build's (a `sha256sum` line and the size, as in REF), and the

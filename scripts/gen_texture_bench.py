@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Inputs of the texture-cache benchmark (docs/BENCHMARKS.md, section `tcache`).
+"""Inputs of a texture-cache benchmark (decoded textures larger than the `--memory` plan).
 
 Writes into OUT: sixteen distinct 4096² RGB PNGs (smooth gradients with a fine pattern;
 1.33 GiB of decoded mip pyramids) and `plane.obj` + `plane.mtl`: a 1024-unit plane of 64×64

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A voxlod build on a Slurm cluster (issue 16): plan, an array of shard builds, a dependent merge.
+# A voxlod build on a Slurm cluster: plan, an array of shard builds, a dependent merge.
 #
 #   scripts/slurm/submit.sh INPUT OUT N [build options]
 #
