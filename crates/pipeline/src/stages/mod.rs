@@ -223,7 +223,7 @@ mod tests {
         for binary in [false, true] {
             let fx = fixture_of(binary);
             let mut ctx = fx.ctx(flag());
-            let mut ingested = ingest::run(&mut ctx).unwrap();
+            let mut ingested = ingest::run(&mut ctx, &fx.resume()).unwrap();
             assert_eq!(ingested.binned_during_ingest, binary);
             let len = |f: WorkFile| std::fs::metadata(ctx.work.file(f)).map_or(0, |m| m.len());
             let spool = len(WorkFile::Spool);
@@ -234,15 +234,15 @@ mod tests {
                 spool + early_bins,
                 "binary: {binary}"
             );
-            let tiled = tile::run(&mut ctx, &mut ingested).unwrap();
+            let tiled = tile::run(&mut ctx, &fx.resume(), &mut ingested).unwrap();
             let bins = len(WorkFile::Bins);
             assert!(bins > 0);
             assert_eq!(tiled.bins.bytes(), bins);
             assert_eq!(ingested.temp_written, spool + bins, "binary: {binary}");
             drop(tiled);
             let mut again = fx.ctx(flag());
-            let mut resumed = ingest::run(&mut again).unwrap();
-            let _ = tile::run(&mut again, &mut resumed).unwrap();
+            let mut resumed = ingest::run(&mut again, &fx.resume()).unwrap();
+            let _ = tile::run(&mut again, &fx.resume(), &mut resumed).unwrap();
             assert_eq!(resumed.temp_written, 0);
         }
     }
