@@ -293,8 +293,8 @@ fn bad_shards_and_inputs_are_refused() {
 /// A byte changed in the middle of the input, with its size and modification time restored
 /// (so the plan's fingerprint of size, time and first and last MiB still matches): the shard
 /// refuses during its pass, naming the input and the plan, and leaves no shard file and no
-/// work folder; with the byte restored it builds again. A plan whose chunk list was edited is
-/// refused too.
+/// work folder; with the byte restored it builds again. A plan whose chunk list or grid was
+/// edited is refused too, naming the plan.
 #[test]
 fn a_shard_refuses_an_input_whose_content_changed() {
     let dir = tempfile::tempdir().unwrap();
@@ -352,6 +352,18 @@ fn a_shard_refuses_an_input_whose_content_changed() {
     let e = err(build_shard(&p, 0, &[]));
     assert!(
         e.contains(&s(&p)) && e.contains("its chunks add up to"),
+        "{e}"
+    );
+    // a plan whose grid was edited: named, in words, the input not blamed
+    let mut edited = v.clone();
+    let size = edited["grid"]["voxel_size"].as_f64().unwrap();
+    edited["grid"]["voxel_size"] = (size * 1.01).into();
+    std::fs::write(&p, serde_json::to_vec_pretty(&edited).unwrap()).unwrap();
+    let e = err(build_shard(&p, 0, &[]));
+    assert!(
+        e.contains(&format!("{}: its grid is origin (", s(&p)))
+            && e.contains("the plan file was edited or damaged")
+            && !e.contains("Grid {"),
         "{e}"
     );
 }

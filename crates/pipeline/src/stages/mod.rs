@@ -26,6 +26,15 @@ pub(crate) struct Built {
     pub source: Option<SourceMarker>,
 }
 
+/// A grid as a message shows it: origin, voxel size and resolution in plain numbers.
+fn grid_words(g: &voxlod_geom::Grid) -> String {
+    let [x, y, z] = g.origin;
+    format!(
+        "origin ({x}, {y}, {z}), voxel size {}, resolution {}",
+        g.voxel_size, g.resolution
+    )
+}
+
 /// Runs the stages in order, each from the previous one's artifact; a stage whose marker is
 /// in the work folder is skipped (the voxelize stage's marker skips the tile stage too).
 pub(crate) fn run(ctx: &mut BuildContext) -> Result<Built, StageError> {
@@ -34,13 +43,27 @@ pub(crate) fn run(ctx: &mut BuildContext) -> Result<Built, StageError> {
     if let Some(scope) = ctx.scope.shard() {
         // the plan's fingerprint was checked; its grid and channels must come out the same
         let channels = lod_write::channels(ctx);
-        if ingested.grid != scope.grid || channels != scope.channels {
-            return Err(anyhow::anyhow!(
-                "{}: the input gives the grid {:?} and channels {channels:?}, the plan {:?} and {:?}: plan again",
+        // the input is unchanged since planning (its fingerprint matched), so a difference
+        // means the plan file was edited or damaged: the message names the plan, in words
+        let what = if ingested.grid != scope.grid {
+            format!(
+                "its grid is {}, but {} gives {}",
+                grid_words(&scope.grid),
                 ctx.input.display(),
-                ingested.grid,
-                scope.grid,
+                grid_words(&ingested.grid)
+            )
+        } else if channels != scope.channels {
+            format!(
+                "its channels are {:?}, but the build settings give {channels:?}",
                 scope.channels
+            )
+        } else {
+            String::new()
+        };
+        if !what.is_empty() {
+            return Err(anyhow::anyhow!(
+                "{}: {what}, though the input has not changed since it was planned: the plan file was edited or damaged; plan again",
+                scope.plan_path.display(),
             )
             .into());
         }
