@@ -699,6 +699,31 @@ mod tests {
         assert!(n >= 15, "{n} examples");
     }
 
+    /// An argument whose default clap prints (`default_value`) does not also write
+    /// `[default: …]` in its doc comment, or `--help` shows the default twice.
+    #[test]
+    fn help_shows_each_default_once() {
+        fn check(cmd: &clap::Command, path: &str) {
+            for arg in cmd.get_arguments() {
+                if arg.get_default_values().is_empty() {
+                    continue;
+                }
+                for help in [arg.get_help(), arg.get_long_help()].into_iter().flatten() {
+                    let text = help.to_string();
+                    assert!(
+                        !text.contains("[default:"),
+                        "{path} --{}: the help repeats the default clap prints: {text}",
+                        arg.get_id()
+                    );
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                check(sub, &format!("{path} {}", sub.get_name()));
+            }
+        }
+        check(&Cli::command(), "voxlod");
+    }
+
     /// The defaults written in the help texts are the settings' real defaults.
     #[test]
     fn help_shows_the_real_defaults() {
