@@ -59,6 +59,16 @@ pub(crate) fn round_count(x: f64) -> String {
     format!("{v:.digits$}{suffix}")
 }
 
+/// A count of whole items: exact below a thousand (`46`, not `46.0`), else as [`round_count`]
+/// (`1.23k`, `4.93M`).
+fn round_items(n: u64) -> String {
+    if n < 1000 {
+        n.to_string()
+    } else {
+        round_count(n as f64)
+    }
+}
+
 /// Bytes as `1.25 GiB`, `310 MiB`: binary units, three significant digits.
 fn round_bytes(x: f64) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
@@ -103,11 +113,7 @@ impl Plain {
         };
         let amount = match self.unit {
             Unit::Bytes => format!("{}/{}", round_bytes(done as f64), round_bytes(total as f64)),
-            Unit::Items(name) => format!(
-                "{}/{} {name}",
-                round_count(done as f64),
-                round_count(total as f64)
-            ),
+            Unit::Items(name) => format!("{}/{} {name}", round_items(done), round_items(total)),
         };
         format!(
             "{:>10} {:>3.0}% {amount}, {}, {secs:.1}s{}",
@@ -228,6 +234,10 @@ mod tests {
             l.ends_with("100% 2.90k/2.90k chunks, 290 chunks/s, 10.0s (done)"),
             "{l}"
         );
+        let l = p.line(46, 46, Duration::from_secs(2), true);
+        assert!(l.contains(" 46/46 chunks, 23.0 chunks/s"), "{l}");
+        assert_eq!(round_items(999), "999");
+        assert_eq!(round_items(1230), "1.23k");
         let b = Plain {
             name: "ingest".into(),
             unit: Unit::Bytes,
