@@ -11,7 +11,9 @@ use indicatif::{ProgressBar, ProgressState, ProgressStyle};
 /// Seconds between two plain progress lines of one stage.
 const PLAIN_EVERY: Duration = Duration::from_secs(5);
 
-pub(crate) struct Bar {
+/// The progress display of one stage or task: a bar on a terminal, plain lines otherwise,
+/// nothing when not shown. Update it with [`Bar::set`] and end it with [`Bar::finish`].
+pub struct Bar {
     bar: ProgressBar,
     plain: Option<Plain>,
 }
@@ -158,17 +160,25 @@ impl Bar {
         Bar { bar, plain }
     }
 
-    /// A stage measured in input bytes.
-    pub(crate) fn bytes(show: bool, name: &str, total: u64) -> Bar {
+    /// A stage measured in input bytes; `show` false displays nothing.
+    pub fn bytes(show: bool, name: &str, total: u64) -> Bar {
         Self::new(show, name, total, Unit::Bytes)
     }
 
-    /// A stage measured in items (triangles, chunks).
-    pub(crate) fn items(show: bool, name: &str, total: u64) -> Bar {
-        Self::new(show, name, total, Unit::Items(item_name(name)))
+    /// A pipeline stage measured in items, named after what the stage counts (triangles of
+    /// `count` and `scatter`, chunks of `voxelize` and `lod+write`).
+    pub fn items(show: bool, name: &str, total: u64) -> Bar {
+        Self::counting(show, name, total, item_name(name))
     }
 
-    pub(crate) fn set(&self, done: u64, total: u64) {
+    /// A task `name` measured in items called `what` (e.g. "records"); `show` false displays
+    /// nothing.
+    pub fn counting(show: bool, name: &str, total: u64, what: &'static str) -> Bar {
+        Self::new(show, name, total, Unit::Items(what))
+    }
+
+    /// `done` of `total` are done (the total may change while the task runs).
+    pub fn set(&self, done: u64, total: u64) {
         if self.bar.length() != Some(total) {
             self.bar.set_length(total);
         }
@@ -186,7 +196,9 @@ impl Bar {
         }
     }
 
-    pub(crate) fn finish(&self) {
+    /// The task has ended: the bar stays at its last state, a plain display prints its last
+    /// line.
+    pub fn finish(&self) {
         self.bar.finish();
         if let Some(p) = &self.plain {
             let Ok(last) = p.last.lock() else { return };

@@ -576,30 +576,16 @@ fn run_gen(a: GenArgs) -> Result<()> {
         voxlod_pipeline::OutputKind::Ply,
         a.force,
     )?;
-    let bar = if a.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(0)
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{prefix:>10} [{bar:40}] {human_pos}/{human_len} records {per_sec} eta {eta}",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    bar.set_prefix("gen");
+    let bar = voxlod_pipeline::progress::Bar::counting(!a.quiet, "gen", 0, "records");
     let (v, t, c) = gen::generate(
         &base,
         &a.output,
         triangles,
         a.seed,
         !a.no_colors,
-        &mut |d, n| {
-            bar.set_length(n);
-            bar.set_position(d);
-        },
+        &mut |d, n| bar.set(d, n),
     )?;
-    bar.finish_and_clear();
+    bar.finish();
     let bytes = std::fs::metadata(&a.output).map(|m| m.len()).unwrap_or(0);
     println!(
         "wrote {}: {t} triangles, {v} vertices ({c} copies), {}",
