@@ -1,4 +1,4 @@
-//! `voxlod render FILE -o image.png`: a headless picture of the octree (each voxel a cube of
+//! `voxlod render FILE -o image.png` (or `.jpg`): a headless picture of the octree (each voxel a cube of
 //! its active faces, shaded by normal and colour), see `voxlod-render`.
 
 use std::path::{Path, PathBuf};
