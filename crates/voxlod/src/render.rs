@@ -1,5 +1,5 @@
-//! `voxlod render FILE -o image.png` (or `.jpg`): a headless picture of the octree (each voxel a cube of
-//! its active faces, shaded by normal and colour), see `voxlod-render`.
+//! `voxlod render FILE -o image.png` (or `.jpg`): a headless picture of the octree (each voxel
+//! a cube of its active faces, shaded by normal and colour), see `voxlod-render`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
