@@ -734,6 +734,9 @@ def main(argv=None):
                 print(f"  level {d['level']} ({d['x']},{d['y']},{d['z']}) "
                       f"{d['voxel_count']} voxels, {d['payload_size']} bytes, "
                       f"children {d['child_mask']:08b}")
+            if args.check:
+                print(f"{args.file}: ok ({h['node_count']} nodes, {h['levels']} levels, "
+                      f"{h['total_voxels']} voxels decoded)")
         return 0
     except FormatError as e:
         print(f"error: {e}", file=sys.stderr)

@@ -75,3 +75,27 @@ fn gen_without_colors_has_the_same_geometry() {
     assert!(!positions[0].is_empty());
     assert_eq!(positions[0], positions[1], "voxel positions differ");
 }
+
+/// `gen` reports progress with the pipeline's progress display: on a piped stderr, a plain
+/// closing line counting the records; nothing with `-q`.
+#[test]
+fn gen_progress_is_the_pipelines() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = voxlod(&["gen", "-n", "2000", "-o", "a.ply"], d);
+    ok(&o);
+    let err = String::from_utf8_lossy(&o.stderr);
+    let last = err.lines().last().unwrap_or_default();
+    assert!(
+        last.trim_start().starts_with("gen 100% ") && last.ends_with("(done)"),
+        "{err}"
+    );
+    assert!(last.contains(" records, "), "{err}");
+    let o = voxlod(&["gen", "-q", "-n", "2000", "-o", "b.ply"], d);
+    ok(&o);
+    assert!(
+        o.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}

@@ -118,11 +118,21 @@ fn check_file(path: &Path, dir: &Path) {
         }
     }
     assert!(checked >= levels);
-    // decode every node with all the checks of FORMAT.md 5.2
-    run(Command::new("python3")
+    // decode every node with all the checks of FORMAT.md 5.2; success is said, not implied
+    let o = run(Command::new("python3")
         .arg(script())
         .arg(path)
         .arg("--check"));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let want = format!(
+        "{}: ok ({} nodes, {levels} levels, ",
+        path.display(),
+        r.nodes().len()
+    );
+    assert!(
+        out.lines().last().is_some_and(|l| l.starts_with(&want)),
+        "{out}"
+    );
 }
 
 #[test]

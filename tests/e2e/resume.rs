@@ -182,7 +182,8 @@ fn killed_build_leaves_no_output() {
 /// cannot hold its bins in its budgeted buffer (about 80 MiB for 100 MiB of binned triangles)
 /// and must flush on the way. (2M triangles under 512 MiB checked the same with about 20 %
 /// more CPU time; at 1024³ the two builds take 8.6 s against 20.7 s at 2048³, the scatter
-/// buffer still smaller than the bins: docs/BENCHMARKS.md, "CI time: dependencies at opt-level 1".)
+/// buffer still smaller than the bins: docs/BENCHMARKS.md, "Earlier measurements", "CI time:
+/// dependencies at opt-level 1".)
 #[test]
 fn small_memory_budget_is_kept_and_changes_nothing() {
     let dir = tempfile::tempdir().unwrap();

@@ -188,6 +188,28 @@ fn export_and_render_commands() {
     assert!(t.contains("240x180"), "{t}");
     let bytes = std::fs::read(&png).unwrap();
     assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n") && bytes.len() > 2000);
+    // the format follows the name: JPEG for .jpg/.jpeg, and no other extension is accepted
+    for name in ["dragon.jpg", "dragon.JPEG"] {
+        let jpg = d.join(name);
+        ok(&voxlod(
+            &["render", s(&a), "-o", s(&jpg), "--size", "240x180"],
+            ".",
+        ));
+        let bytes = std::fs::read(&jpg).unwrap();
+        assert!(bytes.starts_with(b"\xff\xd8\xff"), "{name} is not a JPEG");
+        let img = image::load_from_memory_with_format(&bytes, image::ImageFormat::Jpeg).unwrap();
+        assert_eq!((img.width(), img.height()), (240, 180), "{name}");
+    }
+    let gif = d.join("dragon.gif");
+    let t = fails(&voxlod(&["render", s(&a), "-o", s(&gif)], "."));
+    assert!(
+        t.contains(&format!(
+            "{}: the picture's name must end in .png, .jpg or .jpeg",
+            gif.display()
+        )),
+        "{t}"
+    );
+    assert!(!gif.exists());
     // a level the file does not have is an error naming it
     let t = fails(&voxlod(
         &["render", s(&a), "-o", s(&png), "--level", "7"],

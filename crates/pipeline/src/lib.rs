@@ -32,7 +32,7 @@ mod error;
 mod failure;
 mod files;
 mod memory;
-mod progress;
+pub mod progress;
 mod resume;
 mod runner;
 mod settings;

@@ -11,7 +11,9 @@ use indicatif::{ProgressBar, ProgressState, ProgressStyle};
 /// Seconds between two plain progress lines of one stage.
 const PLAIN_EVERY: Duration = Duration::from_secs(5);
 
-pub(crate) struct Bar {
+/// The progress display of one stage or task: a bar on a terminal, plain lines otherwise,
+/// nothing when not shown. Update it with [`Bar::set`] and end it with [`Bar::finish`].
+pub struct Bar {
     bar: ProgressBar,
     plain: Option<Plain>,
 }
@@ -59,6 +61,16 @@ pub(crate) fn round_count(x: f64) -> String {
     format!("{v:.digits$}{suffix}")
 }
 
+/// A count of whole items: exact below a thousand (`46`, not `46.0`), else as [`round_count`]
+/// (`1.23k`, `4.93M`).
+fn round_items(n: u64) -> String {
+    if n < 1000 {
+        n.to_string()
+    } else {
+        round_count(n as f64)
+    }
+}
+
 /// Bytes as `1.25 GiB`, `310 MiB`: binary units, three significant digits.
 fn round_bytes(x: f64) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
@@ -103,11 +115,7 @@ impl Plain {
         };
         let amount = match self.unit {
             Unit::Bytes => format!("{}/{}", round_bytes(done as f64), round_bytes(total as f64)),
-            Unit::Items(name) => format!(
-                "{}/{} {name}",
-                round_count(done as f64),
-                round_count(total as f64)
-            ),
+            Unit::Items(name) => format!("{}/{} {name}", round_items(done), round_items(total)),
         };
         format!(
             "{:>10} {:>3.0}% {amount}, {}, {secs:.1}s{}",
@@ -152,17 +160,25 @@ impl Bar {
         Bar { bar, plain }
     }
 
-    /// A stage measured in input bytes.
-    pub(crate) fn bytes(show: bool, name: &str, total: u64) -> Bar {
+    /// A stage measured in input bytes; `show` false displays nothing.
+    pub fn bytes(show: bool, name: &str, total: u64) -> Bar {
         Self::new(show, name, total, Unit::Bytes)
     }
 
-    /// A stage measured in items (triangles, chunks).
-    pub(crate) fn items(show: bool, name: &str, total: u64) -> Bar {
-        Self::new(show, name, total, Unit::Items(item_name(name)))
+    /// A pipeline stage measured in items, named after what the stage counts (triangles of
+    /// `count` and `scatter`, chunks of `voxelize` and `lod+write`).
+    pub fn items(show: bool, name: &str, total: u64) -> Bar {
+        Self::counting(show, name, total, item_name(name))
     }
 
-    pub(crate) fn set(&self, done: u64, total: u64) {
+    /// A task `name` measured in items called `what` (e.g. "records"); `show` false displays
+    /// nothing.
+    pub fn counting(show: bool, name: &str, total: u64, what: &'static str) -> Bar {
+        Self::new(show, name, total, Unit::Items(what))
+    }
+
+    /// `done` of `total` are done (the total may change while the task runs).
+    pub fn set(&self, done: u64, total: u64) {
         if self.bar.length() != Some(total) {
             self.bar.set_length(total);
         }
@@ -180,7 +196,9 @@ impl Bar {
         }
     }
 
-    pub(crate) fn finish(&self) {
+    /// The task has ended: the bar stays at its last state, a plain display prints its last
+    /// line.
+    pub fn finish(&self) {
         self.bar.finish();
         if let Some(p) = &self.plain {
             let Ok(last) = p.last.lock() else { return };
@@ -228,6 +246,10 @@ mod tests {
             l.ends_with("100% 2.90k/2.90k chunks, 290 chunks/s, 10.0s (done)"),
             "{l}"
         );
+        let l = p.line(46, 46, Duration::from_secs(2), true);
+        assert!(l.contains(" 46/46 chunks, 23.0 chunks/s"), "{l}");
+        assert_eq!(round_items(999), "999");
+        assert_eq!(round_items(1230), "1.23k");
         let b = Plain {
             name: "ingest".into(),
             unit: Unit::Bytes,

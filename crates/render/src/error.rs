@@ -33,6 +33,14 @@ pub enum RenderError {
         /// What went wrong.
         reason: String,
     },
+    /// Encoding the JPEG failed.
+    #[error("{}: writing JPEG: {reason}", path.display())]
+    Jpeg {
+        /// The output file.
+        path: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
     /// Encoding the PNG failed.
     #[error("{}: writing PNG: {reason}", path.display())]
     Png {

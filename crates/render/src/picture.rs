@@ -1,5 +1,5 @@
 //! A rendered picture: RGBA pixels (alpha = coverage by the model), the camera it was taken
-//! with, and PNG output with the `png` crate.
+//! with, and PNG output with the `png` crate or JPEG output with the `image` crate.
 
 use std::fs::File;
 use std::io::BufWriter;
@@ -58,5 +58,30 @@ impl Picture {
             .collect();
         w.write_image_data(&rgb).map_err(png_err)?;
         w.finish().map_err(png_err)
+    }
+
+    /// Writes the picture as an RGB JPEG of quality 90 (alpha dropped, as in the PNG).
+    pub fn write_jpeg(&self, path: &Path) -> Result<(), RenderError> {
+        use std::io::Write;
+        let file = File::create(path).map_err(RenderError::io("creating", path))?;
+        let jpeg_err = |reason: String| RenderError::Jpeg {
+            path: path.to_owned(),
+            reason,
+        };
+        let rgb: Vec<u8> = self
+            .rgba
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect();
+        let mut out = BufWriter::new(file);
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, 90)
+            .encode(
+                &rgb,
+                self.width,
+                self.height,
+                image::ExtendedColorType::Rgb8,
+            )
+            .map_err(|e| jpeg_err(e.to_string()))?;
+        out.flush().map_err(|e| jpeg_err(e.to_string()))
     }
 }

@@ -576,30 +576,16 @@ fn run_gen(a: GenArgs) -> Result<()> {
         voxlod_pipeline::OutputKind::Ply,
         a.force,
     )?;
-    let bar = if a.quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new(0)
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{prefix:>10} [{bar:40}] {human_pos}/{human_len} records {per_sec} eta {eta}",
-        )
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
-    bar.set_prefix("gen");
+    let bar = voxlod_pipeline::progress::Bar::counting(!a.quiet, "gen", 0, "records");
     let (v, t, c) = gen::generate(
         &base,
         &a.output,
         triangles,
         a.seed,
         !a.no_colors,
-        &mut |d, n| {
-            bar.set_length(n);
-            bar.set_position(d);
-        },
+        &mut |d, n| bar.set(d, n),
     )?;
-    bar.finish_and_clear();
+    bar.finish();
     let bytes = std::fs::metadata(&a.output).map(|m| m.len()).unwrap_or(0);
     println!(
         "wrote {}: {t} triangles, {v} vertices ({c} copies), {}",
@@ -697,6 +683,31 @@ mod tests {
             }
         }
         assert!(n >= 15, "{n} examples");
+    }
+
+    /// An argument whose default clap prints (`default_value`) does not also write
+    /// `[default: …]` in its doc comment, or `--help` shows the default twice.
+    #[test]
+    fn help_shows_each_default_once() {
+        fn check(cmd: &clap::Command, path: &str) {
+            for arg in cmd.get_arguments() {
+                if arg.get_default_values().is_empty() {
+                    continue;
+                }
+                for help in [arg.get_help(), arg.get_long_help()].into_iter().flatten() {
+                    let text = help.to_string();
+                    assert!(
+                        !text.contains("[default:"),
+                        "{path} --{}: the help repeats the default clap prints: {text}",
+                        arg.get_id()
+                    );
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                check(sub, &format!("{path} {}", sub.get_name()));
+            }
+        }
+        check(&Cli::command(), "voxlod");
     }
 
     /// The defaults written in the help texts are the settings' real defaults.

@@ -1,7 +1,7 @@
-//! `voxlod render FILE -o image.png`: a headless picture of the octree (each voxel a cube of
-//! its active faces, shaded by normal and colour), see `voxlod-render`.
+//! `voxlod render FILE -o image.png` (or `.jpg`): a headless picture of the octree (each voxel
+//! a cube of its active faces, shaded by normal and colour), see `voxlod-render`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Result};
@@ -14,7 +14,7 @@ use voxlod_render::{ColorBy, Lod, Renderer, View};
 pub struct RenderArgs {
     /// An octree file.
     file: PathBuf,
-    /// Output PNG file.
+    /// Output picture: PNG for a name ending in .png, JPEG for .jpg or .jpeg.
     #[arg(short, long)]
     output: PathBuf,
     /// Draw every node of this level (0 = finest).
@@ -45,7 +45,7 @@ pub struct RenderArgs {
     /// [default: the centre of the model].
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     target: Option<[f64; 3]>,
-    /// Replace an existing output file even if it is not a PNG image.
+    /// Replace an existing output file even if it is not a picture of that format.
     #[arg(long)]
     force: bool,
     /// What the faces' colour shows: `voxel` (the voxels' colours) or `material` (one colour
@@ -87,10 +87,27 @@ fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
     }
 }
 
+/// The image format `-o` asks for by its extension: PNG for `.png`, JPEG for `.jpg`/`.jpeg`
+/// (any case); any other name is refused rather than written in a format it does not name.
+fn image_kind(path: &Path) -> Result<OutputKind> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("png") => Ok(OutputKind::Png),
+        Some("jpg" | "jpeg") => Ok(OutputKind::Jpeg),
+        _ => bail!(
+            "{}: the picture's name must end in .png, .jpg or .jpeg (the format is chosen by it)",
+            path.display()
+        ),
+    }
+}
+
 pub fn run(a: RenderArgs) -> Result<()> {
     let t = Instant::now();
     // the output is checked (not the input, not another kind of file) and locked first
-    let guard = OutputGuard::acquire(&a.output, &[&a.file], OutputKind::Png, a.force)?;
+    let kind = image_kind(&a.output)?;
+    let guard = OutputGuard::acquire(&a.output, &[&a.file], kind, a.force)?;
     let r = Reader::open(&a.file)?;
     if a.color == ColorBy::Material && !r.has_materials() {
         bail!(
@@ -124,7 +141,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if pic.coverage().iter().all(|&c| !c) {
         bail!("nothing of the model is in the picture (check --view, --up and --zoom)");
     }
-    pic.write_png(guard.staged())?;
+    match kind {
+        OutputKind::Jpeg => pic.write_jpeg(guard.staged())?,
+        _ => pic.write_png(guard.staged())?,
+    }
     guard.commit()?;
     let mut levels: Vec<u32> = nodes.iter().map(|&i| r.nodes()[i].level).collect();
     levels.sort_unstable();

@@ -72,7 +72,7 @@ pub(crate) struct MergeArgs {
     /// Folder of the shard files [default: the plan's folder].
     #[arg(long)]
     shard_dir: Option<PathBuf>,
-    /// Worker threads for the levels above the shards; 0 = one per core [default: 0].
+    /// Worker threads for the levels above the shards; 0 = one per core.
     #[arg(short = 'j', long, default_value_t = 0)]
     threads: usize,
     /// No summary on stderr.

@@ -35,6 +35,8 @@ pub enum OutputKind {
     Octree,
     /// A PNG picture (`render`).
     Png,
+    /// A JPEG picture (`render -o x.jpg`).
+    Jpeg,
     /// A PLY mesh (`export`, `gen`).
     Ply,
     /// A sharded build's plan (`plan`, JSON).
@@ -48,6 +50,7 @@ impl OutputKind {
         match self {
             OutputKind::Octree => "a voxlod octree",
             OutputKind::Png => "a PNG image",
+            OutputKind::Jpeg => "a JPEG image",
             OutputKind::Ply => "a PLY mesh",
             OutputKind::Plan => "a voxlod plan",
             OutputKind::Shard => "a voxlod shard",
@@ -59,6 +62,8 @@ impl OutputKind {
             Some(OutputKind::Octree)
         } else if head.starts_with(b"\x89PNG\r\n\x1a\n") {
             Some(OutputKind::Png)
+        } else if head.starts_with(b"\xff\xd8\xff") {
+            Some(OutputKind::Jpeg)
         } else if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
             Some(OutputKind::Ply)
         } else if head.starts_with(crate::shard::shard_file::MAGIC) {
@@ -295,6 +300,7 @@ fn ext(kind: OutputKind) -> &'static str {
     match kind {
         OutputKind::Octree => "voxlod",
         OutputKind::Png => "png",
+        OutputKind::Jpeg => "jpg",
         OutputKind::Ply => "ply",
         OutputKind::Plan => "json",
         OutputKind::Shard => "vlshard",
@@ -430,6 +436,10 @@ mod tests {
     #[test]
     fn kinds_are_recognized() {
         assert_eq!(OutputKind::of(b"ply\nformat"), Some(OutputKind::Ply));
+        assert_eq!(
+            OutputKind::of(b"\xff\xd8\xff\xe0.."),
+            Some(OutputKind::Jpeg)
+        );
         assert_eq!(
             OutputKind::of(b"\x89PNG\r\n\x1a\n.."),
             Some(OutputKind::Png)

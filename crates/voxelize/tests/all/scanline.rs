@@ -347,7 +347,7 @@ fn ilv_error_is_within_the_documented_bound() {
     }
 }
 
-/// The documented bounds (docs/BENCHMARKS.md, module docs of `scanline`): measured 12–13 %
-/// missed and 13–14 % added here.
+/// The bounds the module docs of `scanline` state: measured 12–13 % missed and 13–14 % added
+/// here (docs/BENCHMARKS.md, "Earlier measurements", the scanline voxelizer).
 const ILV_MISSED_PCT: f64 = 15.0;
 const ILV_ADDED_PCT: f64 = 15.0;
