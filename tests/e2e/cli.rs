@@ -18,6 +18,10 @@ fn sample_builds_with_no_arguments_and_inspects() {
     let o = voxlod(&["inspect", "--json", out.to_str().unwrap()], dir.path());
     ok(&o);
     let info: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    // the summary states the grid in world units, as the file's header has it
+    assert!(summary["voxel_size"].as_f64().unwrap() > 0.0, "{summary}");
+    assert_eq!(summary["voxel_size"], info["voxel_size"]);
+    assert_eq!(summary["origin"], info["origin"]);
     for (l, v) in per_level.iter().enumerate() {
         assert_eq!(info["per_level"][l]["voxels"], *v);
         assert_eq!(summary["levels"][l]["voxels"], *v);

@@ -196,6 +196,8 @@ fn summarize(ctx: BuildContext, built: Built, resumed: bool, t0: Instant) -> Bui
         triangles: ingested.marker.triangles,
         degenerate_skipped: ingested.marker.degenerate_skipped,
         resolution: s.resolution,
+        voxel_size: ingested.grid.voxel_size,
+        origin: ingested.grid.origin,
         mode: s.mode,
         voxelizer: s.voxelizer,
         threads: ctx.pool.current_num_threads(),

@@ -43,6 +43,10 @@ pub struct BuildSummary {
     pub degenerate_skipped: u64,
     /// Voxels per axis of the whole grid.
     pub resolution: u32,
+    /// Edge of a level-0 voxel, in the input's units.
+    pub voxel_size: f64,
+    /// World position of the grid's minimum corner, x y z (the input's units).
+    pub origin: [f64; 3],
     /// Conservative or thin.
     pub mode: Mode,
     /// The CPU voxelizer method (the GPU backend computes the overlap tests' set itself).

@@ -473,6 +473,11 @@ fn print_summary(s: &BuildSummary, input: &str) {
         "  grid         {}³, {} mode, {} threads",
         s.resolution, s.mode, s.threads
     );
+    let [x, y, z] = s.origin;
+    println!(
+        "  voxel        {} input units, grid from ({x}, {y}, {z})",
+        s.voxel_size
+    );
     println!("  voxelizer    {}", s.backend);
     if let Some([small, large]) = s.gpu_split {
         println!(
