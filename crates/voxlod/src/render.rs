@@ -106,7 +106,19 @@ fn image_kind(path: &Path) -> Result<OutputKind> {
 pub fn run(a: RenderArgs) -> Result<()> {
     let t = Instant::now();
     // the output is checked (not the input, not another kind of file) and locked first
-    let kind = image_kind(&a.output)?;
+    let kind = match image_kind(&a.output) {
+        Ok(k) => k,
+        Err(e) => {
+            // a name that is the input itself is the graver mistake: the guard says so first
+            drop(OutputGuard::acquire(
+                &a.output,
+                &[&a.file],
+                OutputKind::Png,
+                false,
+            )?);
+            return Err(e);
+        }
+    };
     let guard = OutputGuard::acquire(&a.output, &[&a.file], kind, a.force)?;
     let r = Reader::open(&a.file)?;
     if a.color == ColorBy::Material && !r.has_materials() {
