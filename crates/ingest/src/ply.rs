@@ -55,7 +55,14 @@ impl PlySource {
         let layout = &header.layout;
         let mut warnings = Vec::new();
         if layout.sources.is_empty() {
-            warnings.push("no face or tristrips element: a point cloud, no triangles".to_string());
+            // a point cloud: say so and what to do, rather than "no triangles" after a full read
+            return Err(IngestError::malformed(
+                path,
+                Location::File,
+                "a point cloud (vertices only, no face or tristrips element): voxlod voxelizes \
+                 triangle meshes; reconstruct a surface first (e.g. screened Poisson or ball \
+                 pivoting in MeshLab or Open3D) and build from that mesh",
+            ));
         }
         let mut map = None;
         let mut offsets = vec![None; header.elements.len()];

@@ -44,6 +44,20 @@ fn binary_mesh(be: bool) -> Vec<u8> {
     )
 }
 
+/// A vertex-only PLY (a scan's point cloud) is named as one, with what to do, before any read.
+#[test]
+fn point_cloud_ply_is_named() {
+    let d = TempDir::new("points");
+    let head = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+property float z\nend_header\n";
+    check(
+        &d,
+        "points.ply",
+        format!("{head}0 0 0\n1 0 0\n0 1 0\n"),
+        &["a point cloud", "reconstruct a surface"],
+    );
+}
+
 #[test]
 fn empty_and_unknown() {
     let d = TempDir::new("empty");
