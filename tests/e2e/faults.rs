@@ -868,6 +868,81 @@ fn stale_work_folders_are_reported_and_cleaned() {
         .contains("no voxlod work folders"));
 }
 
+/// Issue 32 §4 "clean": a run killed while writing its output (here `gen`, SIGKILL while it
+/// writes) leaves `.voxlod-lock-NAME` and `.voxlod-part-NAME-…` beside it; `clean --dry-run`
+/// lists them and keeps them, `clean` removes them (and nothing else), and those of an output
+/// whose lock a running process holds are listed as being written and kept.
+#[test]
+fn leftovers_of_killed_writers_are_cleaned() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("big.ply");
+    let mut child = Command::new(BIN)
+        .args(["gen", "-q", "-n", "3e7", "-o", s(&out)])
+        .current_dir(d)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let part = |d: &Path| {
+        std::fs::read_dir(d)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with(".voxlod-part-big.ply-"))
+            .collect::<Vec<_>>()
+    };
+    let t = Instant::now();
+    while part(d).is_empty() || std::fs::metadata(d.join(part(d)[0].clone())).unwrap().len() == 0 {
+        assert!(t.elapsed() < Duration::from_secs(60), "gen wrote no part file");
+        assert!(child.try_wait().unwrap().is_none(), "gen ended before it was killed");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(!out.exists(), "a killed gen left its output");
+    assert!(d.join(".voxlod-lock-big.ply").exists());
+    assert_eq!(part(d).len(), 1);
+    // an output being written by a live process: its lock held by flock(1)
+    let busy_lock = d.join(".voxlod-lock-busy.png");
+    std::fs::write(d.join(".voxlod-part-busy.png-123-abc"), b"partial").unwrap();
+    let mut holder = Command::new("flock")
+        .arg(&busy_lock)
+        .args(["sleep", "60"])
+        .process_group(0)
+        .spawn()
+        .unwrap();
+    let t = Instant::now();
+    while !busy_lock.exists() && t.elapsed() < Duration::from_secs(5) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(100));
+
+    let o = voxlod(&["clean", "--dry-run", s(d)], d);
+    ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        text.contains("left by a killed run")
+            && text.contains("big.ply")
+            && text.contains("would be removed")
+            && text.contains("being written")
+            && text.contains("busy.png"),
+        "{text}"
+    );
+    assert_eq!(part(d).len(), 1, "--dry-run removed something: {text}");
+
+    let o = voxlod(&["clean", s(d)], d);
+    ok(&o);
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(text.contains("removed the leftovers of 1 killed output"), "{text}");
+    assert!(part(d).is_empty() && !d.join(".voxlod-lock-big.ply").exists(), "{text}");
+    assert!(busy_lock.exists() && d.join(".voxlod-part-busy.png-123-abc").exists());
+    let _ = Command::new("kill")
+        .args(["-TERM", "--", &format!("-{}", holder.id())])
+        .status();
+    let _ = holder.wait();
+}
+
 /// Messages still open after the first pass (issue 17, "Messages"): each names the file and
 /// the place, in words.
 #[test]

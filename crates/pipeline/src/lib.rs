@@ -45,7 +45,9 @@ mod system;
 pub use chain_text::chain_text;
 pub use entry::{build, build_shard, plan};
 pub use error::StageError;
-pub use files::output::{OutputGuard, OutputKind};
+pub use files::output::{
+    find_output_leftovers, remove_output_leftovers, OutputGuard, OutputKind, OutputLeftovers,
+};
 pub use files::work::{find_work_folders, remove_stale_work_folder, WorkFolder, WORK_PREFIX};
 pub use memory::MemoryPlan;
 pub use settings::{Backend, BuildSettings, Cutoff, GpuMethod, SettingError};

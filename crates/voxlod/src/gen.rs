@@ -121,20 +121,21 @@ fn color(hue: f64, p: [f32; 3]) -> [u8; 3] {
 }
 
 /// Writes `triangles` triangles (copies of `base`) to `out` as binary little-endian PLY, with
-/// per-vertex colours if `colors` (positions only otherwise, like most raw scans). Returns
-/// (vertices, triangles, copies).
+/// per-vertex colours if `colors` (positions only otherwise, like most raw scans), under the
+/// temporary name `staged` beside it (the output guard's, so `voxlod clean` finds what a killed
+/// run leaves), renamed to `out` when complete. Returns (vertices, triangles, copies).
 pub fn generate(
     base_path: &Path,
     out: &Path,
+    staged: &Path,
     triangles: u64,
     seed: u64,
     colors: bool,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<(u64, u64, u64)> {
-    let tmp = voxlod_io::temp_path(out);
-    let r = write(base_path, out, &tmp, triangles, seed, colors, progress);
+    let r = write(base_path, out, staged, triangles, seed, colors, progress);
     if r.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+        let _ = std::fs::remove_file(staged);
     }
     r
 }

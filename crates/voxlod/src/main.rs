@@ -574,8 +574,8 @@ fn run_gen(a: GenArgs) -> Result<()> {
         Some(p) => p.clone(),
         None => bundled_sample()?,
     };
-    // checks and locks the output (gen writes its own temporary file and renames it)
-    let _guard = voxlod_pipeline::OutputGuard::acquire(
+    // checks and locks the output; gen writes the guard's temporary file and renames it
+    let guard = voxlod_pipeline::OutputGuard::acquire(
         &a.output,
         &[&base],
         voxlod_pipeline::OutputKind::Ply,
@@ -585,6 +585,7 @@ fn run_gen(a: GenArgs) -> Result<()> {
     let (v, t, c) = gen::generate(
         &base,
         &a.output,
+        guard.staged(),
         triangles,
         a.seed,
         !a.no_colors,

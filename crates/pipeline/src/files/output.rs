@@ -296,6 +296,120 @@ fn remove_leftovers(dir: &Path, name: &str) {
     }
 }
 
+/// What a run killed while writing an output left beside it (`voxlod clean` lists and removes
+/// it): the output's lock file `.voxlod-lock-NAME` and staged parts `.voxlod-part-NAME-PID-TIME`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OutputLeftovers {
+    /// The output's file name (`NAME`).
+    pub name: String,
+    /// The files, sorted: the lock file (when there is one) and the staged parts.
+    pub files: Vec<PathBuf>,
+    /// Bytes of the files.
+    pub bytes: u64,
+    /// The pid of the running process that holds the output's lock, if one does (then nothing
+    /// is removed); `None` when nobody holds it.
+    pub in_use_by: Option<Option<u32>>,
+}
+
+/// The output name a leftover file of `dir` belongs to, if it is one.
+fn leftover_name(file: &str) -> Option<String> {
+    if let Some(name) = file.strip_prefix(".voxlod-lock-") {
+        return (!name.is_empty()).then(|| name.to_string());
+    }
+    // .voxlod-part-NAME-PID-HEXTIME (NAME may itself contain '-')
+    let rest = file.strip_prefix(".voxlod-part-")?;
+    let mut it = rest.rsplitn(3, '-');
+    let (time, pid, name) = (it.next()?, it.next()?, it.next()?);
+    let ok = !name.is_empty()
+        && !pid.is_empty()
+        && pid.bytes().all(|b| b.is_ascii_digit())
+        && !time.is_empty()
+        && time.bytes().all(|b| b.is_ascii_hexdigit());
+    ok.then(|| name.to_string())
+}
+
+/// The leftovers of outputs in `dir` (see [`OutputLeftovers`]), grouped by output name, each
+/// probed for a holder without creating anything: a lock file is opened, never created.
+pub fn find_output_leftovers(dir: &Path) -> Result<Vec<OutputLeftovers>> {
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| anyhow::anyhow!("{}: cannot list it: {}", dir.display(), os_text(&e)))?;
+    let mut by_name = std::collections::BTreeMap::<String, OutputLeftovers>::new();
+    for e in entries.flatten() {
+        let file = e.file_name().to_string_lossy().into_owned();
+        let Some(name) = leftover_name(&file) else {
+            continue;
+        };
+        if !e.file_type().is_ok_and(|t| t.is_file()) {
+            continue;
+        }
+        let l = by_name.entry(name.clone()).or_insert(OutputLeftovers {
+            name,
+            files: Vec::new(),
+            bytes: 0,
+            in_use_by: None,
+        });
+        l.bytes += e.metadata().map_or(0, |m| m.len());
+        l.files.push(e.path());
+    }
+    let mut found: Vec<OutputLeftovers> = by_name.into_values().collect();
+    for l in &mut found {
+        l.files.sort();
+        l.in_use_by = lock_holder(&dir.join(format!(".voxlod-lock-{}", l.name)));
+    }
+    Ok(found)
+}
+
+/// Whether a live process holds the lock file at `path` (opened without creating it): `None`
+/// when it is missing or nobody holds it, else `Some` of the holder's pid when written.
+fn lock_holder(path: &Path) -> Option<Option<u32>> {
+    let f = File::open(path).ok()?;
+    // SAFETY: flock on a descriptor we own; released when `f` is dropped.
+    if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+        return None;
+    }
+    Some(
+        std::fs::read_to_string(path)
+            .ok()
+            .and_then(|s| s.trim().parse::<u32>().ok()),
+    )
+}
+
+/// Removes the leftovers of the output `name` in `dir` while holding that output's lock (so a
+/// run starting to write it meanwhile is refused rather than losing its file); refused when a
+/// running process holds the lock. Returns the bytes removed.
+pub fn remove_output_leftovers(dir: &Path, name: &str) -> Result<u64> {
+    let lock_path = dir.join(format!(".voxlod-lock-{name}"));
+    let lock = match lock_or_name_holder(&lock_path) {
+        Ok(f) => f,
+        Err(LockError::Held(pid)) => bail!(
+            "{} is being written by a running voxlod process ({}): its files are kept",
+            dir.join(name).display(),
+            pid.map_or("pid unknown".to_string(), |p| format!("pid {p}"))
+        ),
+        Err(LockError::Io(e)) => bail!("locking {}: {}", lock_path.display(), os_text(&e)),
+    };
+    let prefix = format!(".voxlod-part-{name}-");
+    let mut bytes = 0;
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| anyhow::anyhow!("{}: cannot list it: {}", dir.display(), os_text(&e)))?;
+    for e in entries.flatten() {
+        let file = e.file_name().to_string_lossy().into_owned();
+        if file.starts_with(&prefix) && leftover_name(&file).as_deref() == Some(name) {
+            let len = e.metadata().map_or(0, |m| m.len());
+            std::fs::remove_file(e.path()).map_err(|err| {
+                anyhow::anyhow!("removing {}: {}", e.path().display(), os_text(&err))
+            })?;
+            bytes += len;
+        }
+    }
+    // the lock file last, while still locked (the protocol of the module docs)
+    if same_inode(&lock, &lock_path) {
+        bytes += lock.metadata().map_or(0, |m| m.len());
+        let _ = std::fs::remove_file(&lock_path);
+    }
+    Ok(bytes)
+}
+
 fn ext(kind: OutputKind) -> &'static str {
     match kind {
         OutputKind::Octree => "voxlod",
@@ -431,6 +545,49 @@ mod tests {
         }
         drop(f);
         assert!(lock_or_name_holder(&p).is_ok());
+    }
+
+    /// A killed run's lock file and staged part are found and removed; a held output's are
+    /// listed as in use and kept; other files (the output itself, look-alike names) are not
+    /// touched; a part without its lock file is found too.
+    #[test]
+    fn leftovers_of_killed_runs_are_found_and_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let w = |name: &str, len: usize| std::fs::write(d.join(name), vec![7u8; len]).unwrap();
+        // a killed run of "a-b.ply": its lock (nobody holds it) and its part
+        drop(lock_or_name_holder(&d.join(".voxlod-lock-a-b.ply")).unwrap());
+        w(".voxlod-part-a-b.ply-4242-17f3a9", 1000);
+        // a running one of "c.png": held here
+        let held = lock_or_name_holder(&d.join(".voxlod-lock-c.png")).unwrap();
+        w(".voxlod-part-c.png-77-abc", 500);
+        // a part whose lock file is gone
+        w(".voxlod-part-d.voxlod-9-ff", 300);
+        // not leftovers
+        w("a-b.ply", 10);
+        w(".voxlod-part-e.ply-x-ff", 10);
+        w(".voxlod-partial", 10);
+        let found = find_output_leftovers(d).unwrap();
+        let names: Vec<_> = found.iter().map(|l| (l.name.as_str(), l.files.len())).collect();
+        assert_eq!(names, vec![("a-b.ply", 2), ("c.png", 2), ("d.voxlod", 1)]);
+        assert_eq!(found[0].in_use_by, None);
+        assert_eq!(found[1].in_use_by, Some(Some(std::process::id())));
+        assert_eq!(found[2].in_use_by, None);
+        assert!(found[0].bytes >= 1000 && found[2].bytes == 300);
+        // the probe created no lock file for "d.voxlod"
+        assert!(!d.join(".voxlod-lock-d.voxlod").exists());
+
+        assert!(remove_output_leftovers(d, "a-b.ply").unwrap() >= 1000);
+        assert!(remove_output_leftovers(d, "d.voxlod").unwrap() >= 300);
+        let e = remove_output_leftovers(d, "c.png").unwrap_err().to_string();
+        assert!(e.contains("c.png") && e.contains("running"), "{e}");
+        let left = find_output_leftovers(d).unwrap();
+        assert_eq!(left.len(), 1, "{left:?}");
+        assert_eq!(left[0].name, "c.png");
+        for f in ["a-b.ply", ".voxlod-part-e.ply-x-ff", ".voxlod-partial"] {
+            assert!(d.join(f).exists(), "{f} was removed");
+        }
+        drop(held);
     }
 
     #[test]

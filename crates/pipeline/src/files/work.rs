@@ -226,6 +226,10 @@ impl WorkDir {
 /// Prefix of every work folder's name (`.voxlod-work-<output name>-<key>`).
 pub const WORK_PREFIX: &str = ".voxlod-work-";
 
+/// How long a work folder without a lock file counts as in use (a build creating it, or one
+/// removing it as it finishes, changes it all the time); after that it is stale.
+pub const UNLOCKED_GRACE: std::time::Duration = std::time::Duration::from_secs(60);
+
 /// A work folder found by [`find_work_folders`].
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct WorkFolder {
@@ -291,12 +295,25 @@ pub fn find_work_folders(dir: &Path) -> Result<Vec<WorkFolder>> {
 /// while others in the same parent look for stale folders (two shards of one plan ending
 /// together), and a lock file created by the probe inside a folder being removed made that
 /// removal fail with "Directory not empty". A folder without a lock file is being created or
-/// removed, so in use; an unreadable one counts as in use too (never removed).
+/// removed (in use) while it changed within the last [`UNLOCKED_GRACE`]; one unchanged for
+/// longer was left so by a killed run (stale: removing it takes the lock first). A lock file
+/// that cannot be opened for another reason counts as in use (never removed).
 fn holder(path: &Path) -> Option<Option<u32>> {
     use std::os::fd::AsRawFd;
     let lock = path.join("lock");
-    let Ok(f) = std::fs::OpenOptions::new().read(true).open(&lock) else {
-        return Some(None);
+    let f = match std::fs::OpenOptions::new().read(true).open(&lock) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let unchanged = std::fs::metadata(path)
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok());
+            return match unchanged {
+                Some(d) if d >= UNLOCKED_GRACE => None,
+                _ => Some(None),
+            };
+        }
+        Err(_) => return Some(None),
     };
     // SAFETY: flock on a descriptor we own; the lock is released when `f` is dropped.
     if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
@@ -357,8 +374,9 @@ mod tests {
     use super::*;
 
     /// Looking for stale folders creates nothing inside a folder whose lock file is gone (a
-    /// build removing its folder at that moment), and counts it as in use; a folder whose lock
-    /// a live handle holds is in use, one whose lock nobody holds is stale.
+    /// build removing its folder at that moment), and counts it as in use while it is fresh; a
+    /// folder whose lock a live handle holds is in use, one whose lock nobody holds is stale,
+    /// and so is one without a lock file left unchanged past the grace period.
     #[test]
     fn probing_for_stale_folders_creates_no_lock_file() {
         let dir = tempfile::tempdir().unwrap();
@@ -371,16 +389,27 @@ mod tests {
         let stale = dir.path().join(format!("{WORK_PREFIX}c-3"));
         std::fs::create_dir(&stale).unwrap();
         drop(crate::files::output::lock_or_name_holder(&stale.join("lock")).unwrap());
+        // a folder without a lock file that nobody changed for longer than the grace period:
+        // a run killed between creating it and locking it (stale, not "in use" forever)
+        let abandoned = dir.path().join(format!("{WORK_PREFIX}d-4"));
+        std::fs::create_dir(&abandoned).unwrap();
+        let long_ago = std::time::SystemTime::now() - UNLOCKED_GRACE * 2;
+        std::fs::File::open(&abandoned)
+            .unwrap()
+            .set_times(std::fs::FileTimes::new().set_modified(long_ago))
+            .unwrap();
         let found = find_work_folders(dir.path()).unwrap();
         let state: Vec<_> = found.iter().map(|f| f.in_use_by).collect();
         assert_eq!(
             state,
-            vec![Some(None), Some(Some(std::process::id())), None]
+            vec![Some(None), Some(Some(std::process::id())), None, None]
         );
         assert!(
-            !removing.join("lock").exists(),
-            "the probe created a lock file in a folder being removed"
+            !removing.join("lock").exists() && !abandoned.join("lock").exists(),
+            "the probe created a lock file"
         );
+        remove_stale_work_folder(&abandoned).unwrap();
+        assert!(!abandoned.exists());
         std::fs::remove_dir_all(&removing).unwrap();
     }
 
