@@ -33,6 +33,7 @@ use std::path::Path;
 use std::sync::Arc;
 use voxlod_geom::{Material, Wrap};
 
+mod png_rows;
 mod pyramid;
 mod tile_cache;
 mod tile_file;

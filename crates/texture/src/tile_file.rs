@@ -14,7 +14,7 @@ use std::fs::File;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use crate::pyramid::{box_level, level_sizes};
+use crate::pyramid::{box_level, level_sizes, LevelRows};
 use crate::tile_cache::{TILE, TILE_BYTES};
 
 const MAGIC: &[u8; 8] = b"VXTILES1";
@@ -48,6 +48,26 @@ pub(crate) fn pyramid_tiles(w: u32, h: u32) -> u64 {
         .sum()
 }
 
+/// The tiles of one band of a level `w` texels wide (up to 64 of its rows, row 0 of the band
+/// at the top of the tiles), left to right, into `out`: each tile's rows of 64 texels, padded
+/// with zeros past the level's right and bottom edges.
+fn band_tiles(band: &[[u8; 4]], w: u32, out: &mut Vec<u8>) {
+    let rows = band.len() / w as usize;
+    assert!(rows as u32 <= TILE && rows * w as usize == band.len());
+    let tx = w.div_ceil(TILE);
+    out.clear();
+    out.resize(tx as usize * TILE_BYTES as usize, 0);
+    let tile_row_bytes = (TILE * 4) as usize;
+    for i in 0..tx {
+        let (x0, x1) = (i * TILE, ((i + 1) * TILE).min(w));
+        let tile = &mut out[i as usize * TILE_BYTES as usize..][..TILE_BYTES as usize];
+        for y in 0..rows {
+            let src = &band[y * w as usize + x0 as usize..y * w as usize + x1 as usize];
+            tile[y * tile_row_bytes..][..src.len() * 4].copy_from_slice(bytemuck::cast_slice(src));
+        }
+    }
+}
+
 /// Writes a tile file: textures added one at a time, the file renamed into place by
 /// [`TileWriter::finish`].
 pub(crate) struct TileWriter {
@@ -65,7 +85,16 @@ impl TileWriter {
         part.push(".part");
         let part = PathBuf::from(part);
         Ok(TileWriter {
-            out: BufWriter::with_capacity(1 << 20, File::create(&part)?),
+            // read too: a texture added by rows is read back for the CRC
+            out: BufWriter::with_capacity(
+                1 << 20,
+                std::fs::OpenOptions::new()
+                    .read(true)
+                    .write(true)
+                    .create(true)
+                    .truncate(true)
+                    .open(&part)?,
+            ),
             crc: crc32fast::Hasher::new(),
             tiles: 0,
             entries: Vec::new(),
@@ -106,23 +135,102 @@ impl TileWriter {
 
     /// The tiles of one `w × h` level, row by row.
     fn write_level(&mut self, texels: &[[u8; 4]], w: u32, h: u32) -> std::io::Result<()> {
-        let (tx, ty) = level_tiles(w, h);
-        let mut tile = vec![[0u8; 4]; (TILE * TILE) as usize];
-        for j in 0..ty {
-            for i in 0..tx {
-                tile.iter_mut().for_each(|t| *t = [0; 4]);
-                let x0 = i * TILE;
-                let x1 = (x0 + TILE).min(w);
-                for y in j * TILE..((j + 1) * TILE).min(h) {
-                    let src = &texels[(y * w + x0) as usize..(y * w + x1) as usize];
-                    let row = ((y - j * TILE) * TILE) as usize;
-                    tile[row..row + src.len()].copy_from_slice(src);
-                }
-                self.put(bytemuck::cast_slice(&tile))?;
-                self.tiles += 1;
-            }
+        assert_eq!(texels.len() as u64, w as u64 * h as u64);
+        let mut tiles = Vec::new();
+        for band in texels.chunks((w * TILE) as usize) {
+            band_tiles(band, w, &mut tiles);
+            self.put(&tiles)?;
+            self.tiles += w.div_ceil(TILE) as u64;
         }
         Ok(())
+    }
+
+    /// Adds a `w × h` texture whose level-0 rows `next_row` writes one at a time, top to
+    /// bottom (a PNG decoded row by row): level 0 and every other level of its pyramid are cut
+    /// into tiles as their rows complete and written in place, so memory holds 64 rows of each
+    /// level, not the image. The tiles are the bytes [`add`](Self::add) writes for the same
+    /// texels. When `next_row` fails, nothing of the texture stays in the file and its error
+    /// is returned as `Ok(Err(..))`; `Err` is a failure to write or read the file.
+    pub(crate) fn add_rows(
+        &mut self,
+        key: u64,
+        w: u32,
+        h: u32,
+        next_row: &mut dyn FnMut(&mut [[u8; 4]]) -> Result<(), String>,
+    ) -> std::io::Result<Result<Entry, String>> {
+        use std::os::unix::fs::FileExt;
+        self.out.flush()?;
+        let first_tile = self.tiles;
+        let sizes = level_sizes(w, h);
+        // the first tile of each level, from the texture's first
+        let mut level_first = Vec::with_capacity(sizes.len());
+        let mut n = 0u64;
+        for &(a, b) in &sizes {
+            level_first.push(n);
+            let (x, y) = level_tiles(a, b);
+            n += x as u64 * y as u64;
+        }
+        let mut levels: Vec<LevelRows> = (1..sizes.len() as u32)
+            .map(|k| LevelRows::new(w, h, k))
+            .collect();
+        // per level: the band of up to 64 rows being filled, and rows done
+        let mut bands: Vec<(Vec<[u8; 4]>, u32)> = sizes
+            .iter()
+            .map(|&(a, _)| (Vec::with_capacity((a * TILE) as usize), 0))
+            .collect();
+        let mut row = vec![[0u8; 4]; w as usize];
+        let (mut level_row, mut tiles) = (Vec::new(), Vec::new());
+        let file = self.out.get_ref();
+        // a finished row of level `k` goes into its band; a full (or last) band is written
+        let mut put_row = |k: usize, texels: &[[u8; 4]], tiles: &mut Vec<u8>| -> std::io::Result<()> {
+            let (wk, hk) = sizes[k];
+            let (band, done) = &mut bands[k];
+            band.extend_from_slice(texels);
+            *done += 1;
+            if *done % TILE == 0 || *done == hk {
+                band_tiles(band, wk, tiles);
+                let tile_row = (*done - 1) / TILE;
+                let at = first_tile + level_first[k] + tile_row as u64 * wk.div_ceil(TILE) as u64;
+                file.write_all_at(tiles, at * TILE_BYTES)?;
+                band.clear();
+            }
+            Ok(())
+        };
+        for _ in 0..h {
+            if let Err(e) = next_row(&mut row) {
+                // nothing of this texture stays: the file ends where it began
+                file.set_len(first_tile * TILE_BYTES)?;
+                return Ok(Err(e));
+            }
+            put_row(0, &row, &mut tiles)?;
+            for (k, level) in levels.iter_mut().enumerate() {
+                if level.push(&row, &mut level_row) {
+                    put_row(k + 1, &level_row, &mut tiles)?;
+                }
+            }
+        }
+        // the CRC runs over the file in order: read the texture's tiles back (from the page
+        // cache, just written) and go on writing after them
+        let (start, end) = (first_tile * TILE_BYTES, (first_tile + n) * TILE_BYTES);
+        let mut buf = vec![0u8; 1 << 20];
+        let mut at = start;
+        while at < end {
+            let len = ((end - at) as usize).min(buf.len());
+            file.read_exact_at(&mut buf[..len], at)?;
+            self.crc.update(&buf[..len]);
+            at += len as u64;
+        }
+        self.out.seek(SeekFrom::Start(end))?;
+        self.tiles += n;
+        debug_assert_eq!(n, pyramid_tiles(w, h));
+        let entry = Entry {
+            key,
+            w,
+            h,
+            first_tile,
+        };
+        self.entries.push(entry);
+        Ok(Ok(entry))
     }
 
     /// Writes the entries and the tail, syncs and renames the file into place.

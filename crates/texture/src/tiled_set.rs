@@ -1,6 +1,9 @@
 //! A mesh's textures inside a share of the memory budget: whole in memory when their decoded
-//! pyramids fit the share (as [`TextureSet::load`]), otherwise decoded one at a time into the
-//! tile file ([`crate::tile_file`]) and sampled through one shared [`TileCache`] of the
+//! pyramids, and the decoding of the largest image beside them, fit the share (as
+//! [`TextureSet::load`]), otherwise decoded one at a time into the tile file
+//! ([`crate::tile_file`]) — a non-interlaced PNG row by row ([`crate::png_rows`]), so even one
+//! image bigger than the share is held to it; another image whole, refused with a warning when
+//! its decoding alone exceeds the share — and sampled through one shared [`TileCache`] of the
 //! share's bytes. The sizes are read from the image headers first, so the choice is made
 //! before anything is decoded. A resumed build reuses a complete tile file of the same
 //! sources (length, CRC and keys checked) and rebuilds any other.
@@ -11,9 +14,10 @@ use std::sync::Arc;
 use voxlod_geom::{Material, Wrap};
 use voxlod_io::{fnv1a, mtime_ns, FNV1A_OFFSET};
 
+use crate::png_rows::{is_png, PngRows};
 use crate::pyramid::pyramid_bytes;
 use crate::tile_cache::{CacheStats, TileCache, MIN_CAPACITY};
-use crate::tile_file::{open_complete, TileWriter};
+use crate::tile_file::{open_complete, Entry, TileWriter};
 use crate::{Texture, TextureSet};
 
 /// A tiled texture set's file and cache (see the module docs).
@@ -87,12 +91,58 @@ impl Source<'_> {
         size.map_err(|e| e.to_string())
     }
 
-    /// The image decoded whole as the in-memory path decodes it: its size and RGBA8 texels,
-    /// row 0 at the top.
-    fn decode_rgba(&self) -> Result<(u32, u32, Vec<u8>), String> {
-        let img = crate::read_image(self.path, self.m.embedded.as_ref())?.into_rgba8();
-        let (w, h) = img.dimensions();
-        Ok((w, h, img.into_raw()))
+    /// Adds the texture's pyramid to the tile file, decoding it within `share` bytes: a
+    /// non-interlaced PNG row by row ([`crate::png_rows`], a few rows of each level in memory),
+    /// any other image whole as the in-memory path decodes it, if its texels and their RGBA8
+    /// copy fit the share. `Ok(Err)` is a texture that cannot be read (a warning).
+    fn add_tiles(
+        &self,
+        out: &mut TileWriter,
+        key: u64,
+        size: (u32, u32),
+        share: u64,
+    ) -> std::io::Result<Result<Entry, String>> {
+        // the PNG decoder's own buffers (chunks, a row) stay far below this
+        const PNG_DECODER_BYTES: usize = 64 << 20;
+        let streamed = match &self.m.embedded {
+            Some(b) if is_png(&b.0) => {
+                PngRows::open(std::io::Cursor::new(&b.0[..]), PNG_DECODER_BYTES).map(|r| r.map(Rows::Embedded))
+            }
+            Some(_) => Ok(None),
+            None => match png_file(self.path) {
+                Ok(Some(f)) => PngRows::open(f, PNG_DECODER_BYTES).map(|r| r.map(Rows::File)),
+                Ok(None) => Ok(None),
+                Err(e) => Err(e),
+            },
+        };
+        let mut rows = match streamed {
+            Ok(Some(rows)) => rows,
+            Ok(None) => {
+                // whole: the decoded image and its RGBA8 copy
+                let (w, h) = size;
+                let whole = 2 * w as u64 * h as u64 * 4;
+                if whole > share {
+                    return Ok(Err(format!(
+                        "{w}×{h} texels take {} to decode whole, more than the {} of the memory \
+                         budget for textures (only non-interlaced PNGs are decoded by rows); \
+                         raise --memory or convert it to a non-interlaced PNG",
+                        mib(whole),
+                        mib(share)
+                    )));
+                }
+                let img = match crate::read_image(self.path, self.m.embedded.as_ref()) {
+                    Ok(img) => img.into_rgba8(),
+                    Err(e) => return Ok(Err(e)),
+                };
+                let (w, h) = img.dimensions();
+                return out
+                    .add(key, bytemuck::cast_slice(img.as_raw()), w, h)
+                    .map(Ok);
+            }
+            Err(e) => return Ok(Err(e)),
+        };
+        let (w, h) = rows.size();
+        out.add_rows(key, w, h, &mut |r| rows.next(r))
     }
 
     /// The identity the tile file records: the path with the file's size and modification
@@ -119,6 +169,46 @@ impl Source<'_> {
     }
 }
 
+/// The rows of a PNG texture, from its embedded bytes or its file.
+enum Rows<'a> {
+    Embedded(PngRows<std::io::Cursor<&'a [u8]>>),
+    File(PngRows<std::io::BufReader<std::fs::File>>),
+}
+
+impl Rows<'_> {
+    fn size(&self) -> (u32, u32) {
+        match self {
+            Rows::Embedded(r) => r.size(),
+            Rows::File(r) => r.size(),
+        }
+    }
+
+    fn next(&mut self, out: &mut [[u8; 4]]) -> Result<(), String> {
+        match self {
+            Rows::Embedded(r) => r.next(out),
+            Rows::File(r) => r.next(out),
+        }
+    }
+}
+
+/// The texture file at `path`, opened at its start, if it is a PNG (a regular file only).
+fn png_file(path: &Path) -> Result<Option<std::io::BufReader<std::fs::File>>, String> {
+    use std::io::{Read, Seek};
+    let mut f = voxlod_io::open_regular(path).map_err(|e| e.to_string())?;
+    let mut head = Vec::with_capacity(8);
+    (&mut f)
+        .take(8)
+        .read_to_end(&mut head)
+        .map_err(|e| e.to_string())?;
+    f.rewind().map_err(|e| e.to_string())?;
+    Ok(is_png(&head).then(|| std::io::BufReader::new(f)))
+}
+
+/// `bytes` in MiB, for messages.
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
+}
+
 impl TextureSet {
     /// The textures of `materials` within `share` bytes (≥ [`MIN_CAPACITY`]): whole in memory
     /// if their decoded pyramids fit, otherwise through a tile cache of `share` bytes over the
@@ -142,7 +232,15 @@ impl TextureSet {
             .flatten()
             .map(|&(w, h)| pyramid_bytes(w, h))
             .sum();
-        if decoded <= share {
+        // held whole, each image is decoded whole too: its texels and their RGBA8 copy beside
+        // the pyramids already loaded (a 16384² PNG is 1 GiB of RGBA8 before its pyramid)
+        let decoding: u64 = sizes
+            .iter()
+            .flatten()
+            .map(|&(w, h)| 2 * w as u64 * h as u64 * 4)
+            .max()
+            .unwrap_or(0);
+        if decoded + decoding <= share {
             return Ok(TextureSet::load(materials));
         }
         let probed: Vec<usize> = (0..sources.len()).filter(|&i| sizes[i].is_some()).collect();
@@ -155,13 +253,11 @@ impl TextureSet {
                 let mut out = TileWriter::create(tile_file).map_err(what)?;
                 let mut written = Vec::new();
                 for (&i, &key) in probed.iter().zip(&keys) {
-                    // one texture decoded at a time, dropped once its tiles are written
-                    match sources[i].decode_rgba() {
-                        Ok((w, h, rgba)) => {
-                            out.add(key, bytemuck::cast_slice(&rgba), w, h)
-                                .map_err(what)?;
-                            written.push(i);
-                        }
+                    // one texture at a time, by rows where it can be, dropped once its tiles
+                    // are written
+                    let size = sizes[i].expect("probed");
+                    match sources[i].add_tiles(&mut out, key, size, share).map_err(what)? {
+                        Ok(_) => written.push(i),
                         Err(e) => warnings.push(sources[i].warning(&e)),
                     }
                 }

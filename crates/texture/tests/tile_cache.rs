@@ -146,9 +146,14 @@ fn tiles_sample_as_the_whole_textures() {
         "{st:?}"
     );
     assert!(!t.reused && t.error().is_none());
-    // a share that holds them all keeps them whole, as `load` does
-    let big = TextureSet::load_within(&materials, whole.bytes() as u64, &file).unwrap();
+    // a share that holds them all and the decoding of the largest (a.png, 517×300: its
+    // texels and their RGBA8 copy) keeps them whole, as `load` does; one without room for the
+    // decoding does not
+    let decoding = 2 * 517 * 300 * 4;
+    let big = TextureSet::load_within(&materials, whole.bytes() as u64 + decoding, &file).unwrap();
     assert!(big.tiles().is_none() && !big.get(1).unwrap().is_tiled());
+    let near = TextureSet::load_within(&materials, whole.bytes() as u64, &file).unwrap();
+    assert!(near.tiles().is_some());
 }
 
 #[test]
@@ -205,4 +210,74 @@ fn unwritable_tile_file_is_an_error_naming_it() {
     let file = d.path().join("no such folder").join("textures.tiles");
     let e = TextureSet::load_within(&materials, MIN_CAPACITY, &file).unwrap_err();
     assert!(e.contains("no such folder/textures.tiles"), "{e}");
+}
+
+/// Issue 32 §4 "memory budget": a texture whose decoded image alone exceeds the share is
+/// decoded row by row when it is a PNG (here 4096² RGB: 64 MiB of RGBA8, 128 MiB with the
+/// whole-image path's copy, under a 16 MiB share) with the texels of the whole decode; the same
+/// image as JPEG cannot be decoded by rows and is refused with a warning that says how much
+/// it takes and what to do, instead of going past the budget; a PNG cut short inside its image
+/// data is a warning and leaves nothing of itself in the tile file (the others read right).
+#[test]
+fn textures_bigger_than_the_share_are_decoded_by_rows_or_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let n = 4096u32;
+    // smooth with a little noise: a small file that decodes big
+    let mut s = 5u64;
+    let img = image::RgbImage::from_fn(n, n, |x, y| {
+        let r = lcg(&mut s) as u8 & 3;
+        image::Rgb([(x / 16) as u8 ^ r, (y / 16) as u8, ((x + y) / 32) as u8])
+    });
+    img.save(dir.join("big.png")).unwrap();
+    img.save(dir.join("big.jpg")).unwrap();
+    let mut materials = scene(dir);
+    let m = |name: &str, file: &str| Material {
+        name: name.into(),
+        texture: Some(dir.join(file)),
+        wrap: [Wrap::Repeat; 2],
+        embedded: None,
+    };
+    // a.png cut inside its image data
+    let a = std::fs::read(dir.join("a.png")).unwrap();
+    std::fs::write(dir.join("cut.png"), &a[..a.len() * 2 / 3]).unwrap();
+    materials.push(m("big", "big.png")); // 6
+    materials.push(m("big-jpeg", "big.jpg")); // 7
+    materials.push(m("cut", "cut.png")); // 8
+    let share = 16u64 << 20;
+    let file = dir.join("textures.tiles");
+    let set = tiled(&materials, share, &file);
+    let warned = |what: &str| set.warnings.iter().filter(|w| w.contains(what)).count();
+    assert_eq!(set.warnings.len(), 3, "{:?}", set.warnings);
+    assert_eq!(warned("missing.png"), 1, "{:?}", set.warnings);
+    assert_eq!(warned("cut.png"), 1, "{:?}", set.warnings);
+    let jpeg = set.warnings.iter().find(|w| w.contains("big.jpg")).unwrap();
+    assert!(
+        jpeg.contains("128.0 MiB") && jpeg.contains("16.0 MiB") && jpeg.contains("--memory"),
+        "{jpeg}"
+    );
+    assert!(set.get(6).is_some_and(|t| t.is_tiled()) && set.get(7).is_none());
+    assert!(set.get(8).is_none());
+    // the others read as the whole textures (the cut PNG left nothing behind)
+    let whole = TextureSet::load(&materials[..6]);
+    same_values(&set, &whole, 5000, 11);
+    // the big PNG: its texels as image decodes them, at level 0 and in every mip
+    let big = set.get(6).unwrap();
+    let want = TextureSet::load(&materials[..7]);
+    let want = want.get(6).unwrap();
+    assert_eq!((big.size(), big.levels()), (want.size(), want.levels()));
+    let mut r = 9u64;
+    for _ in 0..200_000 {
+        let (x, y) = (lcg(&mut r) as u32 % n, lcg(&mut r) as u32 % n);
+        assert_eq!(big.texel(0, x, y), want.texel(0, x, y), "({x}, {y})");
+    }
+    for k in 4..big.levels() {
+        let (w, h) = ((n >> k).max(1), (n >> k).max(1));
+        for y in 0..h {
+            for x in 0..w {
+                assert_eq!(big.texel(k, x, y), want.texel(k, x, y), "level {k} ({x}, {y})");
+            }
+        }
+    }
+    assert!(set.tiles().unwrap().stats().peak_resident <= share);
 }
