@@ -1,7 +1,7 @@
 //! The build's textures: decoded once from the material table ingest found
 //! ([`voxlod_ingest::MeshInfo::materials`]) and handed to the CPU chunk voxelizers
 //! (docs/TEXTURES.md), inside the memory plan: whole in memory when the decoded pyramids fit
-//! the plan's texture share ([`MemoryPlan::texture_share`]), otherwise tiled to the work
+//! the plan's texture share ([`crate::memory::MemoryPlan::texture_share`]), otherwise tiled to the work
 //! folder's `textures.tiles` and read through a tile cache of that share
 //! ([`TextureSet::load_within`]). A texture that cannot be read is a warning naming the file.
 
@@ -14,7 +14,6 @@ use voxlod_texture::TextureSet;
 use crate::context::BuildContext;
 use crate::error::StageError;
 use crate::files::work::WorkFile;
-use crate::memory::{MemoryPlan, BASE_BYTES, LOD_BYTES};
 use crate::size::format_size;
 
 /// The tile cache of a build whose decoded textures exceed their share of the plan
@@ -37,7 +36,7 @@ pub struct TextureCacheSummary {
 
 /// The textures of the mesh, `None` if it has no texture coordinates or no usable texture;
 /// what could not be used goes to the warnings. Sets the plan's texture part
-/// ([`MemoryPlan::with_textures`]). An error is a failure to write the tile file.
+/// ([`crate::memory::MemoryPlan::with_textures`]). An error is a failure to write the tile file.
 pub(crate) fn load(ctx: &mut BuildContext) -> Result<Option<Arc<TextureSet>>, StageError> {
     let info = ctx.source.info();
     if !info.has_texcoords {
@@ -55,7 +54,6 @@ pub(crate) fn load(ctx: &mut BuildContext) -> Result<Option<Arc<TextureSet>>, St
     }
     ctx.memory = ctx.memory.with_textures(set.bytes() as u64);
     if let Some(t) = set.tiles() {
-        decode_warning(&set, &ctx.memory, &mut ctx.warnings);
         if ctx.progress {
             eprintln!(
                 "textures: {} decoded, more than their {} share: read by 64×64 tile through a {} cache from {} ({}, {})",
@@ -69,25 +67,6 @@ pub(crate) fn load(ctx: &mut BuildContext) -> Result<Option<Arc<TextureSet>>, St
         }
     }
     Ok(Some(Arc::new(set)))
-}
-
-/// Warns if decoding the largest texture (the `image` crate decodes PNG and JPEG whole:
-/// 8 bytes per level-0 texel at most, RGB and RGBA copies and level 1) needs more than the
-/// plan has before the voxelizers start (the budget less base and LOD).
-fn decode_warning(set: &TextureSet, plan: &MemoryPlan, warnings: &mut Vec<String>) {
-    let largest = set
-        .textures()
-        .map(|t| t.size().0 as u64 * t.size().1 as u64)
-        .max()
-        .unwrap_or(0);
-    let room = plan.budget - BASE_BYTES - LOD_BYTES;
-    if 8 * largest > room {
-        warnings.push(format!(
-            "the largest texture ({largest} texels) is decoded whole before it is tiled, up to {}, more than the {} the memory plan has before the voxelizers start: peak memory can exceed the budget",
-            format_size(8 * largest),
-            format_size(room)
-        ));
-    }
 }
 
 /// True if the build writes the per-voxel material channel (docs/FORMAT.md 14.3): the mesh's
