@@ -19,6 +19,7 @@ mod hostile;
 mod json_schema;
 mod materials;
 mod octree;
+mod python_package;
 mod python_reader;
 mod resume;
 mod shard;
