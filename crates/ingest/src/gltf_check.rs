@@ -217,7 +217,49 @@ pub(crate) fn document(json: &str, bin: Option<&[u8]>) -> Result<(), String> {
     if !root.is_object() {
         return Err("not a valid glTF 2.0 file: the JSON is not an object".into());
     }
-    let d = Doc { v: &root };
+    // Compressed geometry first: its accessors and buffers break the rules below on purpose
+    // (data that only the extension's decoder makes), and that is not what the user must hear.
+    let names = |key: &str| -> Vec<String> {
+        let list = root.get(key).and_then(Value::as_array);
+        let strings = list.map_or(&[][..], Vec::as_slice).iter();
+        strings.filter_map(|v| v.as_str().map(str::to_owned)).collect()
+    };
+    let (required, used) = (names("extensionsRequired"), names("extensionsUsed"));
+    let compressed = |list: &[String]| {
+        list.iter()
+            .find(|e| COMPRESSION.iter().any(|(c, _)| c == e))
+            .cloned()
+    };
+    if let Some(ext) = compressed(&required) {
+        return Err(format!(
+            "the geometry is compressed with {ext} ({}), which voxlod does not decode: \
+             decompress the file first (for example with gltf-transform, or by exporting it \
+             again from Blender without compression) and build from that",
+            COMPRESSION.iter().find(|(c, _)| *c == ext).map_or("", |(_, w)| w)
+        ));
+    }
+    let optional = compressed(&used);
+    rules(&root, bin).map_err(|rule| match optional {
+        Some(ext) => format!(
+            "the file uses {ext} (compressed geometry, which voxlod does not decode) and its \
+             uncompressed fallback is broken; decompress the file first (for example with \
+             gltf-transform): {rule}"
+        ),
+        None => rule,
+    })
+}
+
+/// Geometry compression extensions (name, what they are): a file requiring one holds its
+/// vertices only in the compressed form.
+const COMPRESSION: [(&str, &str); 3] = [
+    ("KHR_draco_mesh_compression", "Draco"),
+    ("EXT_meshopt_compression", "meshoptimizer"),
+    ("KHR_meshopt_compression", "meshoptimizer"),
+];
+
+/// The rules of [`document`] after the compression check.
+fn rules(root: &Value, bin: Option<&[u8]>) -> Result<(), String> {
+    let d = Doc { v: root };
     let mut buffer_len = Vec::new();
     for (i, b) in d.list("buffers").iter().enumerate() {
         let what = format!("buffer {i}");
@@ -588,6 +630,22 @@ mod tests {
 
     fn refused(accessors: &str, views: &str, prim: &str, nodes: &str) -> String {
         document(&doc(accessors, views, prim, nodes), Some(&[0; 64])).unwrap_err()
+    }
+
+    #[test]
+    fn compression_used_with_a_valid_fallback_passes() {
+        // an optional compression extension leaves the uncompressed data readable
+        let d = doc(
+            &format!("[{POS}]"),
+            VIEW,
+            r#"{"attributes":{"POSITION":0}}"#,
+            NODE,
+        );
+        let d = d.replacen('{', r#"{"extensionsUsed":["KHR_draco_mesh_compression"],"#, 1);
+        document(&d, Some(&[0; 64])).unwrap();
+        let req = d.replacen('{', r#"{"extensionsRequired":["KHR_draco_mesh_compression"],"#, 1);
+        let e = document(&req, Some(&[0; 64])).unwrap_err();
+        assert!(e.starts_with("the geometry is compressed with KHR_draco_mesh_compression (Draco)"), "{e}");
     }
 
     #[test]

@@ -349,3 +349,68 @@ fn damaged_files_are_errors_naming_the_file() {
     let e = read(&p).unwrap_err().to_string();
     assert!(e.contains("ix.gltf") && e.contains("index 9"), "{e}");
 }
+
+/// A glTF whose geometry is compressed (Draco, meshopt) as those tools write it: the error
+/// names the extension and suggests decompressing, before any rule the compressed layout
+/// breaks on purpose (accessors without data, a fallback buffer without bytes). Before this
+/// check the Draco file said "accessors[0].bufferView: Missing data; …" and the meshopt file
+/// "buffer 1 has no uri, but it is not the first buffer of a GLB".
+#[test]
+fn compressed_geometry_names_the_extension_first() {
+    let d = TempDir::new("gltfcompressed");
+    let data = "data:application/octet-stream;base64,".to_owned() + &"A".repeat(88);
+    let head = |ext: &str, required: bool| {
+        let req = if required {
+            format!(r#""extensionsRequired":["{ext}"],"#)
+        } else {
+            String::new()
+        };
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"extensionsUsed":["{ext}"],{req}
+            "nodes":[{{"mesh":0}}],"scenes":[{{"nodes":[0]}}],"scene":0,"#
+        )
+    };
+    // Draco: the accessors have no bufferView; the primitive's extension holds the data
+    let draco = |required| {
+        head("KHR_draco_mesh_compression", required)
+            + &format!(
+                r#""buffers":[{{"byteLength":64,"uri":"{data}"}}],
+            "bufferViews":[{{"buffer":0,"byteLength":64}}],
+            "accessors":[{{"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,1]}},
+                         {{"componentType":5125,"count":3,"type":"SCALAR"}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"indices":1,
+              "extensions":{{"KHR_draco_mesh_compression":{{"bufferView":0,"attributes":{{"POSITION":0}}}}}}}}]}}]}}"#
+            )
+    };
+    // meshopt: views read a fallback buffer that has no bytes, the real data is compressed
+    let meshopt = |required| {
+        head("EXT_meshopt_compression", required)
+            + &format!(
+                r#""buffers":[{{"byteLength":64,"uri":"{data}"}},
+                {{"byteLength":36,"extensions":{{"EXT_meshopt_compression":{{"fallback":true}}}}}}],
+            "bufferViews":[{{"buffer":1,"byteLength":36,"byteStride":12,"extensions":{{"EXT_meshopt_compression":
+              {{"buffer":0,"byteLength":64,"byteStride":12,"count":3,"mode":"ATTRIBUTES"}}}}}}],
+            "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,1]}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}]}}"#
+            )
+    };
+    for (name, json, ext) in [
+        ("draco.gltf", draco(true), "KHR_draco_mesh_compression"),
+        ("meshopt.gltf", meshopt(true), "EXT_meshopt_compression"),
+    ] {
+        let p = d.write(name, &json);
+        let e = read(&p).unwrap_err().to_string();
+        let at = |s: &str| e.find(s).unwrap_or_else(|| panic!("{s:?} not in: {e}"));
+        assert!(at(name) < at(ext) && at(ext) < at("decompress"), "{e}");
+        assert!(e.contains("gltf-transform"), "{e}");
+        for noise in ["Missing data", "no uri", "accessor", "bufferView"] {
+            assert!(!e.contains(noise), "{noise:?} in: {e}");
+        }
+    }
+    // only used, not required: the uncompressed fallback would be read; when it is broken
+    // (here: no bytes), the extension is still named before the rule
+    let p = d.write("meshopt-optional.gltf", &meshopt(false));
+    let e = read(&p).unwrap_err().to_string();
+    let ext = e.find("EXT_meshopt_compression").expect(&e);
+    assert!(ext < e.find("no uri").expect(&e), "{e}");
+}
