@@ -199,6 +199,43 @@ fn block_world_materials() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("channel 1    materials ("), "{text}");
     assert!(text.contains(", 4 materials)"), "{text}");
+    // the legend names every material with its id and the colour `render --color material`
+    // paints it with, in inspect's text and after render's summary
+    let names = r.manifest().unwrap()["materials"].clone();
+    let names: Vec<&str> = names
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    assert_eq!(names.len(), 4);
+    let legend: Vec<String> = names
+        .iter()
+        .enumerate()
+        .map(|(id, name)| {
+            let c = voxlod_render::material_color(id as u32);
+            let name = if id == 0 { "(no material)" } else { name };
+            format!("{id:>5}  #{:02x}{:02x}{:02x}  {name}", c[0], c[1], c[2])
+        })
+        .collect();
+    for n in NAMES {
+        assert!(legend.iter().any(|l| l.ends_with(&format!("  {n}"))), "{n}");
+    }
+    for line in &legend {
+        assert!(text.lines().any(|l| l.trim_end() == format!("  {line}")), "{line:?} not in:\n{text}");
+    }
+    let png = dir.path().join("w.png");
+    let o = Command::new(BIN)
+        .arg("render")
+        .arg(&out)
+        .args(["--color", "material", "-o"])
+        .arg(&png)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = String::from_utf8_lossy(&o.stdout);
+    let tail: Vec<&str> = said.lines().skip_while(|l| !l.starts_with("legend")).skip(1).collect();
+    assert_eq!(tail, legend, "{said}");
 
     // render --color material on a file without the channel: a clear error, nothing written
     let png = dir.path().join("one.png");

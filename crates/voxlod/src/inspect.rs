@@ -112,6 +112,29 @@ fn gather(path: &Path) -> Result<FileInfo> {
     })
 }
 
+/// The material legend of a file's manifest (FORMAT.md 14.3: `"materials"` names the ids):
+/// one line per material id, `id  #rrggbb  name`, the colour being the one `render --color
+/// material` paints that id with ([`voxlod_render::material_color`]); id 0 is "no material".
+/// Empty without a `"materials"` list.
+pub fn material_legend(manifest: &serde_json::Value) -> Vec<String> {
+    let Some(names) = manifest.get("materials").and_then(|m| m.as_array()) else {
+        return Vec::new();
+    };
+    names
+        .iter()
+        .enumerate()
+        .map(|(id, name)| {
+            let [r, g, b, _] = voxlod_render::material_color(id as u32);
+            let name = match name.as_str() {
+                Some("") if id == 0 => "(no material)".to_owned(),
+                Some(n) => n.to_owned(),
+                None => name.to_string(),
+            };
+            format!("{id:>5}  #{r:02x}{g:02x}{b:02x}  {name}")
+        })
+        .collect()
+}
+
 pub fn run(path: &Path, json: bool) -> Result<()> {
     let info = gather(path)?;
     if json {
@@ -159,6 +182,12 @@ pub fn run(path: &Path, json: bool) -> Result<()> {
             c.name,
             format_size(c.payload_bytes)
         );
+    }
+    if info.channels.iter().any(|c| c.id == CHANNEL_MATERIAL) {
+        println!("  materials    id, colour in render --color material, name:");
+        for line in material_legend(&info.manifest) {
+            println!("  {line}");
+        }
     }
     if let Some(s) = info.manifest.get("settings") {
         println!("  built with   {s}");

@@ -178,6 +178,12 @@ pub fn run(a: RenderArgs) -> Result<()> {
         renderer.adapter(),
         t.elapsed().as_secs_f64()
     );
+    if a.color == ColorBy::Material {
+        println!("legend (material id, colour, name):");
+        for line in crate::inspect::material_legend(&r.manifest()?) {
+            println!("{line}");
+        }
+    }
     Ok(())
 }
 
