@@ -222,7 +222,10 @@ fn block_world_materials() {
         assert!(legend.iter().any(|l| l.ends_with(&format!("  {n}"))), "{n}");
     }
     for line in &legend {
-        assert!(text.lines().any(|l| l.trim_end() == format!("  {line}")), "{line:?} not in:\n{text}");
+        assert!(
+            text.lines().any(|l| l.trim_end() == format!("  {line}")),
+            "{line:?} not in:\n{text}"
+        );
     }
     let png = dir.path().join("w.png");
     let o = Command::new(BIN)
@@ -234,7 +237,11 @@ fn block_world_materials() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let said = String::from_utf8_lossy(&o.stdout);
-    let tail: Vec<&str> = said.lines().skip_while(|l| !l.starts_with("legend")).skip(1).collect();
+    let tail: Vec<&str> = said
+        .lines()
+        .skip_while(|l| !l.starts_with("legend"))
+        .skip(1)
+        .collect();
     assert_eq!(tail, legend, "{said}");
 
     // render --color material on a file without the channel: a clear error, nothing written

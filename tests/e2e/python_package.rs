@@ -31,7 +31,14 @@ fn python_package_passes_its_tests() {
         return;
     }
     let o = Command::new("python3")
-        .args(["-m", "pytest", "-q", "-p", "no:cacheprovider", "python/tests"])
+        .args([
+            "-m",
+            "pytest",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            "python/tests",
+        ])
         .current_dir(REPO)
         .env("VOXLOD_BIN", BIN)
         .output()
@@ -43,7 +50,11 @@ fn python_package_passes_its_tests() {
         String::from_utf8_lossy(&o.stderr)
     );
     // every test ran: none skipped (a skip would hide a missing mesh or reader)
-    let last = out.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("");
+    let last = out
+        .lines()
+        .rev()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("");
     assert!(
         last.contains(" passed") && !last.contains("skipped"),
         "pytest's summary: {last}"

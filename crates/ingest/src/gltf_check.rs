@@ -222,7 +222,9 @@ pub(crate) fn document(json: &str, bin: Option<&[u8]>) -> Result<(), String> {
     let names = |key: &str| -> Vec<String> {
         let list = root.get(key).and_then(Value::as_array);
         let strings = list.map_or(&[][..], Vec::as_slice).iter();
-        strings.filter_map(|v| v.as_str().map(str::to_owned)).collect()
+        strings
+            .filter_map(|v| v.as_str().map(str::to_owned))
+            .collect()
     };
     let (required, used) = (names("extensionsRequired"), names("extensionsUsed"));
     let compressed = |list: &[String]| {
@@ -235,7 +237,10 @@ pub(crate) fn document(json: &str, bin: Option<&[u8]>) -> Result<(), String> {
             "the geometry is compressed with {ext} ({}), which voxlod does not decode: \
              decompress the file first (for example with gltf-transform, or by exporting it \
              again from Blender without compression) and build from that",
-            COMPRESSION.iter().find(|(c, _)| *c == ext).map_or("", |(_, w)| w)
+            COMPRESSION
+                .iter()
+                .find(|(c, _)| *c == ext)
+                .map_or("", |(_, w)| w)
         ));
     }
     let optional = compressed(&used);
@@ -641,11 +646,22 @@ mod tests {
             r#"{"attributes":{"POSITION":0}}"#,
             NODE,
         );
-        let d = d.replacen('{', r#"{"extensionsUsed":["KHR_draco_mesh_compression"],"#, 1);
+        let d = d.replacen(
+            '{',
+            r#"{"extensionsUsed":["KHR_draco_mesh_compression"],"#,
+            1,
+        );
         document(&d, Some(&[0; 64])).unwrap();
-        let req = d.replacen('{', r#"{"extensionsRequired":["KHR_draco_mesh_compression"],"#, 1);
+        let req = d.replacen(
+            '{',
+            r#"{"extensionsRequired":["KHR_draco_mesh_compression"],"#,
+            1,
+        );
         let e = document(&req, Some(&[0; 64])).unwrap_err();
-        assert!(e.starts_with("the geometry is compressed with KHR_draco_mesh_compression (Draco)"), "{e}");
+        assert!(
+            e.starts_with("the geometry is compressed with KHR_draco_mesh_compression (Draco)"),
+            "{e}"
+        );
     }
 
     #[test]
