@@ -409,7 +409,7 @@ fn compressed_geometry_names_the_extension_first() {
     }
     // only used, not required: the uncompressed fallback would be read; when it is broken
     // (here: no bytes), the extension is still named before the rule
-    let p = d.write("meshopt-optional.gltf", &meshopt(false));
+    let p = d.write("meshopt-optional.gltf", meshopt(false));
     let e = read(&p).unwrap_err().to_string();
     let ext = e.find("EXT_meshopt_compression").expect(&e);
     assert!(ext < e.find("no uri").expect(&e), "{e}");
