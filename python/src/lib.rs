@@ -45,15 +45,22 @@ struct Reader {
 }
 
 impl Reader {
-    /// The index of node `(level, x, y, z)`, or `KeyError` naming the file.
-    fn index(&self, level: u32, x: u32, y: u32, z: u32) -> PyResult<usize> {
-        self.inner.find(level, [x, y, z]).ok_or_else(|| {
+    /// `read` of node `(level, x, y, z)` without the GIL (`KeyError` naming the file when there
+    /// is no such node, `VoxlodError` when reading fails).
+    fn read<T: Send>(
+        &self,
+        py: Python<'_>,
+        (level, x, y, z): (u32, u32, u32, u32),
+        read: impl FnOnce(&RustReader, usize) -> Result<T, FormatError> + Send,
+    ) -> PyResult<T> {
+        let index = self.inner.find(level, [x, y, z]).ok_or_else(|| {
             PyKeyError::new_err(format!(
                 "{}: no node at level {level}, position ({x}, {y}, {z}) (the file has {} levels)",
                 self.inner.path().display(),
                 self.inner.spec().levels
             ))
-        })
+        })?;
+        py.detach(|| read(&self.inner, index)).map_err(err)
     }
 }
 
@@ -160,14 +167,9 @@ impl Reader {
         y: u32,
         z: u32,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let index = self.index(level, x, y, z)?;
-        let (voxels, materials) = py
-            .detach(|| {
-                let voxels = self.inner.read_node(index)?;
-                let materials = self.inner.read_materials(index)?;
-                Ok((voxels, materials))
-            })
-            .map_err(err)?;
+        let (voxels, materials) = self.read(py, (level, x, y, z), |r, i| {
+            Ok((r.read_node(i)?, r.read_materials(i)?))
+        })?;
         let n = voxels.len();
         let origin = [x, y, z].map(|c| c * CHUNK);
         let mut pos = Vec::with_capacity(3 * n);
@@ -200,11 +202,8 @@ impl Reader {
         y: u32,
         z: u32,
     ) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let index = self.index(level, x, y, z)?;
-        let Some(mesh) = py
-            .detach(|| self.inner.source_triangles(index))
-            .map_err(err)?
-        else {
+        let read = |r: &RustReader, i| r.source_triangles(i);
+        let Some(mesh) = self.read(py, (level, x, y, z), read)? else {
             return Ok(None);
         };
         let origin = [x, y, z].map(|c| (c * CHUNK) as f64);
