@@ -14,7 +14,7 @@ use voxlod_render::{RenderError, Renderer};
 pub const EXAMPLES: &str = "\
 Examples:
   voxlod view dragon.voxlod --fly configs/fly-in.json --frames frames/
-  voxlod view dragon.voxlod --fly configs/fly-in.json --frames frames/ --cache-mib 16 --upload-kib-per-frame 512
+  voxlod view dragon.voxlod --fly configs/fly-in.json --frames frames/ --cache-mib 16 --upload-kib-per-frame 512 --real-time
   voxlod view bunny-src.voxlod --fly configs/close-up.json --frames close/   # built with --source-geometry
   voxlod view bunny-src.voxlod --fly configs/close-up.json --frames close/ --no-source   # voxels only
   voxlod view dragon.voxlod                       # a window (orbit: drag; zoom: wheel; keys below)
@@ -22,10 +22,13 @@ Window keys: left drag or A/D/Q/E orbit, wheel or W/S move in and out, arrow key
 target, R resets, [ and ] halve and double the pixel error, Esc quits.
 In a file built with --source-geometry, leaves whose voxels are still coarser than --error
 pixels are streamed and drawn from their source triangles (in the same cache and upload limit).
+Headless frames are complete (drawn once all their camera wants is resident); --real-time
+draws each after one frame's upload, as the window shows it. No display: use --fly, or run the
+window under xvfb-run. The camera path format: docs/VIEWER.md.
 Each headless frame prints one JSON line: frame, cut_nodes, cut_leaf_nodes, drawn_nodes,
 drawn_leaf_nodes, source_leaves_drawn, faces_drawn, nodes_resident, bytes_resident,
 source_bytes_resident, cache_budget, bytes_uploaded, upload_limit, cache_hits, cache_misses,
-evictions, pending, starved, ... (bytes are bytes; every field in docs/JSON.md).";
+evictions, pending, starved, passes, ... (bytes are bytes; every field in docs/JSON.md).";
 
 #[derive(Args)]
 pub struct ViewArgs {
@@ -33,9 +36,17 @@ pub struct ViewArgs {
     file: PathBuf,
     /// Render this camera path headless instead of opening a window: JSON
     /// {"keyframes": [{"eye": [x,y,z], "target": [x,y,z]}, ...], "frames": N}, coordinates in
-    /// the model's bounding cube mapped to [-1,1]^3 (optional "up" and "fov" in degrees).
+    /// the model's bounding cube mapped to [-1,1]^3, or with "coordinates": "world" in world
+    /// units as `render --target` takes them; optional "up" (default [0,1,0]) and "fov"
+    /// (vertical, degrees, default 45). Keyframes are spread evenly over the frames
+    /// (docs/VIEWER.md has the format).
     #[arg(long, requires = "frames")]
     fly: Option<PathBuf>,
+    /// With --fly: render each frame as the window would show it at that moment (one stream
+    /// pass, at most --upload-kib-per-frame uploaded, coarse levels or nothing until the cut
+    /// has arrived) instead of waiting until everything the frame's camera wants is resident.
+    #[arg(long, requires = "fly")]
+    real_time: bool,
     /// Folder for the frames of --fly (frame_00000.png, ...; files of those names are
     /// replaced); created if missing, but its parent folder must exist.
     #[arg(long, requires = "fly")]
@@ -101,7 +112,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
     }
     let renderer = Renderer::new()?;
     let mut viewer = Viewer::new(&reader, renderer, config)?;
-    fly(&mut viewer, &path, a.size, &mut |i, frame| {
+    fly(&mut viewer, &path, a.size, a.real_time, &mut |i, frame| {
         // each frame as every output of voxlod: not the octree viewed (nor a link to it), not
         // a file of another kind, written under a temporary name and renamed into place
         let out = dir.join(format!("frame_{i:05}.png"));

@@ -11,7 +11,7 @@ mod stream;
 #[cfg(feature = "window")]
 pub mod window;
 
-pub use path::{FlyPath, Keyframe};
+pub use path::{Coordinates, FlyPath, Keyframe};
 pub use stream::{FrameStats, Stream, StreamConfig};
 
 use glam::DVec3;
@@ -77,9 +77,67 @@ impl<'a> Viewer<'a> {
         &self.stream
     }
 
-    /// Streams and draws one frame for `shot`.
+    /// Streams and draws one real-time frame for `shot`: one stream pass, at most the upload
+    /// limit, and what is resident drawn (as the window does: after a jump, coarse levels or
+    /// nothing until the cut arrives over the next frames).
     pub fn frame(&mut self, shot: &Shot) -> Result<Frame, RenderError> {
-        let (mut stats, drawn) = self.stream.frame(self.reader, &self.renderer, shot)?;
+        let (stats, drawn) = self.stream.frame(self.reader, &self.renderer, shot)?;
+        self.draw(shot, stats, drawn)
+    }
+
+    /// Streams and draws one complete frame for `shot`: stream passes (each within the upload
+    /// limit, as in [`frame`](Self::frame)) repeat until nothing the frame wants is pending,
+    /// or until a pass makes no progress (the cache budget is full of entries this frame needs,
+    /// or an entry exceeds it: then what fits is drawn, as `starved` and `too_big` say). The
+    /// picture is the one the camera gets once streaming has caught up, whatever the upload
+    /// limit. Counters: hits and misses are those of the first pass (the cache as the frame
+    /// found it), bytes uploaded, evictions and completions are summed over the passes, the
+    /// rest are the last pass's; `passes` says how many there were.
+    pub fn complete_frame(&mut self, shot: &Shot) -> Result<Frame, RenderError> {
+        /// A bound on the passes, far above any need (each pass that continues uploads bytes).
+        const MAX_PASSES: u32 = 1 << 20;
+        let mut first: Option<FrameStats> = None;
+        let mut sum = FrameStats::default();
+        loop {
+            let (stats, drawn) = self.stream.frame(self.reader, &self.renderer, shot)?;
+            sum.bytes_uploaded += stats.bytes_uploaded;
+            sum.source_bytes_uploaded += stats.source_bytes_uploaded;
+            sum.evictions += stats.evictions;
+            sum.nodes_completed += stats.nodes_completed;
+            sum.source_completed += stats.source_completed;
+            sum.passes += 1;
+            let progress = stats.bytes_uploaded > 0
+                || stats.nodes_completed > 0
+                || stats.source_completed > 0
+                || stats.evictions > 0;
+            let first = first.get_or_insert_with(|| stats.clone());
+            if stats.pending == 0 || !progress || sum.passes == MAX_PASSES {
+                let stats = FrameStats {
+                    frame: first.frame,
+                    cache_hits: first.cache_hits,
+                    cache_misses: first.cache_misses,
+                    source_hits: first.source_hits,
+                    source_misses: first.source_misses,
+                    bytes_uploaded: sum.bytes_uploaded,
+                    source_bytes_uploaded: sum.source_bytes_uploaded,
+                    evictions: sum.evictions,
+                    nodes_completed: sum.nodes_completed,
+                    source_completed: sum.source_completed,
+                    passes: sum.passes,
+                    ..stats
+                };
+                return self.draw(shot, stats, drawn);
+            }
+        }
+    }
+
+    /// Draws the entries `drawn` of a stream pass.
+    fn draw(
+        &mut self,
+        shot: &Shot,
+        mut stats: FrameStats,
+        drawn: Vec<stream::Drawn>,
+    ) -> Result<Frame, RenderError> {
         let (batches, all, kept) = self.stream.batches(self.reader, shot, &drawn);
         let source = self.stream.source_batches(&drawn);
         stats.faces_resident_in_drawn = all;
@@ -111,11 +169,15 @@ impl<'a> Viewer<'a> {
 }
 
 /// Renders every frame of `path` at `width`×`height` and hands each to `each` (which may write
-/// it out); stops at the first error.
+/// it out); stops at the first error. Frames are complete ([`Viewer::complete_frame`]: each
+/// waits until what its camera wants is resident), or with `real_time` one stream pass each
+/// ([`Viewer::frame`], what the window would show at that frame). Frame numbers in the
+/// counters are the path's, from 0.
 pub fn fly(
     viewer: &mut Viewer,
     path: &FlyPath,
     (width, height): (u32, u32),
+    real_time: bool,
     each: &mut dyn FnMut(u32, Frame) -> Result<(), RenderError>,
 ) -> Result<(), RenderError> {
     path.check()?;
@@ -126,7 +188,12 @@ pub fn fly(
     }
     for i in 0..path.frames {
         let shot = path.shot(i, viewer.bounds(), width, height);
-        let frame = viewer.frame(&shot)?;
+        let mut frame = if real_time {
+            viewer.frame(&shot)?
+        } else {
+            viewer.complete_frame(&shot)?
+        };
+        frame.stats.frame = i as u64;
         each(i, frame)?;
     }
     Ok(())

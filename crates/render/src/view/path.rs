@@ -1,13 +1,20 @@
-//! A camera path for the headless viewer: keyframes of eye and target in the model's
-//! bounding cube mapped to [−1, 1]³ (so one path suits any model), and the number of frames.
+//! A camera path for the headless viewer (`voxlod view FILE --fly PATH.json`): keyframes of
+//! eye and target, and the number of frames.
 //!
 //! ```json
 //! {"keyframes": [{"eye": [0, 0.4, 6], "target": [0, 0, 0]}, {"eye": [0.1, 0.1, 0.6], "target": [0, 0, 0]}],
 //!  "frames": 24, "up": [0, 1, 0], "fov": 45}
 //! ```
-//! `up` (default +Y) and `fov` (vertical, degrees, default 45) are optional. Frame `i` of `N`
-//! is at `t = i/(N−1)` of the path; eye and target move linearly between keyframes spaced
-//! evenly in `t`, eased (smoothstep) inside each segment so the camera starts and stops gently.
+//! Coordinates: by default (`"coordinates": "cube"`) eye and target are in the model's bounding
+//! cube mapped to [−1, 1]³ (the centre of the root node's box is 0, ±1 its largest half extent,
+//! the same scale on every axis), so one path suits any model; with `"coordinates": "world"`
+//! they are world coordinates, the units of the input mesh, as `render --target` takes them.
+//! `up` (default +Y, world axes in both cases) and `fov` (vertical, degrees, default 45) are
+//! optional. Frame `i` of `N` is at `t = i/(N−1)` of the path; the keyframes are spaced evenly
+//! in `t` (K keyframes: keyframe `k` at `t = k/(K−1)`, so each segment gets the same number of
+//! frames, whatever its length); eye and target move linearly between neighbouring keyframes,
+//! eased (smoothstep) inside each segment so the camera starts and stops gently at every
+//! keyframe. One keyframe or one frame: a still.
 
 use std::path::Path;
 
@@ -18,14 +25,25 @@ use voxlod_format::Aabb;
 use crate::camera::Shot;
 use crate::RenderError;
 
-/// One keyframe: where the eye is and what it looks at, in the unit cube of the model.
+/// One keyframe: where the eye is and what it looks at, in the path's [`Coordinates`].
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Keyframe {
-    /// Eye position in [−1, 1]³ coordinates of the model's bounding cube (may lie outside).
+    /// Eye position (in cube coordinates it may lie outside [−1, 1]³).
     pub eye: [f64; 3],
     /// Point looked at, same coordinates.
     pub target: [f64; 3],
+}
+
+/// What the numbers of a path's keyframes mean.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Coordinates {
+    /// The model's bounding cube mapped to [−1, 1]³ (any model, one path).
+    #[default]
+    Cube,
+    /// World coordinates, as `render --target` takes them.
+    World,
 }
 
 /// A camera path (see the module docs for the JSON).
@@ -42,6 +60,9 @@ pub struct FlyPath {
     /// Vertical field of view, degrees.
     #[serde(default = "default_fov")]
     pub fov: f64,
+    /// What the keyframes' numbers mean (default: the unit cube of the model).
+    #[serde(default)]
+    pub coordinates: Coordinates,
 }
 
 fn default_up() -> [f64; 3] {
@@ -93,7 +114,15 @@ impl FlyPath {
         }
         for (i, k) in self.keyframes.iter().enumerate() {
             let (e, t) = (DVec3::from(k.eye), DVec3::from(k.target));
-            if !(e.is_finite() && t.is_finite()) || e.abs().max_element() > 1e6 {
+            // world coordinates may be georeferenced (metres from a far origin)
+            let limit = match self.coordinates {
+                Coordinates::Cube => 1e6,
+                Coordinates::World => 1e12,
+            };
+            if !(e.is_finite() && t.is_finite())
+                || e.abs().max_element() > limit
+                || t.abs().max_element() > limit
+            {
                 return bad(format!(
                     "keyframe {i}: eye and target must be finite numbers of moderate size"
                 ));
@@ -132,13 +161,17 @@ impl FlyPath {
 
     /// The camera of frame `i` for a model whose bounding box is `bounds`, `width`×`height`
     /// pixels: cube coordinates `p` are `centre + p·half` with `half` half the box's largest
-    /// extent.
+    /// extent; world coordinates are taken as they are.
     pub fn shot(&self, i: u32, bounds: Aabb, width: u32, height: u32) -> Shot {
         let (eye, target) = self.at(i);
         let (centre, half) = cube(bounds);
+        let world = |p: DVec3| match self.coordinates {
+            Coordinates::Cube => centre + p * half,
+            Coordinates::World => p,
+        };
         cube_shot(
-            centre + eye * half,
-            centre + target * half,
+            world(eye),
+            world(target),
             self.up.into(),
             self.fov.to_radians(),
             half,
@@ -221,5 +254,37 @@ mod tests {
             assert!(p.check().is_err(), "{bad}");
         }
         assert!(serde_json::from_str::<FlyPath>(r#"{"frames": 3}"#).is_err());
+    }
+
+    #[test]
+    fn world_coordinates_are_the_cube_ones_mapped() {
+        // the box [0,2]×[0,1]×[0,1]: centre (1, 0.5, 0.5), half edge 1
+        let b = Aabb {
+            min: [0.0, 0.0, 0.0],
+            max: [2.0, 1.0, 1.0],
+        };
+        let cube: FlyPath = serde_json::from_str(
+            r#"{"keyframes": [{"eye": [0, 0, 3], "target": [0.5, 0, 0]}], "frames": 1}"#,
+        )
+        .unwrap();
+        let world: FlyPath = serde_json::from_str(
+            r#"{"keyframes": [{"eye": [1, 0.5, 3.5], "target": [1.5, 0.5, 0.5]}], "frames": 1,
+                "coordinates": "world"}"#,
+        )
+        .unwrap();
+        assert_eq!(cube.coordinates, Coordinates::Cube);
+        assert_eq!(world.coordinates, Coordinates::World);
+        let (c, w) = (cube.shot(0, b, 64, 48), world.shot(0, b, 64, 48));
+        assert_eq!((c.eye, c.target), (w.eye, w.target));
+        assert_eq!(w.target, DVec3::new(1.5, 0.5, 0.5));
+        // georeferenced numbers are fine in world coordinates, not in the cube
+        let far = r#"{"keyframes": [{"eye": [5e6, 0, 1], "target": [5e6, 0, 0]}], "frames": 1"#;
+        let p: FlyPath =
+            serde_json::from_str(&format!(r#"{far}, "coordinates": "world"}}"#)).unwrap();
+        p.check().unwrap();
+        let p: FlyPath = serde_json::from_str(&format!("{far}}}")).unwrap();
+        assert!(p.check().is_err());
+        let screen = format!(r#"{far}, "coordinates": "screen"}}"#);
+        assert!(serde_json::from_str::<FlyPath>(&screen).is_err());
     }
 }

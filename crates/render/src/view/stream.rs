@@ -122,6 +122,10 @@ pub struct FrameStats {
     /// Entries larger than the whole cache budget (never drawable at this budget; a leaf's
     /// triangles that large leave it drawn as voxels).
     pub too_big: usize,
+    /// Stream passes made for this frame: 1 for a real-time frame (the window, `--fly
+    /// --real-time`); for a complete frame (`Viewer::complete_frame`, the `--fly` default) the
+    /// passes until nothing the frame wants was pending, or a pass made no progress.
+    pub passes: u32,
 }
 
 /// The two kinds of cache entry: a node's voxel faces, a leaf's source triangles.
@@ -339,6 +343,7 @@ impl Stream {
             frame: self.frame,
             cache_budget: self.config.cache_bytes,
             upload_limit: self.upload_limit(),
+            passes: 1,
             ..Default::default()
         };
         let want = cut::select(reader, shot, px);

@@ -69,10 +69,40 @@ struct App<'a> {
     error: Option<RenderError>,
 }
 
+/// What to do instead of a window, said with every failure to open one.
+const NO_WINDOW_HINT: &str = "render a camera path headless instead (voxlod view FILE --fly \
+     configs/fly-in.json --frames DIR, or voxlod render FILE -o PICTURE.png), or give the window \
+     a virtual display (xvfb-run voxlod view FILE)";
+
+/// Why no window can open here, before winit is asked: on Linux and the BSDs a window needs
+/// an X11 or Wayland display named by the environment.
+pub fn no_display() -> Option<String> {
+    if cfg!(any(
+        target_os = "macos",
+        target_os = "windows",
+        target_os = "ios",
+        target_os = "android"
+    )) {
+        return None;
+    }
+    let set = |k: &str| std::env::var_os(k).is_some_and(|v| !v.is_empty());
+    if set("DISPLAY") || set("WAYLAND_DISPLAY") || set("WAYLAND_SOCKET") {
+        return None;
+    }
+    Some(format!(
+        "no display to open a window on (neither DISPLAY nor WAYLAND_DISPLAY is set): {NO_WINDOW_HINT}"
+    ))
+}
+
 /// Opens a window on `reader` and runs until it is closed.
 pub fn run(reader: &Reader, config: StreamConfig, size: (u32, u32)) -> Result<(), RenderError> {
-    let event_loop =
-        EventLoop::new().map_err(|e| RenderError::Option(format!("cannot open a window: {e}")))?;
+    if let Some(why) = no_display() {
+        return Err(RenderError::Option(why));
+    }
+    // winit's own message names a source file of its crate; the hint says what to do
+    let event_loop = EventLoop::new().map_err(|e| {
+        RenderError::Option(format!("cannot open a window ({e}): {NO_WINDOW_HINT}"))
+    })?;
     let mut app = App {
         reader,
         config,

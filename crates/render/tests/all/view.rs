@@ -86,7 +86,7 @@ fn fly_in_streams_within_its_budgets() {
     path.keyframes.push(*path.keyframes.last().unwrap());
     path.frames = 40;
     let mut stats = Vec::new();
-    fly(&mut viewer, &path, (160, 120), &mut |i, f| {
+    fly(&mut viewer, &path, (160, 120), true, &mut |i, f| {
         let s = &f.stats;
         let resident = viewer_resident_bytes(&r, &f.picture.nodes, &sizes);
         assert!(s.bytes_resident <= config.cache_bytes, "frame {i}: {s:?}");
