@@ -17,6 +17,7 @@ mod gen_blocks;
 mod gpu;
 mod hostile;
 mod json_schema;
+mod licence;
 mod materials;
 mod octree;
 mod python_package;
