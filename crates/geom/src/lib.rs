@@ -93,6 +93,7 @@ impl Triangle {
     }
 
     /// Twice the area vector `(v1 - v0) × (v2 - v0)` in f64.
+    #[inline]
     pub fn cross(&self) -> [f64; 3] {
         let a = sub64(self.v[1], self.v[0]);
         let b = sub64(self.v[2], self.v[0]);
@@ -104,12 +105,14 @@ impl Triangle {
     }
 
     /// True if all nine coordinates are finite.
+    #[inline]
     pub fn is_finite(&self) -> bool {
         self.v.iter().flatten().all(|x| x.is_finite())
     }
 
     /// True if the triangle has zero area (two equal vertices or collinear), judged exactly in
     /// f64 on the stored f32 coordinates.
+    #[inline]
     pub fn is_degenerate(&self) -> bool {
         let c = self.cross();
         c[0] == 0.0 && c[1] == 0.0 && c[2] == 0.0
@@ -157,6 +160,7 @@ impl std::fmt::Debug for Embedded {
     }
 }
 
+#[inline]
 fn sub64(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
     [
         a[0] as f64 - b[0] as f64,
@@ -189,6 +193,7 @@ impl Bounds {
     // cut into batches and merged in order (the ingest pass merges per-thread batches).
     // NaN is never taken.
     /// Grows the box to hold `p`.
+    #[inline]
     pub fn add_point(&mut self, p: [f32; 3]) {
         for a in 0..3 {
             let x = p[a] as f64;
@@ -208,6 +213,7 @@ impl Bounds {
     }
     /// [`Bounds::add_triangle`] of each of `tris`, with the comparisons in f32 (the same
     /// result: the values are f32 values either way), which is faster.
+    #[inline]
     pub fn add_triangles(&mut self, tris: &[Triangle]) {
         let mut b = [[f32::INFINITY; 3], [f32::NEG_INFINITY; 3]];
         for t in tris {
@@ -345,6 +351,7 @@ impl Grid {
     /// coordinates may produce voxels in: every voxel `i` with `[i, i+1]` touching the
     /// triangle's bounding box, clamped to the grid. This is a superset of the voxels either
     /// voxelization mode marks, so binning by it loses nothing.
+    #[inline]
     pub fn chunk_range(&self, t: &Triangle) -> Option<([u32; 3], [u32; 3])> {
         let (mn, mx) = corners(&t.v);
         self.box_chunk_range(mn, mx)
@@ -354,6 +361,7 @@ impl Grid {
     /// triangle moved to the grid (`to_grid` of each vertex), without moving it: `to_grid` is
     /// monotonic per axis (a subtraction and a multiplication by a positive factor, each
     /// rounded, then a rounding to f32), so the grid box is `to_grid` of the world box.
+    #[inline]
     pub fn world_chunk_range(&self, t: &Triangle) -> Option<([u32; 3], [u32; 3])> {
         let (mn, mx) = corners(&t.v);
         self.box_chunk_range(self.to_grid(mn), self.to_grid(mx))

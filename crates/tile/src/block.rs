@@ -102,10 +102,31 @@ impl BlockEncoder {
 
     /// Appends one block of `n` (1 to [`BLOCK_TRIANGLES`]) records.
     fn block<'a>(&mut self, n: usize, rec: impl Fn(usize) -> &'a [u8], out: &mut Vec<u8>) {
+        // the entry size a constant, so that hashing and comparing entries are a few word
+        // operations, not loops and `memcmp` calls
+        match self.layout.vertex_bytes() {
+            12 => self.block_of::<12>(n, rec, out),
+            16 => self.block_of::<16>(n, rec, out),
+            20 => self.block_of::<20>(n, rec, out),
+            24 => self.block_of::<24>(n, rec, out),
+            28 => self.block_of::<28>(n, rec, out),
+            32 => self.block_of::<32>(n, rec, out),
+            _ => self.block_of::<MAX_VERTEX>(n, rec, out),
+        }
+    }
+
+    /// [`Self::block`] for vertex-table entries of `VB` bytes.
+    fn block_of<'a, const VB: usize>(
+        &mut self,
+        n: usize,
+        rec: impl Fn(usize) -> &'a [u8],
+        out: &mut Vec<u8>,
+    ) {
         debug_assert!(n > 0 && n <= BLOCK_TRIANGLES);
         let l = self.layout;
-        let (rb, vb) = (l.bytes(), l.vertex_bytes());
-        let size = (6 * n).next_power_of_two().max(64);
+        let (rb, vb) = (l.bytes(), VB);
+        assert_eq!(vb, l.vertex_bytes(), "entry size of {l:?}");
+        let size = (4 * n).next_power_of_two().max(64);
         self.slots.clear();
         self.slots.resize(size, 0);
         let mask = size - 1;
@@ -124,7 +145,7 @@ impl BlockEncoder {
             self.flags.extend_from_slice(&r[36..40]);
             for k in 0..3 {
                 corner(l, r, k, &mut v);
-                let v = &v[..vb];
+                let v: &[u8; VB] = v[..VB].try_into().expect("VB bytes");
                 let mut s = hash(v) as usize & mask;
                 let at = loop {
                     let e = self.slots[s];
@@ -135,7 +156,10 @@ impl BlockEncoder {
                         break nv - 1;
                     }
                     let j = (e - 1) as usize;
-                    if &self.verts[j * vb..(j + 1) * vb] == v {
+                    let entry: &[u8; VB] = self.verts[j * VB..(j + 1) * VB]
+                        .try_into()
+                        .expect("VB bytes");
+                    if entry == v {
                         break e - 1;
                     }
                     s = (s + 1) & mask;
@@ -259,11 +283,36 @@ impl BlockHeader {
         out: &mut Vec<Triangle>,
     ) -> Result<(), String> {
         debug_assert_eq!(body.len(), self.body_bytes(l));
-        let t = self.triangles;
         if self.kind == RAW {
             out.extend(body.chunks_exact(l.bytes()).map(|r| l.decode(r)));
             return Ok(());
         }
+        // the layout a constant, so that the copies of a corner are fixed moves
+        match (l.normals, l.colors, l.texcoords) {
+            (false, false, false) => self.decode_of::<false, false, false>(body, out),
+            (false, true, false) => self.decode_of::<false, true, false>(body, out),
+            (true, false, false) => self.decode_of::<true, false, false>(body, out),
+            (true, true, false) => self.decode_of::<true, true, false>(body, out),
+            (false, false, true) => self.decode_of::<false, false, true>(body, out),
+            (false, true, true) => self.decode_of::<false, true, true>(body, out),
+            (true, false, true) => self.decode_of::<true, false, true>(body, out),
+            (true, true, true) => self.decode_of::<true, true, true>(body, out),
+        }
+    }
+
+    /// [`Self::decode`] of an indexed block in the layout with normals `N`, colours `C` and
+    /// texture coordinates `T`.
+    fn decode_of<const N: bool, const C: bool, const T: bool>(
+        &self,
+        body: &[u8],
+        out: &mut Vec<Triangle>,
+    ) -> Result<(), String> {
+        let l = RecordLayout {
+            normals: N,
+            colors: C,
+            texcoords: T,
+        };
+        let t = self.triangles;
         let vb = l.vertex_bytes();
         let (verts, rest) = body.split_at(self.vertices * vb);
         let (idx, flags) = rest.split_at(6 * t);

@@ -9,9 +9,9 @@
 
 use std::sync::Arc;
 use voxlod_format::voxel::{
-    border_caps, face_mask, morton8, pack_color, pack_normal_f64, Voxel, NORMAL_SCALE,
+    border_caps, face_mask, pack_color, pack_normal_f64, Voxel, NORMAL_SCALE,
 };
-use voxlod_geom::morton::unmorton8;
+use voxlod_geom::morton::{morton8_by_table, unmorton8};
 use voxlod_geom::{Triangle, CHUNK, TRI_HAS_NORMALS};
 use voxlod_texture::{linear_to_srgb, TextureSet};
 
@@ -725,25 +725,31 @@ impl Slots {
         add_sums(&mut self.count, &mut self.sums, slot, w, x);
     }
 
+    /// The block + 1 of brick `bi`, made on its first touch; remembered as the last brick.
+    #[inline(never)]
+    fn brick(&mut self, bi: u32) -> usize {
+        let mut b = self.bricks[bi as usize] as usize;
+        if b == 0 {
+            self.blocks.resize(self.blocks.len() + BRICK, 0);
+            self.touched.push((bi, [0; 8]));
+            b = self.touched.len();
+            self.bricks[bi as usize] = b as u32;
+        }
+        self.last = (bi, b as u32);
+        b
+    }
+
     /// Counts one contribution to the voxel at in-chunk position `local` and returns its slot,
     /// making the slot (and its brick's block of slots) on first touch.
-    #[inline]
+    #[inline(always)]
     fn mark(&mut self, local: [u32; 3]) -> u32 {
-        let idx = morton8(local[0] as u8, local[1] as u8, local[2] as u8);
+        let idx = morton8_by_table(local[0] as u8, local[1] as u8, local[2] as u8);
         let bi = idx >> 9;
         // a column's voxels and a triangle's neighbouring columns mostly stay in one brick
         let b = if bi == self.last.0 {
             self.last.1 as usize
         } else {
-            let mut b = self.bricks[bi as usize] as usize;
-            if b == 0 {
-                self.blocks.resize(self.blocks.len() + BRICK, 0);
-                self.touched.push((bi, [0; 8]));
-                b = self.touched.len();
-                self.bricks[bi as usize] = b as u32;
-            }
-            self.last = (bi, b as u32);
-            b
+            self.brick(bi)
         };
         let v = idx as usize & (BRICK - 1);
         let sl = &mut self.blocks[(b - 1) * BRICK + v];

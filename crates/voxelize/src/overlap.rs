@@ -136,7 +136,9 @@ pub(crate) fn cross_f64(v: &[[f64; 3]; 3]) -> [f64; 3] {
 
 #[inline]
 pub(crate) fn to_f64(v: &[[f32; 3]; 3]) -> [[f64; 3]; 3] {
-    v.map(|p| p.map(|c| c as f64))
+    // written out: `array::map` here compiled to calls and copies in the hot small-triangle path
+    let p = |i: usize| [v[i][0] as f64, v[i][1] as f64, v[i][2] as f64];
+    [p(0), p(1), p(2)]
 }
 
 /// The voxel whose open interior `(p, p+1)³` contains the whole triangle, if there is one (every

@@ -96,7 +96,7 @@ impl Small {
 /// decides (a non-finite coordinate, zero area, a normal component of uncertain sign, or a
 /// projection of zero area that the set needs).
 pub(crate) fn split(v: &[[f32; 3]; 3], lo: [i32; 3], hi: [i32; 3], out: &mut Small) -> bool {
-    if !v.iter().flatten().all(|c| c.is_finite()) {
+    if !(v[0].iter().chain(&v[1]).chain(&v[2])).all(|c| c.is_finite()) {
         return false;
     }
     let o = to_f64(v);
@@ -135,8 +135,8 @@ pub(crate) fn split(v: &[[f32; 3]; 3], lo: [i32; 3], hi: [i32; 3], out: &mut Sma
     }
     // each normal component's sign certain (the filter of TriSetup::new), so that the dominant
     // axis is TriSetup's and the projections' orientations are exact
-    let d1 = [0, 1, 2].map(|k| o[1][k] - o[0][k]);
-    let d2 = [0, 1, 2].map(|k| o[2][k] - o[0][k]);
+    let d1 = [o[1][0] - o[0][0], o[1][1] - o[0][1], o[1][2] - o[0][2]];
+    let d2 = [o[2][0] - o[0][0], o[2][1] - o[0][1], o[2][2] - o[0][2]];
     for k in 0..3 {
         let (i, j) = ((k + 1) % 3, (k + 2) % 3);
         let mag = (d1[i] * d2[j]).abs() + (d1[j] * d2[i]).abs();
@@ -145,7 +145,11 @@ pub(crate) fn split(v: &[[f32; 3]; 3], lo: [i32; 3], hi: [i32; 3], out: &mut Sma
         }
     }
     out.interior = false;
-    let p = [0, 1, 2].map(|k| (first[k] + split[k] as i32) as f64);
+    let p = [
+        (first[0] + split[0] as i32) as f64,
+        (first[1] + split[1] as i32) as f64,
+        (first[2] + split[2] as i32) as f64,
+    ];
     let Some(inside) = octants(&o, n, split, p) else {
         return false;
     };
