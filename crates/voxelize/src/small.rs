@@ -70,7 +70,8 @@ pub(crate) struct Piece {
 /// voxelizer gives it the whole triangle's contribution).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Small {
-    /// the triangle's vertices swizzled to its dominant axis (for the interpolation)
+    /// the triangle's vertices swizzled to its dominant axis (for the interpolation; not set
+    /// for an `interior` triangle)
     pub sv: [[f64; 3]; 3],
     /// its normal `(v1 − v0) × (v2 − v0)` (f64, original axes) and `|n|`, as
     /// `chunk::face` computes them
@@ -120,10 +121,8 @@ pub(crate) fn split(v: &[[f32; 3]; 3], lo: [i32; 3], hi: [i32; 3], out: &mut Sma
     }
     out.n = n;
     out.norm = nn.sqrt();
-    let swz = swizzle(dominant_axis(n));
-    let sw = |p: [f64; 3]| [p[swz[0]], p[swz[1]], p[swz[2]]];
-    out.sv = [sw(o[0]), sw(o[1]), sw(o[2])];
     if split == [false; 3] {
+        // the whole triangle's contribution: no swizzle, no cut (`sv` is not read)
         out.interior = true;
         out.len = 1;
         out.pieces[0] = Piece {
@@ -133,6 +132,9 @@ pub(crate) fn split(v: &[[f32; 3]; 3], lo: [i32; 3], hi: [i32; 3], out: &mut Sma
         };
         return true;
     }
+    let swz = swizzle(dominant_axis(n));
+    let sw = |p: [f64; 3]| [p[swz[0]], p[swz[1]], p[swz[2]]];
+    out.sv = [sw(o[0]), sw(o[1]), sw(o[2])];
     // each normal component's sign certain (the filter of TriSetup::new), so that the dominant
     // axis is TriSetup's and the projections' orientations are exact
     let d1 = [o[1][0] - o[0][0], o[1][1] - o[0][1], o[1][2] - o[0][2]];
