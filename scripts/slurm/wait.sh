@@ -3,8 +3,8 @@
 #
 #   scripts/slurm/wait.sh WORK [TIMEOUT_SECONDS]
 #
-# Exit 0 when the merge job completed (OUT is written). Otherwise exit 1 naming every shard
-# whose task did not succeed (state, exit code, log and its last lines) and the command that
+# Exit 0 when the merge job completed (OUT is written). Otherwise exit 1 naming every map task
+# and shard whose task did not succeed (state, exit code, log and its last lines) and the command that
 # reruns them; exit 3 on timeout (default: none). Polls `scontrol` once a second (no Slurm
 # accounting database needed; finished jobs stay visible for the cluster's MinJobAge).
 set -euo pipefail
@@ -27,12 +27,12 @@ job_state() {
   field "$rec" JobState
 }
 
-# Every shard task of the array jobs, later jobs (reruns) overriding earlier ones, as lines
-# "TASK STATE EXITCODE REASON"; a pending range ("2-5") stays one line.
-shard_states() {
+# Every task of the array jobs $1 (comma-separated), later jobs (reruns) overriding earlier
+# ones, as lines "TASK STATE EXITCODE REASON"; a pending range ("2-5") stays one line.
+task_states() {
   local job rec
   declare -A line=()
-  for job in ${ARRAY_JOBS//,/ }; do
+  for job in ${1//,/ }; do
     while IFS= read -r rec; do
       [[ -n "$rec" ]] || continue
       local task
@@ -63,14 +63,26 @@ if [[ "$state" == COMPLETED ]]; then
 fi
 
 echo "wait.sh: merge job $MERGE_JOB ended $state; $OUT was not written" >&2
+failed_maps=()
+while read -r task st code reason; do
+  [[ "$st" == COMPLETED ]] && continue
+  echo "  map task $task: $st (exit $code, $reason), log $LOGS/map-$task.out" >&2
+  if [[ -f "$LOGS/map-$task.out" ]]; then tail -n 5 "$LOGS/map-$task.out" | sed 's/^/    | /' >&2; fi
+  [[ "$task" =~ ^[0-9]+$ ]] && failed_maps+=("$task")
+done < <(task_states "${MAP_JOBS:-}")
 failed=()
 while read -r task st code reason; do
   [[ "$st" == COMPLETED ]] && continue
+  # shards cancelled because a map task failed are rerun with it
+  [[ ${#failed_maps[@]} -gt 0 && "$st" == CANCELLED ]] && continue
   echo "  shard $task: $st (exit $code, $reason), log $LOGS/shard-$task.out" >&2
   if [[ -f "$LOGS/shard-$task.out" ]]; then tail -n 5 "$LOGS/shard-$task.out" | sed 's/^/    | /' >&2; fi
   [[ "$task" =~ ^[0-9]+$ ]] && failed+=("$task")
-done < <(shard_states)
-if [[ ${#failed[@]} -gt 0 ]]; then
+done < <(task_states "$ARRAY_JOBS")
+if [[ ${#failed_maps[@]} -gt 0 ]]; then
+  echo "  (the shards waiting for them were cancelled)" >&2
+  echo "rerun them and the shards: $here/rerun.sh $work map $(IFS=,; echo "${failed_maps[*]}")" >&2
+elif [[ ${#failed[@]} -gt 0 ]]; then
   echo "rerun them: $here/rerun.sh $work $(IFS=,; echo "${failed[*]}")" >&2
 elif [[ -f "$LOGS/merge.out" ]]; then
   tail -n 5 "$LOGS/merge.out" | sed 's/^/    | /' >&2

@@ -1,11 +1,14 @@
-//! Sharded builds on cluster schedulers (issue 16): the same three commands (`voxlod plan`,
-//! `voxlod build --plan --shard I`, `voxlod merge`) driven by Slurm and by Kubernetes.
+//! Sharded builds on cluster schedulers (issues 16 and 30): the same four commands (`voxlod
+//! plan --parts`, `voxlod map --part I`, `voxlod build --plan --shard I`, `voxlod merge`) driven
+//! by Slurm and by Kubernetes.
 //!
-//! Slurm, for real: `scripts/slurm/submit.sh` plans a generated mesh, runs the shards as a
-//! Slurm job array and the merge as a job that depends on it, and the merged file must equal a
-//! one-machine `voxlod build` byte for byte. A shard that fails must keep the merge job from
-//! running, `wait.sh` must name that shard, and rerunning only it (`rerun.sh`, an `--array=K`
-//! job) must finish the same file. The cluster is the single-node one of `.ci/slurm-up.sh`
+//! Slurm, for real: `scripts/slurm/submit.sh` plans a generated mesh, runs the map tasks as a
+//! Slurm job array, the shards as an array that depends on it and the merge as a job that
+//! depends on the shards, and the merged file must equal a one-machine `voxlod build` byte for
+//! byte. A shard that fails must keep the merge job from running, `wait.sh` must name that
+//! shard, and rerunning only it (`rerun.sh`, an `--array=K` job) must finish the same file; a
+//! map task that fails must keep the shards and the merge from running, `wait.sh` must name it,
+//! and `rerun.sh WORK map K` must rerun it and the shards, to the same file. The cluster is the single-node one of `.ci/slurm-up.sh`
 //! (slurmctld, slurmd and munge on localhost), which `.ci/run` starts before `cargo test`; its
 //! jobs run as the same user on the same file system, so they run this test's own `voxlod`
 //! binary on the test's temporary files. Under CI (`CI=true`) a cluster that does not answer is
@@ -147,6 +150,7 @@ fn slurm_array_build_equals_single_build_and_a_failed_shard_is_rerun() {
     let sub = slurm_script("submit.sh", &args, d);
     assert!(sub.status.success(), "submit.sh: {}", text(&sub.stderr));
     let out = text(&sub.stdout);
+    let maps = job_id(&out, "map job: ");
     let array = job_id(&out, "array job: ");
     job_id(&out, "merge job: ");
     let w = slurm_script("wait.sh", &["array.shards", "120"], d);
@@ -167,6 +171,15 @@ fn slurm_array_build_equals_single_build_and_a_failed_shard_is_rerun() {
         // --mem follows --memory 512MiB; Slurm states it per node.
         assert_eq!(t["MinMemoryNode"], "512M", "{t:?}");
     }
+    let map_tasks = scontrol_job(&maps);
+    assert_eq!(
+        map_tasks.len(),
+        SHARDS,
+        "one map task per part: {map_tasks:?}"
+    );
+    for t in &map_tasks {
+        assert_eq!(t["JobState"], "COMPLETED", "{t:?}");
+    }
     let merged = std::fs::read(d.join("array.voxlod")).unwrap();
     assert!(
         merged == expected,
@@ -175,9 +188,61 @@ fn slurm_array_build_equals_single_build_and_a_failed_shard_is_rerun() {
     for k in 0..SHARDS {
         let shard = d.join(format!("array.shards/shard-{k:04}.vlshard"));
         assert!(shard.is_file(), "{} is missing", shard.display());
+        let part = d.join(format!("array.shards/part-{k:04}.json"));
+        assert!(part.is_file(), "{} is missing", part.display());
     }
 
     failed_shard_stops_the_merge_and_rerun_finishes(d, m, &expected);
+    failed_map_task_stops_the_shards_and_rerun_finishes(d, m, &expected);
+}
+
+/// Map task 1 cannot rename its bins into place (a folder has the name), so it fails: the
+/// shard array and the merge are cancelled without running, wait.sh names map task 1 and the
+/// rerun command, and `rerun.sh WORK map 1` once the folder is gone reruns it and the shards
+/// (none had written a file), to the plain build's bytes.
+fn failed_map_task_stops_the_shards_and_rerun_finishes(d: &Path, mesh: &str, expected: &[u8]) {
+    let blocker = d.join("mapfail.shards/part-0001.bins");
+    std::fs::create_dir_all(blocker.join("in-the-way")).unwrap();
+    let n = SHARDS.to_string();
+    let mut args = vec![mesh, "mapfail.voxlod", &n];
+    args.extend(OPTS);
+    let sub = slurm_script("submit.sh", &args, d);
+    assert!(sub.status.success(), "submit.sh: {}", text(&sub.stderr));
+    let array = job_id(&text(&sub.stdout), "array job: ");
+    let w = slurm_script("wait.sh", &["mapfail.shards", "120"], d);
+    let err = text(&w.stderr);
+    assert_eq!(w.status.code(), Some(1), "wait.sh should fail: {err}");
+    assert!(
+        err.contains("map task 1: FAILED"),
+        "wait.sh names map task 1: {err}"
+    );
+    assert!(err.contains("rerun.sh mapfail.shards map 1"), "{err}");
+    for t in scontrol_job(&array) {
+        assert_ne!(
+            t["JobState"], "COMPLETED",
+            "a shard ran after a failed map task: {t:?}"
+        );
+    }
+    assert!(!d.join("mapfail.voxlod").exists());
+    std::fs::remove_dir_all(&blocker).unwrap();
+    let re = slurm_script("rerun.sh", &["mapfail.shards", "map", "1"], d);
+    assert!(re.status.success(), "rerun.sh: {}", text(&re.stderr));
+    let out = text(&re.stdout);
+    let maps = scontrol_job(&job_id(&out, "map job: "));
+    assert_eq!(maps.len(), 1, "one map task: {maps:?}");
+    assert_eq!(maps[0]["ArrayTaskId"], "1", "{maps:?}");
+    job_id(&out, "array job: ");
+    let w = slurm_script("wait.sh", &["mapfail.shards", "120"], d);
+    assert!(
+        w.status.success(),
+        "wait.sh after the rerun: {}",
+        text(&w.stderr)
+    );
+    let merged = std::fs::read(d.join("mapfail.voxlod")).unwrap();
+    assert!(
+        merged == expected,
+        "the map rerun's merged file differs from a plain build"
+    );
 }
 
 /// Shard 1 cannot write its file (a folder has its name), so its task fails: the merge job
@@ -304,6 +369,7 @@ fn local_command(c: &serde_json::Value, data: &Path) -> Command {
                 .expect("command strings")
                 .replace("/data", data.to_str().unwrap())
                 .replace("--shards 16", "--shards 3")
+                .replace("--parts 16", "--parts 3")
                 .replace("-r 16384", "-r 1024")
                 .replace("8GiB", "512MiB")
         })
@@ -324,6 +390,8 @@ fn k8s_indexed_job_runs_the_three_commands() {
         return;
     }
     let plan = manifest("voxlod-plan.yaml");
+    let maps = manifest("voxlod-map.yaml");
+    let map_c = job_container("voxlod-map.yaml", &maps);
     let shards = manifest("voxlod-shards.yaml");
     let rerun = manifest("voxlod-shard-rerun.yaml");
     let merge = manifest("voxlod-merge.yaml");
@@ -336,6 +404,18 @@ fn k8s_indexed_job_runs_the_three_commands() {
     let n = shards["spec"]["completions"].as_u64().expect("completions");
     assert_eq!(shards["spec"]["parallelism"], n);
     assert!(plan_cmd.contains(&format!("--shards {n} ")), "{plan_cmd}");
+    assert_eq!(maps["spec"]["completionMode"], "Indexed");
+    let p = maps["spec"]["completions"].as_u64().expect("completions");
+    assert!(plan_cmd.contains(&format!("--parts {p} ")), "{plan_cmd}");
+    let map_cmd = map_c["command"].to_string();
+    assert!(
+        map_cmd.contains(r#"--part \"$JOB_COMPLETION_INDEX\""#),
+        "{map_cmd}"
+    );
+    assert!(
+        map_cmd.contains("map /data/scan.shards/plan.json"),
+        "{map_cmd}"
+    );
     assert!(
         plan_cmd.contains("-o /data/scan.shards/plan.json"),
         "{plan_cmd}"
@@ -370,6 +450,9 @@ fn k8s_indexed_job_runs_the_three_commands() {
     run_ok(Command::new(BIN).args(&build));
 
     run_ok(&mut local_command(&plan_c, &data));
+    for i in 0..SHARDS {
+        run_ok(local_command(&map_c, &data).env("JOB_COMPLETION_INDEX", i.to_string()));
+    }
     for i in 0..SHARDS {
         run_ok(local_command(&shard_c, &data).env("JOB_COMPLETION_INDEX", i.to_string()));
     }

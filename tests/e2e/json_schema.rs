@@ -347,11 +347,33 @@ fn sharded_build_json_and_the_plan_file_match_their_schemas() {
     assert_eq!(merge["shards"], 2);
     let len = std::fs::metadata(d.join("m.voxlod")).unwrap().len();
     assert_eq!(merge["bytes"], len);
+
+    // with parts: the plan, the plan file and each map task's summary
+    std::fs::create_dir_all(d.join("pp")).unwrap();
+    let mut args = vec!["plan", bunny.to_str().unwrap(), "-o", "pp/plan.json"];
+    args.extend(["--shards", "2", "--parts", "3"]);
+    args.extend(set);
+    let plan = ok(run(&args, d));
+    check("plan", &plan);
+    assert_eq!(plan["parts"], 3);
+    let file: Value =
+        serde_json::from_slice(&std::fs::read(d.join("pp/plan.json")).unwrap()).unwrap();
+    check("plan-file", &file);
+    let mut mapped = 0;
+    for i in ["0", "1", "2"] {
+        let m = ok(run(
+            &["map", "pp/plan.json", "--part", i, "-q", "--json"],
+            d,
+        ));
+        check("map", &m);
+        mapped += m["records"].as_u64().unwrap();
+    }
+    assert_eq!(mapped, file["parts"][2]["records"][1].as_u64().unwrap());
 }
 
 #[test]
 fn every_schema_field_is_described_and_in_json_md() {
-    for name in ["build", "inspect", "verify", "diff", "plan", "merge"] {
+    for name in ["build", "inspect", "verify", "diff", "plan", "map", "merge"] {
         documented(name, "docs/JSON.md");
     }
     documented("plan-file", "docs/FORMAT.md");

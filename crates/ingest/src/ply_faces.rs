@@ -22,7 +22,7 @@ const _: () = assert!(PARALLEL_RECORDS as usize <= crate::batch::BATCH);
 
 /// Bytes of one record of a `face` element if it holds a triangle: every property a scalar
 /// except the index list, whose count is 3. `None` if another property is a list.
-fn triangle_record_bytes(el: &Element, list: usize) -> Option<usize> {
+pub(crate) fn triangle_record_bytes(el: &Element, list: usize) -> Option<usize> {
     let mut n = 0;
     for (pi, p) in el.props.iter().enumerate() {
         n += match p.kind {
@@ -40,11 +40,13 @@ fn triangle_record_bytes(el: &Element, list: usize) -> Option<usize> {
 /// thread, in [`PARTS_PER_THREAD`] parts per thread, are decoded into [`LocalBatch`]es, prepared (`em.prepare`) on the same thread, and
 /// handed to `em` in record order, so the triangles, counts and the first error are those of
 /// the sequential reader. At the first record that is not a triangle, the rest is read
-/// sequentially.
+/// sequentially. Only the records `records` are read: all of them, or (for a part of the
+/// input) a range, which needs triangle records of one size.
 pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     faces: &FaceRecords<V>,
     data: &[u8],
     off: usize,
+    records: std::ops::Range<u64>,
     em: &mut Emitter,
 ) -> Result<(), IngestError> {
     use rayon::prelude::*;
@@ -54,14 +56,20 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     // the sequential reader from record `first`, which starts at byte `at`
     let sequential = |first: u64, at: usize, em: &mut Emitter| {
         let mut src = SliceRecords::<BE>::new(path, data, at);
-        stream_faces(faces, false, &mut src, em, first..el.count, false).map(drop)
+        stream_faces(faces, false, &mut src, em, first..records.end, false).map(drop)
     };
     let threads = rayon::current_num_threads() as u64;
-    let size = match triangle_record_bytes(el, list) {
-        Some(size) if threads > 1 => size as u64,
-        _ => return sequential(0, off, em),
+    let Some(size) = triangle_record_bytes(el, list).map(|s| s as u64) else {
+        assert!(
+            records.start == 0,
+            "a part of the faces needs triangle records of one size"
+        );
+        return sequential(0, off, em);
     };
     let at = |rec: u64| off + (rec * size) as usize;
+    if threads <= 1 {
+        return sequential(records.start, at(records.start), em);
+    }
     // `property list uchar int|uint vertex_indices` and nothing else: what nearly every writer
     // produces, decoded by `plain_triangles`
     let plain = match (el.props.len(), el.props[list].kind) {
@@ -76,7 +84,7 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     };
     // records that fit in the file at the uniform size (the rest, if any, is read sequentially
     // and reports the truncation as the sequential reader does)
-    let fit = ((data.len() - off) as u64 / size).min(el.count);
+    let fit = ((data.len() - off) as u64 / size).min(records.end);
     // one round: records [rec, rec + n) split between the threads, decoded in parallel
     type Round = Vec<(u64, Result<(LocalBatch, Option<u64>), IngestError>)>;
     let round_len = |rec: u64| (PARALLEL_RECORDS * threads).min(fit - rec);
@@ -125,8 +133,8 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     // Pipelined: while the triangles of round k go to `em` on this thread (the caller's
     // callback, which need not be thread-safe), round k+1 is decoded on the pool. The order
     // of triangles, counts and the first error is unchanged.
-    let mut rec = 0u64;
-    let mut current = (fit > 0).then(|| decode(0));
+    let mut rec = records.start;
+    let mut current = (fit > rec).then(|| decode(rec));
     while let Some(results) = current.take() {
         let n = round_len(rec);
         let next_rec = rec + n;
@@ -154,7 +162,7 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
         em.bytes_done = at(rec) as u64;
         current = next;
     }
-    if rec < el.count {
+    if rec < records.end {
         return sequential(rec, at(rec), em);
     }
     Ok(())

@@ -83,10 +83,20 @@ fn run_build(input: &Path, output: &Path, s: &BuildSettings, scope: Scope) -> Re
     }
 }
 
-/// Plans a sharded build of `input` (`voxlod plan`): one pass for the bounds and the
-/// per-chunk triangle counts (the ingest and count passes of a build, on the same grid), the
-/// split level and `shards` Morton ranges (`shard/split.rs`), written to `plan_path` as JSON.
-pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> Result<PlanSummary> {
+/// Plans a sharded build of `input` (`voxlod plan`), written to `plan_path` as JSON: the grid,
+/// the split level and `shards` Morton ranges (`shard/split.rs`). With `parts` > 0 and an
+/// input that can be cut into face records read on their own (a binary PLY of triangles), the
+/// plan reads only the vertex list (the bounds) and a sample of the faces (the per-chunk
+/// weights of the split), and cuts the faces into `parts` parts for map tasks
+/// (`shard/map_part.rs`). Otherwise one pass for the bounds and the per-chunk triangle counts
+/// (the ingest and count passes of a build, on the same grid), and no parts.
+pub fn plan(
+    input: &Path,
+    plan_path: &Path,
+    s: &BuildSettings,
+    shards: u32,
+    parts: u32,
+) -> Result<PlanSummary> {
     crate::settings::check_settings(s)?;
     if shards == 0 {
         bail!("--shards 0: a plan needs at least one shard");
@@ -97,7 +107,26 @@ pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> R
         scope: &Scope::Plan,
     };
     let runner = Runner::open(job, s)?;
+    let mut parts_warning = None;
+    if parts > 0 {
+        let ctx = runner.context();
+        let cut = ctx
+            .source
+            .face_parts(parts as u64)
+            .zip(ctx.pool.install(|| ctx.source.vertex_bounds()));
+        drop(ctx);
+        match cut {
+            Some((cut, vb)) => return plan_parts(runner, input, plan_path, shards, cut, vb),
+            None => {
+                parts_warning = Some(format!(
+                    "{}: cannot be cut into parts (only a binary PLY whose faces are triangle records of one size, after a vertex list of fixed-size records, can): planned without parts, so every shard reads the whole input",
+                    input.display()
+                ))
+            }
+        }
+    }
     let mut ctx = runner.context();
+    ctx.warnings.extend(parts_warning);
     let resume = crate::resume::Resume::read(ctx.work);
     // the content checksum on a thread of its own beside the passes
     let (counted, xxh3) = content_hash::beside(input, ctx.interrupt, || {
@@ -136,13 +165,19 @@ pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> R
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,
         tool_version: env!("CARGO_PKG_VERSION").into(),
-        input: PlanInput::of(input, fingerprint, xxh3)?,
+        input: PlanInput::of(input, fingerprint, Some(xxh3))?,
         settings: s.clone(),
         grid: ingested.grid.into(),
-        ingest: stages::ingest::planned(&ingested.marker),
+        ingest: Some(stages::ingest::planned(&ingested.marker)),
         chunks: leaves.iter().map(|&(m, c)| [m, c]).collect(),
+        parts: Vec::new(),
         levels,
-        manifest: stages::lod_write::manifest_fields(&ctx, &ingested),
+        manifest: stages::lod_write::manifest_fields(
+            &ctx,
+            &ingested.grid,
+            ingested.marker.triangles,
+            ingested.marker.degenerate_skipped,
+        ),
         channels: stages::lod_write::channels(&ctx),
         split_level,
         shards: ranges.clone(),
@@ -159,8 +194,129 @@ pub fn plan(input: &Path, plan_path: &Path, s: &BuildSettings, shards: u32) -> R
         chunks: leaves.len() as u64,
         split_level,
         shards: ranges,
-        balance,
+        parts: 0,
+        sampled_triangles: None,
         seconds: t0.elapsed().as_secs_f64(),
+        balance,
+        warnings,
+    })
+}
+
+/// Windows of face records the plan with parts decodes for its per-chunk weights.
+const SAMPLE_WINDOWS: u64 = 256;
+/// The sample is about 1/`SAMPLE_FRACTION` of the face records.
+const SAMPLE_FRACTION: u64 = 64;
+
+/// A plan with parts: the grid from the vertex list's bounds `vb`, the per-chunk weights from
+/// a sample of [`SAMPLE_WINDOWS`] evenly spaced windows of face records (scaled to the whole),
+/// and the parts `cut`.
+fn plan_parts(
+    runner: Runner,
+    input: &Path,
+    plan_path: &Path,
+    shards: u32,
+    cut: Vec<voxlod_ingest::FacePart>,
+    vb: voxlod_geom::Bounds,
+) -> Result<PlanSummary> {
+    use crate::shard::plan_file::PlanPart;
+    let ctx = runner.context();
+    let s = ctx.settings;
+    let grid = voxlod_geom::Grid::fit(&vb, s.resolution).with_context(|| {
+        format!(
+            "{}: fitting the grid to the vertex list's bounds",
+            input.display()
+        )
+    })?;
+    let (first, end) = (cut[0].records[0], cut[cut.len() - 1].records[1]);
+    let (off, count) = (cut[0].bytes[0], end - first);
+    let size = (cut[cut.len() - 1].bytes[1] - off)
+        .checked_div(count)
+        .unwrap_or(0);
+    let windows = SAMPLE_WINDOWS.min(count);
+    let w = (count / (windows.max(1) * SAMPLE_FRACTION)).max(1);
+    let mut counts = voxlod_tile::ChunkCounts::new(&grid)?;
+    let mut sampled = 0u64;
+    let bar = crate::progress::Bar::items(ctx.progress, "sample", windows);
+    for k in 0..windows {
+        let a = first + count * k / windows;
+        let b = (a + w).min(end);
+        let part = voxlod_ingest::FacePart {
+            records: [a, b],
+            bytes: [off + a * size, off + b * size],
+        };
+        let st = ctx.pool.install(|| {
+            ctx.source.stream_part_prepared(
+                &part,
+                &|_| (),
+                &mut |t, ()| {
+                    counts.add_triangles(t);
+                    Ok(())
+                },
+                &mut |_, _| {},
+            )
+        })?;
+        sampled += st.polygons;
+        bar.set(k + 1, windows);
+    }
+    bar.finish();
+    // each sampled chunk's count scaled to all records (at least 1); unsampled chunks weigh 0
+    let leaves: Vec<(u64, u64)> = counts
+        .layout()
+        .iter()
+        .map(|c| (c.morton, (c.count * count).div_ceil(sampled.max(1)).max(1)))
+        .collect();
+    let levels = grid.levels();
+    let (split_level, ranges, balance) = split::choose_split(&leaves, levels, shards as usize);
+    let mut warnings = ctx.warnings.clone();
+    warnings.extend(split::balance_warning(shards, split_level, &balance));
+    let fingerprint = runner
+        .mesh()
+        .fingerprint
+        .clone()
+        .expect("a plan's runner takes the input's fingerprint");
+    let parts: Vec<PlanPart> = cut
+        .iter()
+        .enumerate()
+        .map(|(i, c)| PlanPart {
+            index: i as u32,
+            records: c.records,
+            bytes: c.bytes,
+        })
+        .collect();
+    let p = ShardPlan {
+        format: PLAN_FORMAT.into(),
+        version: PLAN_VERSION,
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        input: PlanInput::of(input, fingerprint, None)?,
+        settings: s.clone(),
+        grid: grid.into(),
+        ingest: None,
+        chunks: leaves.iter().map(|&(m, c)| [m, c]).collect(),
+        parts,
+        levels,
+        // the counts are the map outputs' (`merge` sets them)
+        manifest: stages::lod_write::manifest_fields(&ctx, &grid, 0, 0),
+        channels: stages::lod_write::channels(&ctx),
+        split_level,
+        shards: ranges.clone(),
+        balance: balance.clone(),
+    };
+    drop(ctx);
+    let text = serde_json::to_vec_pretty(&p).context("serializing the plan")?;
+    runner.guard.write_whole(&text)?;
+    let t0 = runner.t0;
+    let nparts = p.parts.len() as u32;
+    runner.finish(&mut Vec::new())?;
+    Ok(PlanSummary {
+        plan: plan_path.to_path_buf(),
+        triangles: count,
+        chunks: leaves.len() as u64,
+        split_level,
+        shards: ranges,
+        parts: nparts,
+        sampled_triangles: Some(sampled),
+        seconds: t0.elapsed().as_secs_f64(),
+        balance,
         warnings,
     })
 }

@@ -51,10 +51,11 @@ pub use files::output::{
 pub use files::work::{find_work_folders, remove_stale_work_folder, WorkFolder, WORK_PREFIX};
 pub use memory::MemoryPlan;
 pub use settings::{Backend, BuildSettings, Cutoff, GpuMethod, SettingError};
+pub use shard::map_part::{map_part, MapMarker, MapSummary, MAP_FORMAT, MAP_VERSION};
 pub use shard::merge::{merge, MergeSummary};
 pub use shard::plan_file::{
-    Balance, Fingerprint, LoadedPlan, PlanGrid, PlanIngest, PlanInput, PlanSummary, ShardPlan,
-    ShardRange, ShardScope, PLAN_FORMAT, PLAN_VERSION,
+    Balance, Fingerprint, LoadedPlan, PlanGrid, PlanIngest, PlanInput, PlanPart, PlanSummary,
+    ShardPlan, ShardRange, ShardScope, PLAN_FORMAT, PLAN_VERSION,
 };
 pub use size::{format_size, parse_size};
 pub use stages::lod_write::octree_writer::{LevelStats, NodeSink, OctreeWriter, StoredPayloads};

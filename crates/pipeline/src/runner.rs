@@ -207,7 +207,7 @@ impl Runner {
 
 /// Worker threads for `-j n` (0: one per core). More threads than cores never helps (every
 /// stage is bound by the CPU or the disk), and thousands of them only thrash.
-fn thread_count(asked: usize, warnings: &mut Vec<String>) -> usize {
+pub(crate) fn thread_count(asked: usize, warnings: &mut Vec<String>) -> usize {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     if asked == 0 {
         cores

@@ -75,6 +75,10 @@ enum Command {
     /// per machine (then `build --plan P --shard I` on each, and `merge`).
     #[command(after_help = shard::EXAMPLES_PLAN)]
     Plan(shard::PlanArgs),
+    /// Run one map task of a plan with parts: decode its face records once and bin the
+    /// triangles by leaf chunk beside the plan, for the shards to read.
+    #[command(after_help = shard::EXAMPLES_MAP)]
+    Map(shard::MapArgs),
     /// Merge the shard files of a sharded build into the octree file a one-machine build
     /// writes, byte for byte.
     #[command(after_help = shard::EXAMPLES_MERGE)]
@@ -307,6 +311,7 @@ fn main() -> ExitCode {
         Command::View(a) => view::run(a),
         Command::Clean(a) => clean::run(a),
         Command::Plan(a) => shard::run_plan(a),
+        Command::Map(a) => shard::run_map(a),
         Command::Merge(a) => shard::run_merge(a),
     };
     match r {
@@ -659,6 +664,7 @@ mod tests {
             EXAMPLES_CLEAN,
             view::EXAMPLES,
             shard::EXAMPLES_PLAN,
+            shard::EXAMPLES_MAP,
             shard::EXAMPLES_MERGE,
         ];
         // every subcommand shows examples (a new one without them fails here)

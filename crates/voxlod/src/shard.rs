@@ -1,5 +1,5 @@
-//! Sharded builds on a cluster: `voxlod plan`, `voxlod build --plan P --shard I` and
-//! `voxlod merge` (the pipeline's `plan`, `build_shard` and `merge`).
+//! Sharded builds on a cluster: `voxlod plan`, `voxlod map P --part I`, `voxlod build --plan P
+//! --shard I` and `voxlod merge` (the pipeline's `plan`, `map_part`, `build_shard` and `merge`).
 
 use std::path::PathBuf;
 
@@ -10,10 +10,16 @@ use voxlod_pipeline::{format_size, BuildSettings};
 pub(crate) const EXAMPLES_PLAN: &str = "\
 Examples:
   voxlod plan scan.ply -o scan.plan.json --shards 16 -r 8192        # then one build per shard
+  voxlod plan scan.ply -o scan.plan.json --shards 16 --parts 16 -r 8192   # map tasks, then shards
   voxlod plan city.obj -o city.plan.json --shards 64 --config configs/scan.toml --json
   voxlod build --plan scan.plan.json --shard 0                      # writes shard-0000.vlshard
   voxlod merge scan.plan.json -o scan.voxlod                        # the same bytes as `voxlod build scan.ply -r 8192`
 Every build option that changes the output goes to `plan`; the shards take them from the plan.";
+
+pub(crate) const EXAMPLES_MAP: &str = "\
+Examples:
+  voxlod map scan.plan.json --part 3 -j 2      # writes part-0003.bins and part-0003.json beside the plan
+A part whose output for this plan is already committed is left as it is.";
 
 pub(crate) const EXAMPLES_MERGE: &str = "\
 Examples:
@@ -49,6 +55,12 @@ pub(crate) struct PlanArgs {
     /// Number of shards (machines or array tasks).
     #[arg(long)]
     shards: u32,
+    /// Cut the input into this many parts for map tasks (`voxlod map`), so that it is decoded
+    /// once in all instead of once per shard; the plan then reads only the vertex list and a
+    /// sample of the faces. Binary PLY of triangles only; any other input is planned without
+    /// parts (with a warning). 0: no parts.
+    #[arg(long, default_value_t = 0)]
+    parts: u32,
     #[command(flatten)]
     settings: super::SettingsArgs,
     /// No progress.
@@ -91,7 +103,7 @@ pub(crate) fn run_plan(a: PlanArgs) -> Result<()> {
     s.progress = !a.quiet;
     s.force = a.force;
     super::install_ctrlc();
-    let p = voxlod_pipeline::plan(&a.input, &a.output, &s, a.shards)?;
+    let p = voxlod_pipeline::plan(&a.input, &a.output, &s, a.shards, a.parts)?;
     if a.json {
         return super::json::print(&p);
     }
@@ -109,6 +121,14 @@ pub(crate) fn run_plan(a: PlanArgs) -> Result<()> {
         p.balance.ratio,
         p.seconds
     );
+    if p.parts > 0 {
+        println!(
+            "  {} parts for map tasks (`voxlod map {} --part I`); shard weights from {} sampled triangles",
+            p.parts,
+            p.plan.display(),
+            p.sampled_triangles.unwrap_or(0)
+        );
+    }
     for r in &p.shards {
         println!(
             "  shard {:4}: Morton {}..{}, {} subtrees, {} binned triangles",
@@ -164,6 +184,61 @@ pub(crate) fn run_build_shard(a: &super::BuildArgs) -> Result<()> {
         );
     } else {
         super::print_summary(&summary, &summary.input.display().to_string());
+    }
+    Ok(())
+}
+
+#[derive(Args)]
+pub(crate) struct MapArgs {
+    /// The plan file (written by `voxlod plan --parts N`); the outputs go beside it.
+    plan: PathBuf,
+    /// The part to map, 0-based (Slurm: $SLURM_ARRAY_TASK_ID; a Kubernetes Indexed Job:
+    /// $JOB_COMPLETION_INDEX).
+    #[arg(long)]
+    part: u32,
+    /// Worker threads; 0 = one per core.
+    #[arg(short = 'j', long, default_value_t = 0)]
+    threads: usize,
+    /// Memory budget (the binning buffer's share), e.g. 2GiB.
+    #[arg(long, value_parser = voxlod_pipeline::parse_size)]
+    memory: Option<u64>,
+    /// Folders besides the input's own that files it refers to may be read from.
+    #[arg(long)]
+    allow_path: Vec<PathBuf>,
+    /// No progress.
+    #[arg(short, long)]
+    quiet: bool,
+    /// Print the summary as JSON on stdout (fields: docs/JSON.md).
+    #[arg(long)]
+    json: bool,
+}
+
+pub(crate) fn run_map(a: MapArgs) -> Result<()> {
+    let defaults = BuildSettings::default();
+    let runtime = BuildSettings {
+        threads: a.threads,
+        memory: a.memory.unwrap_or(defaults.memory),
+        allow_paths: a.allow_path,
+        progress: !a.quiet,
+        ..defaults
+    };
+    super::install_ctrlc();
+    let m = voxlod_pipeline::map_part(&a.plan, a.part, &runtime)?;
+    if a.json {
+        super::json::print(&m)?;
+    } else if !a.quiet {
+        println!(
+            "{}: part {}, {} face records ({}), {} triangles into {} chunks ({} of bins){}, {:.2} s",
+            m.marker.display(),
+            m.part,
+            m.records,
+            format_size(m.face_bytes),
+            m.triangles,
+            m.chunks,
+            format_size(m.bins_bytes),
+            if m.already_done { ", already done" } else { "" },
+            m.seconds
+        );
     }
     Ok(())
 }

@@ -10,6 +10,7 @@ mod fuzz;
 mod gltf;
 mod malformed;
 mod parallel_faces;
+mod parts;
 mod ply_face_data;
 mod ply_formats;
 mod real_meshes;

@@ -10,7 +10,7 @@ use voxlod_ingest::{IngestStats, MeshSource};
 
 /// What is wrong with face `bad_at` of [`mesh`].
 #[derive(Clone, Copy)]
-enum Bad {
+pub(crate) enum Bad {
     /// an index past the last vertex
     OutOfRange,
     /// the index -1
@@ -23,7 +23,12 @@ enum Bad {
 /// the list unless `plain` (then the faces are the usual `list uchar int` records alone, which
 /// have their own decoding loop), degenerate ones (repeated index, collinear), a quad at
 /// `quad_at` (breaks the uniform record size) and, if given, a bad face at `bad_at`.
-fn mesh(n: usize, plain: bool, quad_at: Option<usize>, bad_at: Option<(usize, Bad)>) -> Vec<El> {
+pub(crate) fn mesh(
+    n: usize,
+    plain: bool,
+    quad_at: Option<usize>,
+    bad_at: Option<(usize, Bad)>,
+) -> Vec<El> {
     let side = 400usize;
     let mut vrows = Vec::new();
     for y in 0..side {

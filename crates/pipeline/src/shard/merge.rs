@@ -119,6 +119,15 @@ pub fn merge(
     let plan = LoadedPlan::load(plan_path)?;
     let shards = open_shards(&plan, shard_dir)?;
     let p = &plan.plan;
+    // a plan with parts: the input's counts are the map outputs'
+    let mut manifest = p.manifest.clone();
+    if !p.parts.is_empty() {
+        let hex = voxlod_io::hex(&plan.sha256);
+        let markers = super::map_part::load_markers(&plan.path, &hex, &p.parts)?;
+        let (triangles, degenerate, _) = super::map_part::totals(&markers);
+        manifest["input"]["triangles"] = triangles.into();
+        manifest["input"]["degenerate_skipped"] = degenerate.into();
+    }
     let inputs: Vec<&Path> = shards.iter().map(|s| s.path()).collect();
     let runner = Runner::open(
         Job::Merge {
@@ -145,7 +154,6 @@ pub fn merge(
     }
     let (copied, roots) = (m.copied, m.roots);
     let (bytes, levels) = octree.finish(|levels| {
-        let mut manifest = p.manifest.clone();
         manifest["levels"] = serde_json::json!(levels);
         manifest
     })?;

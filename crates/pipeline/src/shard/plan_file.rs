@@ -24,8 +24,9 @@ use crate::settings::BuildSettings;
 pub const PLAN_FORMAT: &str = "voxlod-plan";
 /// Version of the plan file. 2: the input's content checksum (`input.content_xxh3`), the
 /// ingest pass's findings (`ingest`) and the per-chunk counts (`chunks`), so that a shard reads
-/// the input once.
-pub const PLAN_VERSION: u32 = 2;
+/// the input once. 3: `parts` (the map tasks' face records), with which the plan reads no
+/// faces (no `ingest`, no `content_xxh3`; `chunks` estimated from a sample).
+pub const PLAN_VERSION: u32 = 3;
 /// Bytes hashed at each end of the input for its fingerprint.
 const FINGERPRINT_SPAN: u64 = 1 << 20;
 
@@ -91,20 +92,26 @@ pub struct PlanInput {
     /// fingerprint differs.
     pub fingerprint: Fingerprint,
     /// XXH3-64 of every byte of the input, 16 hex digits (`content_hash.rs`): a shard takes it
-    /// again during its pass and refuses an input whose content differs.
-    pub content_xxh3: String,
+    /// again during its pass and refuses an input whose content differs. None for a plan with
+    /// parts, which reads only the input's vertex list and a sample of its faces.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub content_xxh3: Option<String>,
 }
 
 impl PlanInput {
     /// `input` by its absolute path, with its fingerprint and content checksum.
-    pub(crate) fn of(input: &Path, fingerprint: Fingerprint, xxh3: u64) -> Result<PlanInput> {
+    pub(crate) fn of(
+        input: &Path,
+        fingerprint: Fingerprint,
+        xxh3: Option<u64>,
+    ) -> Result<PlanInput> {
         let path = input
             .canonicalize()
             .with_context(|| format!("{}: cannot resolve the path", input.display()))?;
         Ok(PlanInput {
             path,
             fingerprint,
-            content_xxh3: hex64(xxh3),
+            content_xxh3: xxh3.map(hex64),
         })
     }
 }
@@ -125,6 +132,28 @@ pub struct PlanIngest {
     pub max: [f64; 3],
     /// The ingest pass's warnings (degenerate triangles skipped).
     pub warnings: Vec<String>,
+}
+
+/// One part of the input for a map task: consecutive face records.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanPart {
+    /// 0-based part index.
+    pub index: u32,
+    /// First face record and the record after the last.
+    pub records: [u64; 2],
+    /// Their byte range in the input.
+    pub bytes: [u64; 2],
+}
+
+impl PlanPart {
+    /// The part as the reader takes it.
+    pub(crate) fn face_part(&self) -> voxlod_ingest::FacePart {
+        voxlod_ingest::FacePart {
+            records: self.records,
+            bytes: self.bytes,
+        }
+    }
 }
 
 /// One shard: a contiguous range of level-`split_level` Morton codes.
@@ -176,11 +205,17 @@ pub struct ShardPlan {
     pub settings: BuildSettings,
     /// The grid of the input's bounds (`Grid::fit` of `ingest`'s bounds).
     pub grid: PlanGrid,
-    /// What the pass over the input found.
-    pub ingest: PlanIngest,
+    /// What the pass over the input found (none for a plan with `parts`: the map tasks find it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ingest: Option<PlanIngest>,
     /// Every non-empty leaf chunk, in Morton order: `[Morton code, binned triangles]` (the
-    /// tile stage's counts, which size a shard's bins exactly).
+    /// tile stage's counts, which size a shard's bins exactly; with `parts`, estimated from a
+    /// sample of the faces, for the split only).
     pub chunks: Vec<[u64; 2]>,
+    /// The map tasks' parts of the input (`voxlod map --part I`), in file order; empty if the
+    /// input cannot be cut (then every shard reads the whole input).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parts: Vec<PlanPart>,
     /// The octree's levels.
     pub levels: u32,
     /// The output's manifest without its `levels` (they are summed by the merge).
@@ -295,6 +330,18 @@ impl LoadedPlan {
             );
         }
         check_chunks(&plan).with_context(|| format!("{}: edited by hand?", path.display()))?;
+        let parts_ok = plan.parts.iter().enumerate().all(|(i, p)| {
+            p.index == i as u32 && p.records[0] <= p.records[1] && p.bytes[0] <= p.bytes[1]
+        }) && plan
+            .parts
+            .windows(2)
+            .all(|w| w[0].records[1] == w[1].records[0]);
+        if !parts_ok || plan.parts.is_empty() == plan.ingest.is_none() {
+            bail!(
+                "{}: its parts are not consecutive face records in order, or it has both or neither of parts and the ingest pass's findings (edited by hand?)",
+                path.display()
+            );
+        }
         Ok(LoadedPlan {
             sha256: Sha256::digest(&bytes).into(),
             plan,
@@ -305,6 +352,11 @@ impl LoadedPlan {
     /// The level-`split_level` Morton code of leaf chunk code `m`.
     fn subtree_of(&self, m: u64) -> u64 {
         m >> (3 * self.plan.split_level)
+    }
+
+    /// The folder of the map outputs: beside the plan.
+    pub fn parts_dir(&self) -> &Path {
+        crate::files::output::output_dir(&self.path)
     }
 
     /// The name of shard `index`'s file: `shard-IIII.vlshard`.
@@ -340,6 +392,8 @@ impl LoadedPlan {
             channels: self.plan.channels.clone(),
             plan_path: self.path.clone(),
             content_xxh3: self.plan.input.content_xxh3.clone(),
+            parts: self.plan.parts.clone(),
+            plan_sha256_hex: voxlod_io::hex(&self.sha256),
             ingest: self.plan.ingest.clone(),
             chunks: self
                 .plan
@@ -406,10 +460,14 @@ pub struct ShardScope {
     pub channels: Vec<u32>,
     /// The plan file (named by errors).
     pub plan_path: PathBuf,
-    /// The plan's XXH3-64 of the input's bytes, hex.
-    pub content_xxh3: String,
-    /// What the plan's pass over the input found.
-    pub ingest: PlanIngest,
+    /// The plan's XXH3-64 of the input's bytes, hex (none for a plan with parts).
+    pub content_xxh3: Option<String>,
+    /// What the plan's pass over the input found (none for a plan with parts).
+    pub ingest: Option<PlanIngest>,
+    /// The map tasks' parts, whose outputs the shard reads instead of the input (if any).
+    pub parts: Vec<PlanPart>,
+    /// The plan's SHA-256, hex (what the map outputs record).
+    pub plan_sha256_hex: String,
     /// The shard's non-empty leaf chunks, `[Morton code, binned triangles]` in Morton order.
     pub chunks: Vec<[u64; 2]>,
 }
@@ -427,10 +485,15 @@ impl ShardScope {
 pub struct PlanSummary {
     /// The plan file written.
     pub plan: PathBuf,
-    /// Triangles read.
+    /// Triangles read (with parts: the face records, none of them read whole).
     pub triangles: u64,
-    /// Non-empty leaf chunks.
+    /// Non-empty leaf chunks (with parts: those the sample touched).
     pub chunks: u64,
+    /// Parts for map tasks (0: none; every shard reads the input).
+    pub parts: u32,
+    /// With parts: the face records the plan decoded for the per-chunk weights.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sampled_triangles: Option<u64>,
     /// Level of the subtree roots.
     pub split_level: u32,
     /// The shards.

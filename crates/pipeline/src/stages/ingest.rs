@@ -72,6 +72,11 @@ pub(crate) fn run(ctx: &mut BuildContext, resume: &Resume) -> Result<Ingested, S
     let spooled = !ctx.source.rereadable() && ctx.scope.shard().is_none();
     let t = Instant::now();
     if let Some(scope) = ctx.scope.shard() {
+        if !scope.parts.is_empty() {
+            let ingested = from_parts(ctx, scope, layout, resume)?;
+            ctx.stage_done(Stage::Ingest, t, false);
+            return Ok(ingested);
+        }
         // the bins of its own chunks, exactly; the tile stage checks them against the free space
         let bins: u64 = scope.chunks.iter().map(|c| c[1]).sum();
         let ingested = from_plan(ctx, scope, layout, bins * layout.bytes() as u64)?;
@@ -162,7 +167,10 @@ fn from_plan(
     layout: RecordLayout,
     temp_disk: u64,
 ) -> Result<Ingested, StageError> {
-    let p = &scope.ingest;
+    let p = scope
+        .ingest
+        .as_ref()
+        .expect("a plan without parts has the ingest pass's findings");
     let marker = IngestMarker {
         spooled: false,
         count: p.triangles,
@@ -199,6 +207,73 @@ fn from_plan(
         binned_during_ingest: false,
         temp_disk,
         temp_written: 0,
+    })
+}
+
+/// A sharded build's ingest stage when the plan has parts: the map outputs' counts and bounds,
+/// and the bins of the shard's chunks gathered from them (the tile stage takes them); the
+/// input is not read. Refuses map outputs that are missing or not this plan's, and a grid
+/// (fitted by the plan to the vertex list's bounds) that is not the triangles' grid.
+fn from_parts(
+    ctx: &mut BuildContext,
+    scope: &ShardScope,
+    layout: RecordLayout,
+    resume: &Resume,
+) -> Result<Ingested, StageError> {
+    use crate::shard::map_part;
+    let markers = map_part::load_markers(&scope.plan_path, &scope.plan_sha256_hex, &scope.parts)?;
+    let (triangles, degenerate, tb) = map_part::totals(&markers);
+    let plan = scope.plan_path.display();
+    let Some(tb) = tb else {
+        return Err(StageError::NoTriangles(ctx.input.to_path_buf()));
+    };
+    // the plan fitted the grid to the vertex list's bounds: the build's grid is the triangles'
+    let grid = Grid::fit(&tb, ctx.settings.resolution)
+        .with_context(|| format!("{plan}: fitting the grid to the map outputs' bounds"))?;
+    if grid != scope.grid {
+        return Err(anyhow::anyhow!(
+            "{}: some vertices are used by no triangle and lie outside the triangles' bounds, so the grid {plan} fitted to the vertex list is not the grid of a one-machine build: plan it without --parts",
+            ctx.input.display()
+        )
+        .into());
+    }
+    let warnings: Vec<String> = (degenerate > 0)
+        .then(|| {
+            format!(
+                "{}: {degenerate} degenerate (zero-area) triangles skipped",
+                ctx.input.display()
+            )
+        })
+        .into_iter()
+        .collect();
+    ctx.warnings.extend(warnings.iter().cloned());
+    let marker = IngestMarker {
+        spooled: false,
+        count: triangles,
+        min: tb.min,
+        max: tb.max,
+        triangles,
+        degenerate_skipped: degenerate,
+        warnings,
+    };
+    // a resumed shard has its bins (or more) in the work folder already
+    let bins = if resume.past_ingest() {
+        None
+    } else {
+        let path = ctx.work.file(WorkFile::Bins);
+        Some(map_part::gather(scope, &markers, &path, layout)?)
+    };
+    let written = bins.as_ref().map_or(0, Bins::bytes);
+    Ok(Ingested {
+        marker,
+        layout,
+        grid,
+        early_counts: None,
+        binned_during_ingest: bins.is_some(),
+        counted_during_ingest: bins.is_some(),
+        early_bins: bins,
+        temp_disk: written,
+        temp_written: written,
     })
 }
 

@@ -67,7 +67,8 @@ pub(crate) fn run(
     let writer = Writer::create_staged(ctx.output.staged(), spec, &channels)?;
     let mut octree = OctreeWriter::new(writer, grid.levels(), s.zstd_level, ctx.pool);
     let source = write_leaves(ctx, &mut octree, voxelized.marker.records, materials)?;
-    let manifest = manifest_fields(ctx, ingested);
+    let m = &ingested.marker;
+    let manifest = manifest_fields(ctx, &ingested.grid, m.triangles, m.degenerate_skipped);
     let (bytes, levels) = octree.finish(|levels| {
         let mut m = manifest;
         m["levels"] = serde_json::json!(levels);
@@ -287,9 +288,13 @@ fn split_leaf(
 }
 
 /// The manifest without its `levels` (known once the file is written).
-pub(crate) fn manifest_fields(ctx: &BuildContext, ingested: &Ingested) -> serde_json::Value {
+pub(crate) fn manifest_fields(
+    ctx: &BuildContext,
+    grid: &voxlod_geom::Grid,
+    triangles: u64,
+    degenerate_skipped: u64,
+) -> serde_json::Value {
     let s = ctx.settings;
-    let grid = &ingested.grid;
     let mut settings = serde_json::json!({
         "resolution": s.resolution,
         "mode": s.mode.to_string(),
@@ -304,12 +309,11 @@ pub(crate) fn manifest_fields(ctx: &BuildContext, ingested: &Ingested) -> serde_
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let m = &ingested.marker;
     let mut manifest = serde_json::json!({
         "tool": "voxlod",
         "tool_version": env!("CARGO_PKG_VERSION"),
-        "input": { "file": input_name, "format": ctx.source.info().format, "triangles": m.triangles,
-                   "degenerate_skipped": m.degenerate_skipped },
+        "input": { "file": input_name, "format": ctx.source.info().format, "triangles": triangles,
+                   "degenerate_skipped": degenerate_skipped },
         "settings": settings,
         "grid": {
             "origin": grid.origin,
