@@ -11,6 +11,7 @@
 
 mod cli;
 mod cluster;
+mod export_gltf;
 mod faults;
 mod gen;
 mod gen_blocks;
