@@ -26,6 +26,7 @@ mod python_reader;
 mod resume;
 mod shard;
 mod textures;
+mod tiles;
 mod tools;
 mod validation;
 mod view;

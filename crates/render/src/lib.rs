@@ -9,7 +9,7 @@
 //!   ([`robust_bounds`], so stray fragments do not shrink it) from a [`View`].
 //! - [`export_ply`] writes one level as a quad mesh (binary PLY with normals and colours);
 //!   [`export_glb_with`] the same quads as glTF 2.0 binary, [`node_glb`] one node's (a 3D
-//!   Tiles tile).
+//!   Tiles tile), [`export_tileset_with`] an OGC 3D Tiles 1.1 tileset of them.
 //! - [`view`] streams nodes by that same cut into a fixed GPU budget (least recently used
 //!   eviction, an upload limit per frame) and draws frames along a camera path (`voxlod view`),
 //!   or in a window with the `window` feature.
@@ -45,6 +45,7 @@ mod export;
 mod export_source;
 mod faces;
 mod glb;
+mod tileset;
 mod pass;
 mod picture;
 mod source_draw;
@@ -56,6 +57,7 @@ pub use error::RenderError;
 pub use export::{export_ply, export_ply_with, shading_normal, ExportSummary};
 pub use export_source::{export_source_ply, source_world_position, SourceExportSummary};
 pub use glb::{export_glb_with, node_glb, UpAxis, GLB_VERTEX_BYTES};
+pub use tileset::{export_tileset_with, tile_uri, TilesetSummary};
 pub use faces::{
     face_direction, material_color, node_faces, node_faces_by, unit_face_corners, ColorBy, Face,
 };

@@ -1,10 +1,12 @@
 //! `voxlod export FILE --level K -o out.ply`: one level as a quad mesh (binary PLY, normals
 //! and colours) for MeshLab or Blender, or `-o out.glb` the same quads as glTF 2.0 binary;
 //! `--source [--node 0 X Y Z]`: the source triangles stored beside the leaves (FORMAT.md
-//! 14.4); see `voxlod-render`. Every export is sized before it is written and refused when too
+//! 14.4); `--3d-tiles DIR`: an OGC 3D Tiles 1.1 tileset ([`tiles`]); see `voxlod-render`.
+//! Every export is sized before it is written and refused when too
 //! big ([`size_guard`]).
 
 mod size_guard;
+mod tiles;
 
 use std::path::{Path, PathBuf};
 
@@ -23,8 +25,16 @@ pub struct ExportArgs {
     #[arg(short, long, default_value_t = 0)]
     level: u32,
     /// Output file: `.glb` writes glTF 2.0 binary, any other name binary PLY.
-    #[arg(short, long)]
-    output: PathBuf,
+    #[arg(short, long, required_unless_present = "tiles")]
+    output: Option<PathBuf>,
+    /// Write an OGC 3D Tiles 1.1 tileset into this new folder instead: `tileset.json` and one
+    /// `.glb` per node of levels --level and coarser.
+    #[arg(long = "3d-tiles", id = "tiles", value_name = "DIR", conflicts_with_all = ["output", "source"])]
+    tiles: Option<PathBuf>,
+    /// With --3d-tiles: cut by geometric error instead of --level: the finest level written
+    /// is the coarsest whose voxel edge is at most E (world units).
+    #[arg(long, value_name = "E", requires = "tiles", conflicts_with = "level")]
+    error: Option<f64>,
     /// Export the source triangles stored beside the leaves (a file built with
     /// --source-geometry) instead of voxel quads.
     #[arg(long)]
@@ -65,7 +75,13 @@ fn output_kind(output: &Path) -> Result<OutputKind> {
 }
 
 /// `--source`: the stored source triangles of one leaf or of all of them.
-fn run_source(a: &ExportArgs, r: &Reader, guard: &OutputGuard, limit: &SizeLimit) -> Result<()> {
+fn run_source(
+    a: &ExportArgs,
+    output: &Path,
+    r: &Reader,
+    guard: &OutputGuard,
+    limit: &SizeLimit,
+) -> Result<()> {
     let nodes = match &a.node {
         Some(n) => {
             let (level, pos) = (n[0], [n[1], n[2], n[3]]);
@@ -91,7 +107,7 @@ fn run_source(a: &ExportArgs, r: &Reader, guard: &OutputGuard, limit: &SizeLimit
     let s = voxlod_render::export_source_ply(r, nodes.as_deref(), guard.staged(), &mut |s| {
         // source triangles exist at level 0 only: no coarser level to suggest
         limit
-            .check(&a.output.display().to_string(), s.bytes, 0, 1, &|_| 0)
+            .check(&output.display().to_string(), s.bytes, 0, 1, &|_| 0)
             .map_err(|e| voxlod_render::RenderError::Option(e.to_string()))?;
         eprintln!(
             "writing the source triangles of {} leaves of {}: {} triangles, {} to {}",
@@ -99,14 +115,14 @@ fn run_source(a: &ExportArgs, r: &Reader, guard: &OutputGuard, limit: &SizeLimit
             a.file.display(),
             s.triangles,
             format_size(s.bytes),
-            a.output.display()
+            output.display()
         );
         Ok(())
     })?;
     guard.commit()?;
     println!(
         "wrote {}: source triangles of {} leaves, {} triangles, {} vertices, {}",
-        a.output.display(),
+        output.display(),
         s.leaves,
         s.triangles,
         s.vertices,
@@ -116,18 +132,22 @@ fn run_source(a: &ExportArgs, r: &Reader, guard: &OutputGuard, limit: &SizeLimit
 }
 
 pub fn run(a: ExportArgs) -> Result<()> {
+    if let Some(dir) = &a.tiles {
+        return tiles::run(&a.file, dir, a.level, a.error, a.max_size, a.force);
+    }
+    let output = a.output.clone().expect("clap: -o or --3d-tiles");
     // the output is checked (not the input, not another kind of file) and locked first, and
     // written under a temporary name: an interrupted export leaves no partial file
     let kind = if a.source {
         OutputKind::Ply
     } else {
-        output_kind(&a.output)?
+        output_kind(&output)?
     };
-    let guard = OutputGuard::acquire(&a.output, &[&a.file], kind, a.force)?;
+    let guard = OutputGuard::acquire(&output, &[&a.file], kind, a.force)?;
     let r = Reader::open(&a.file)?;
-    let limit = SizeLimit::for_dir(a.max_size, &output_dir(&a.output));
+    let limit = SizeLimit::for_dir(a.max_size, &output_dir(&output));
     if a.source {
-        return run_source(&a, &r, &guard, &limit);
+        return run_source(&a, &output, &r, &guard, &limit);
     }
     // the size is known before anything is written: refused when too big (issue 31 §3), else
     // said first (a fine level of a big model is gigabytes), without a prompt, as
@@ -136,7 +156,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
         let estimate = size_guard::proportional(&r, a.level, s.bytes);
         limit
             .check(
-                &a.output.display().to_string(),
+                &output.display().to_string(),
                 s.bytes,
                 a.level,
                 r.spec().levels,
@@ -149,7 +169,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
             a.file.display(),
             s.quads,
             format_size(s.bytes),
-            a.output.display()
+            output.display()
         );
         Ok(())
     };
@@ -161,7 +181,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
     guard.commit()?;
     println!(
         "wrote {}: level {}, {} voxels, {} quads, {} vertices, {}",
-        a.output.display(),
+        output.display(),
         a.level,
         s.voxels,
         s.quads,
