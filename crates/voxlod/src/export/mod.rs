@@ -42,7 +42,8 @@ pub struct ExportArgs {
     /// With --source: only this leaf node (level 0 and its chunk position).
     #[arg(long, num_args = 4, value_names = ["L", "X", "Y", "Z"], requires = "source")]
     node: Option<Vec<u32>>,
-    /// Replace an existing output file even if it is not of the kind written.
+    /// Replace an existing output file even if it is not of the kind written; with
+    /// --3d-tiles, replace the tileset in DIR.
     #[arg(long)]
     force: bool,
     /// Write an export bigger than 4 GiB, up to SIZE (e.g. 20GiB); an export bigger than the
