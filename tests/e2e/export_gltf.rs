@@ -44,7 +44,10 @@ fn ply_triangles(path: &Path, unit: f64, names: &[String]) -> Vec<Tri> {
     let end = b.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
     let header = String::from_utf8_lossy(&b[..end]).to_string();
     let count = |el: &str| -> usize {
-        let l = header.lines().find(|l| l.starts_with(&format!("element {el} "))).unwrap();
+        let l = header
+            .lines()
+            .find(|l| l.starts_with(&format!("element {el} ")))
+            .unwrap();
         l.rsplit(' ').next().unwrap().parse().unwrap()
     };
     let (nv, nf) = (count("vertex"), count("face"));
@@ -54,8 +57,16 @@ fn ply_triangles(path: &Path, unit: f64, names: &[String]) -> Vec<Tri> {
     let verts: Vec<_> = b[end..end + nv * vb]
         .chunks_exact(vb)
         .map(|r| {
-            let m = if materials { u32::from_le_bytes(r[28..32].try_into().unwrap()) } else { 0 };
-            let name = names.get(m as usize).filter(|n| !n.is_empty()).cloned().unwrap_or_else(|| "voxel".into());
+            let m = if materials {
+                u32::from_le_bytes(r[28..32].try_into().unwrap())
+            } else {
+                0
+            };
+            let name = names
+                .get(m as usize)
+                .filter(|n| !n.is_empty())
+                .cloned()
+                .unwrap_or_else(|| "voxel".into());
             (
                 grid([f(r, 0) as f64, f(r, 1) as f64, f(r, 2) as f64], unit),
                 [f(r, 3), f(r, 4), f(r, 5)],
@@ -86,8 +97,14 @@ fn component(blob: &[u8], at: usize, ct: gltf::accessor::DataType, normalized: b
         D::U8 => (blob[at] as f64, 255.0),
         D::I16 => (i16::from_le_bytes([blob[at], blob[at + 1]]) as f64, 32767.0),
         D::U16 => (u16::from_le_bytes([blob[at], blob[at + 1]]) as f64, 65535.0),
-        D::U32 => (u32::from_le_bytes(blob[at..at + 4].try_into().unwrap()) as f64, 1.0),
-        D::F32 => (f32::from_le_bytes(blob[at..at + 4].try_into().unwrap()) as f64, 1.0),
+        D::U32 => (
+            u32::from_le_bytes(blob[at..at + 4].try_into().unwrap()) as f64,
+            1.0,
+        ),
+        D::F32 => (
+            f32::from_le_bytes(blob[at..at + 4].try_into().unwrap()) as f64,
+            1.0,
+        ),
         D::I8 => (blob[at] as i8 as f64, 127.0),
     };
     if normalized {
@@ -106,7 +123,14 @@ fn read_accessor(a: &gltf::Accessor, blob: &[u8]) -> Vec<Vec<f64>> {
     (0..a.count())
         .map(|i| {
             (0..a.dimensions().multiplicity())
-                .map(|c| component(blob, base + i * stride + c * size, a.data_type(), a.normalized()))
+                .map(|c| {
+                    component(
+                        blob,
+                        base + i * stride + c * size,
+                        a.data_type(),
+                        a.normalized(),
+                    )
+                })
                 .collect()
         })
         .collect()
@@ -148,7 +172,10 @@ fn glb_triangles(path: &Path, unit: f64) -> (Vec<Tri>, Vec<String>) {
             }
         }
     }
-    (tris, g.document.extensions_required().map(String::from).collect())
+    (
+        tris,
+        g.document.extensions_required().map(String::from).collect(),
+    )
 }
 
 /// The Khronos validator's report on `glb`, or None (skipped; a failure under CI) when node
@@ -156,7 +183,10 @@ fn glb_triangles(path: &Path, unit: f64) -> (Vec<Tri>, Vec<String>) {
 fn khronos_report(glb: &Path) -> Option<serde_json::Value> {
     let node = Path::new(super::REPO).join("tests/node");
     let installed = node.join("node_modules/gltf-validator").is_dir()
-        && Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
+        && Command::new("node")
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success());
     if !installed {
         assert!(
             !voxlod_testkit::under_ci(),
@@ -184,10 +214,19 @@ fn check_glb_against_ply(file: &Path, level: u32, dir: &Path) {
     let (ply, glb) = (dir.join("l.ply"), dir.join("l.glb"));
     let f = file.to_str().unwrap();
     let lv = level.to_string();
-    ok(&voxlod(&["export", f, "--level", &lv, "-o", ply.to_str().unwrap()], dir));
-    let said = ok(&voxlod(&["export", f, "--level", &lv, "-o", glb.to_str().unwrap()], dir));
+    ok(&voxlod(
+        &["export", f, "--level", &lv, "-o", ply.to_str().unwrap()],
+        dir,
+    ));
+    let said = ok(&voxlod(
+        &["export", f, "--level", &lv, "-o", glb.to_str().unwrap()],
+        dir,
+    ));
     let bytes = std::fs::metadata(&glb).unwrap().len();
-    assert!(said.contains(&voxlod_pipeline::format_size(bytes)), "{said}");
+    assert!(
+        said.contains(&voxlod_pipeline::format_size(bytes)),
+        "{said}"
+    );
 
     let mut want = ply_triangles(&ply, unit, &names);
     let (mut got, required) = glb_triangles(&glb, unit);
@@ -198,24 +237,38 @@ fn check_glb_against_ply(file: &Path, level: u32, dir: &Path) {
     got.sort_by(|a, b| a.0.cmp(&b.0));
     let differ = want.iter().zip(&got).filter(|(a, b)| a.0 != b.0).count();
     let first = want.iter().zip(&got).find(|(a, b)| a.0 != b.0);
-    assert_eq!(differ, 0, "{differ} of {} triangles differ, e.g. {first:?}", want.len());
+    assert_eq!(
+        differ,
+        0,
+        "{differ} of {} triangles differ, e.g. {first:?}",
+        want.len()
+    );
     // normals: the PLY's f32, the GLB's normalized i16 (within its quantization step)
     for (a, b) in want.iter().zip(&got) {
         for (na, nb) in a.1.iter().zip(&b.1) {
-            assert!(na.iter().zip(nb).all(|(x, y)| (x - y).abs() < 1e-4), "{na:?} vs {nb:?}");
+            assert!(
+                na.iter().zip(nb).all(|(x, y)| (x - y).abs() < 1e-4),
+                "{na:?} vs {nb:?}"
+            );
         }
     }
     if names.len() > 1 {
         let used: std::collections::BTreeSet<_> = got.iter().map(|t| t.0[0].2.clone()).collect();
         assert!(used.len() > 1, "materials {used:?}");
-        assert!(used.iter().all(|u| names.contains(u)), "{used:?} not in {names:?}");
+        assert!(
+            used.iter().all(|u| names.contains(u)),
+            "{used:?} not in {names:?}"
+        );
     }
 
     if let Some(report) = khronos_report(&glb) {
         let issues = &report["issues"];
         assert_eq!(issues["numErrors"], 0, "{issues}");
         assert_eq!(issues["numWarnings"], 0, "{issues}");
-        assert_eq!(report["info"]["extensionsRequired"], serde_json::json!(["KHR_mesh_quantization"]));
+        assert_eq!(
+            report["info"]["extensionsRequired"],
+            serde_json::json!(["KHR_mesh_quantization"])
+        );
     }
 }
 
@@ -232,17 +285,28 @@ fn glb_export_is_the_ply_export_and_valid_gltf() {
     check_glb_against_ply(&bunny, 1, d);
     // a real model with materials (per-face materials become glTF materials by name)
     let sib = d.join("sibenik.voxlod");
-    build_ok(&m.join("mcguire-sibenik/sibenik.obj"), &sib, &["-r", "256"], d);
+    build_ok(
+        &m.join("mcguire-sibenik/sibenik.obj"),
+        &sib,
+        &["-r", "256"],
+        d,
+    );
     check_glb_against_ply(&sib, 0, d);
 
     // .gltf is refused with what to write instead; an existing PLY is not replaced by a GLB
     let o = voxlod(&["export", "bunny.voxlod", "-o", "x.gltf"], d);
     assert!(!o.status.success());
     assert!(text(&o).contains("name it .glb"), "{}", text(&o));
-    let o = voxlod(&["export", "bunny.voxlod", "--level", "1", "-o", "l.glb"], d);
+    let o = voxlod(
+        &["export", "bunny.voxlod", "--level", "1", "-o", "l.glb"],
+        d,
+    );
     ok(&o);
     std::fs::copy(d.join("l.ply"), d.join("p.glb")).unwrap();
-    let o = voxlod(&["export", "bunny.voxlod", "--level", "1", "-o", "p.glb"], d);
+    let o = voxlod(
+        &["export", "bunny.voxlod", "--level", "1", "-o", "p.glb"],
+        d,
+    );
     assert!(!o.status.success());
     assert!(text(&o).contains("a PLY mesh"), "{}", text(&o));
 }
@@ -260,7 +324,10 @@ fn listing(dir: &Path) -> Vec<String> {
 /// A size as `format_size` prints it ("78.20 MiB") back in bytes, approximately.
 fn bytes_of(s: &str) -> f64 {
     let (n, u) = s.split_once(' ').unwrap();
-    let k = ["B", "KiB", "MiB", "GiB", "TiB"].iter().position(|x| *x == u).unwrap();
+    let k = ["B", "KiB", "MiB", "GiB", "TiB"]
+        .iter()
+        .position(|x| *x == u)
+        .unwrap();
     n.parse::<f64>().unwrap() * 1024f64.powi(k as i32)
 }
 
@@ -276,15 +343,33 @@ fn export_over_the_size_limit_is_refused_before_writing() {
     let before = listing(d);
     let mut sizes = BTreeMap::new();
     for out in ["big.ply", "big.glb"] {
-        let o = voxlod(&["export", "bunny.voxlod", "-o", out, "--max-size", "100MiB"], d);
+        let o = voxlod(
+            &["export", "bunny.voxlod", "-o", out, "--max-size", "100MiB"],
+            d,
+        );
         let t = text(&o);
         assert!(!o.status.success(), "{t}");
-        assert!(t.contains(&format!("{out}: the export of level 0 would write ")), "{t}");
-        assert!(t.contains("more than --max-size 100.00 MiB; nothing was written"), "{t}");
+        assert!(
+            t.contains(&format!("{out}: the export of level 0 would write ")),
+            "{t}"
+        );
+        assert!(
+            t.contains("more than --max-size 100.00 MiB; nothing was written"),
+            "{t}"
+        );
         // the bunny at 512³ has levels 0 and 1; level 1 is about a quarter of level 0
-        let hint = t.split("Level ").nth(1).unwrap_or_else(|| panic!("no level named: {t}"));
-        assert!(hint.starts_with("1 is the coarsest that fits (about "), "{t}");
-        assert!(t.contains("--level 1; or allow more with --max-size SIZE."), "{t}");
+        let hint = t
+            .split("Level ")
+            .nth(1)
+            .unwrap_or_else(|| panic!("no level named: {t}"));
+        assert!(
+            hint.starts_with("1 is the coarsest that fits (about "),
+            "{t}"
+        );
+        assert!(
+            t.contains("--level 1; or allow more with --max-size SIZE."),
+            "{t}"
+        );
         assert_eq!(listing(d), before, "nothing written, nothing staged");
         let size_of = |after: &str| {
             let s = t.split(after).nth(1).unwrap();
@@ -294,17 +379,44 @@ fn export_over_the_size_limit_is_refused_before_writing() {
     }
     // the level named fits and is written; its size is near the estimate the refusal gave
     for out in ["big.ply", "big.glb"] {
-        let o = voxlod(&["export", "bunny.voxlod", "--level", "1", "-o", out, "--max-size", "100MiB"], d);
+        let o = voxlod(
+            &[
+                "export",
+                "bunny.voxlod",
+                "--level",
+                "1",
+                "-o",
+                out,
+                "--max-size",
+                "100MiB",
+            ],
+            d,
+        );
         ok(&o);
         let real = std::fs::metadata(d.join(out)).unwrap().len() as f64;
         let est = bytes_of(&sizes[out].1);
-        assert!((est / real - 1.0).abs() < 0.15, "{out}: estimate {est} vs {real}");
+        assert!(
+            (est / real - 1.0).abs() < 0.15,
+            "{out}: estimate {est} vs {real}"
+        );
         assert!(real <= 100.0 * 1024.0 * 1024.0);
     }
     // the size refused is the size written: level 1 under a smaller limit, no coarser level
     for out in ["big.ply", "big.glb"] {
         let real = std::fs::metadata(d.join(out)).unwrap().len();
-        let o = voxlod(&["export", "bunny.voxlod", "--level", "1", "-o", out, "--max-size", "1MiB"], d);
+        let o = voxlod(
+            &[
+                "export",
+                "bunny.voxlod",
+                "--level",
+                "1",
+                "-o",
+                out,
+                "--max-size",
+                "1MiB",
+            ],
+            d,
+        );
         let t = text(&o);
         assert!(!o.status.success(), "{t}");
         let want = format!(
@@ -312,10 +424,24 @@ fn export_over_the_size_limit_is_refused_before_writing() {
             voxlod_pipeline::format_size(real)
         );
         assert!(t.contains(&want), "{t}");
-        assert_eq!(std::fs::metadata(d.join(out)).unwrap().len(), real, "the old file stays");
+        assert_eq!(
+            std::fs::metadata(d.join(out)).unwrap().len(),
+            real,
+            "the old file stays"
+        );
     }
     // sizes parse as elsewhere in the CLI
-    let o = voxlod(&["export", "bunny.voxlod", "-o", "x.ply", "--max-size", "lots"], d);
+    let o = voxlod(
+        &[
+            "export",
+            "bunny.voxlod",
+            "-o",
+            "x.ply",
+            "--max-size",
+            "lots",
+        ],
+        d,
+    );
     assert!(!o.status.success());
     assert!(text(&o).contains("--max-size"), "{}", text(&o));
 }

@@ -29,7 +29,10 @@ fn box_of(t: &Value) -> ([f64; 3], [f64; 3]) {
         .map(|v| v.as_f64().unwrap())
         .collect();
     assert_eq!(b.len(), 12);
-    assert!([4, 5, 6, 8, 9, 10].iter().all(|&i| b[i] == 0.0), "axis-aligned box {b:?}");
+    assert!(
+        [4, 5, 6, 8, 9, 10].iter().all(|&i| b[i] == 0.0),
+        "axis-aligned box {b:?}"
+    );
     let h = [b[3], b[7], b[11]];
     (
         std::array::from_fn(|a| b[a] - h[a]),
@@ -53,7 +56,10 @@ fn check_tile(r: &Reader, i: usize, t: &Value, min_level: u32, dir: &Path) -> us
     for v in &voxels {
         let lo = spec.voxel_min_corner(e.level, e.pos(), v.pos());
         let hi = lo.map(|c| c + edge);
-        assert!(inside((lo, hi), bx, edge * 1e-6), "voxel {lo:?} outside {bx:?}");
+        assert!(
+            inside((lo, hi), bx, edge * 1e-6),
+            "voxel {lo:?} outside {bx:?}"
+        );
         faces += v.mask().count_ones() as u64;
     }
     if faces > 0 {
@@ -70,7 +76,10 @@ fn check_tile(r: &Reader, i: usize, t: &Value, min_level: u32, dir: &Path) -> us
         // glTF is y-up: the node is turned −90° about x for the consumer's y-up to z-up turn
         let n = g.nodes().find(|n| n.mesh().is_some()).unwrap();
         let (_, rot, _) = n.transform().decomposed();
-        assert!((rot[0] + std::f32::consts::FRAC_1_SQRT_2).abs() < 1e-6 && rot[3] > 0.7, "{rot:?}");
+        assert!(
+            (rot[0] + std::f32::consts::FRAC_1_SQRT_2).abs() < 1e-6 && rot[3] > 0.7,
+            "{rot:?}"
+        );
     } else {
         assert!(t.get("content").is_none());
     }
@@ -79,13 +88,20 @@ fn check_tile(r: &Reader, i: usize, t: &Value, min_level: u32, dir: &Path) -> us
     } else {
         Vec::new()
     };
-    let kids = t.get("children").and_then(Value::as_array).cloned().unwrap_or_default();
+    let kids = t
+        .get("children")
+        .and_then(Value::as_array)
+        .cloned()
+        .unwrap_or_default();
     assert_eq!(kids.len(), want.len(), "children of {:?}", e.pos());
     let error = t["geometricError"].as_f64().unwrap();
     assert_eq!(error, if want.is_empty() { 0.0 } else { edge });
     let mut n = 1;
     for (c, k) in want.iter().zip(&kids) {
-        assert!(inside(box_of(k), bx, edge * 1e-6), "child box outside its parent's");
+        assert!(
+            inside(box_of(k), bx, edge * 1e-6),
+            "child box outside its parent's"
+        );
         n += check_tile(r, *c, k, min_level, dir);
     }
     n
@@ -95,9 +111,14 @@ fn check_tile(r: &Reader, i: usize, t: &Value, min_level: u32, dir: &Path) -> us
 fn browser_tools() -> bool {
     let node = Path::new(REPO).join("tests/node/node_modules");
     let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
-    let there = ["three", "3d-tiles-renderer", "puppeteer-core", "gltf-validator"]
-        .iter()
-        .all(|p| node.join(p).is_dir())
+    let there = [
+        "three",
+        "3d-tiles-renderer",
+        "puppeteer-core",
+        "gltf-validator",
+    ]
+    .iter()
+    .all(|p| node.join(p).is_dir())
         && Path::new(&chromium).is_file();
     if !there {
         assert!(
@@ -133,15 +154,25 @@ fn tileset_matches_the_octree_and_opens_in_three_js() {
     assert_eq!(r.spec().levels, 2);
 
     // the whole tree (levels 0 and 1)
-    let said = ok(&voxlod(&["export", "bunny.voxlod", "--3d-tiles", "tiles"], d));
+    let said = ok(&voxlod(
+        &["export", "bunny.voxlod", "--3d-tiles", "tiles"],
+        d,
+    ));
     let tiles = d.join("tiles");
-    let ts: Value = serde_json::from_slice(&std::fs::read(tiles.join("tileset.json")).unwrap()).unwrap();
+    let ts: Value =
+        serde_json::from_slice(&std::fs::read(tiles.join("tileset.json")).unwrap()).unwrap();
     assert_eq!(ts["asset"]["version"], "1.1");
     assert_eq!(ts["root"]["refine"], "REPLACE");
     let n = check_tile(&r, r.root().unwrap(), &ts["root"], 0, &tiles);
     assert_eq!(n, r.nodes().len());
-    let bytes: u64 = walk(&tiles).iter().map(|p| std::fs::metadata(p).unwrap().len()).sum();
-    assert!(said.contains(&voxlod_pipeline::format_size(bytes)), "{said}");
+    let bytes: u64 = walk(&tiles)
+        .iter()
+        .map(|p| std::fs::metadata(p).unwrap().len())
+        .sum();
+    assert!(
+        said.contains(&voxlod_pipeline::format_size(bytes)),
+        "{said}"
+    );
     if browser_tools() {
         let report = Command::new("node")
             .arg(Path::new(REPO).join("tests/node/validate-gltf.js"))
@@ -155,24 +186,76 @@ fn tileset_matches_the_octree_and_opens_in_three_js() {
 
     // --error: the coarsest level whose voxel edge is at most E
     let e1 = r.spec().voxel_size_at(1).to_string();
-    ok(&voxlod(&["export", "bunny.voxlod", "--3d-tiles", "coarse", "--error", &e1], d));
-    let ts1: Value = serde_json::from_slice(&std::fs::read(d.join("coarse/tileset.json")).unwrap()).unwrap();
-    assert_eq!(check_tile(&r, r.root().unwrap(), &ts1["root"], 1, &d.join("coarse")), 1);
+    ok(&voxlod(
+        &[
+            "export",
+            "bunny.voxlod",
+            "--3d-tiles",
+            "coarse",
+            "--error",
+            &e1,
+        ],
+        d,
+    ));
+    let ts1: Value =
+        serde_json::from_slice(&std::fs::read(d.join("coarse/tileset.json")).unwrap()).unwrap();
+    assert_eq!(
+        check_tile(&r, r.root().unwrap(), &ts1["root"], 1, &d.join("coarse")),
+        1
+    );
 
     // folder rules: a tileset is not replaced without --force; a non-empty other folder never
-    let o = voxlod(&["export", "bunny.voxlod", "--3d-tiles", "coarse", "--level", "1"], d);
+    let o = voxlod(
+        &[
+            "export",
+            "bunny.voxlod",
+            "--3d-tiles",
+            "coarse",
+            "--level",
+            "1",
+        ],
+        d,
+    );
     assert!(!o.status.success());
-    assert!(text(&o).contains("holds a tileset already; --force replaces it"), "{}", text(&o));
-    ok(&voxlod(&["export", "bunny.voxlod", "--3d-tiles", "coarse", "--level", "1", "--force"], d));
+    assert!(
+        text(&o).contains("holds a tileset already; --force replaces it"),
+        "{}",
+        text(&o)
+    );
+    ok(&voxlod(
+        &[
+            "export",
+            "bunny.voxlod",
+            "--3d-tiles",
+            "coarse",
+            "--level",
+            "1",
+            "--force",
+        ],
+        d,
+    ));
     std::fs::create_dir(d.join("notes")).unwrap();
     std::fs::write(d.join("notes/a.txt"), "keep").unwrap();
-    let o = voxlod(&["export", "bunny.voxlod", "--3d-tiles", "notes", "--force"], d);
+    let o = voxlod(
+        &["export", "bunny.voxlod", "--3d-tiles", "notes", "--force"],
+        d,
+    );
     assert!(!o.status.success());
     assert!(text(&o).contains("holds no tileset"), "{}", text(&o));
 
     // the size guard: refused before a byte is written, naming the level that fits
     let before = listing(d);
-    let o = voxlod(&["export", "bunny.voxlod", "--3d-tiles", "big", "--max-size", "100MiB"], d);
+    let o = voxlod(
+        &[
+            "export",
+            "bunny.voxlod",
+            "--3d-tiles",
+            "big",
+            "--max-size",
+            "100MiB",
+        ],
+        d,
+    );
     let t = text(&o);
     assert!(!o.status.success(), "{t}");
     assert!(t.contains("big: the export of level 0 would write "), "{t}");
@@ -214,7 +297,11 @@ fn tileset_matches_the_octree_and_opens_in_three_js() {
     let result: Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(result["errors"], serde_json::json!([]), "{result}");
     // at this size the root's voxels are about a pixel: the root alone is drawn
-    assert_eq!(result["loaded"], serde_json::json!(["1/0-0-0.glb"]), "{result}");
+    assert_eq!(
+        result["loaded"],
+        serde_json::json!(["1/0-0-0.glb"]),
+        "{result}"
+    );
     let a = ours.coverage();
     let (b, bw, bh) = silhouette(&shot_png, [255, 0, 255]);
     assert_eq!((a.len(), bw, bh), ((w * h) as usize, w, h));
@@ -222,7 +309,10 @@ fn tileset_matches_the_octree_and_opens_in_three_js() {
     let union = a.iter().zip(&b).filter(|(x, y)| **x || **y).count();
     let iou = inter as f64 / union as f64;
     eprintln!("silhouette IoU three.js vs voxlod render: {iou:.4} ({inter} / {union} pixels)");
-    assert!(union > (w * h / 20) as usize, "the model covers too little of the picture");
+    assert!(
+        union > (w * h / 20) as usize,
+        "the model covers too little of the picture"
+    );
     assert!(iou >= 0.97, "silhouette IoU {iou:.4}");
 }
 

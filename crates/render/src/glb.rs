@@ -220,7 +220,12 @@ impl Document {
         i
     }
 
-    fn view(&mut self, len: u64, stride: Option<usize>, target: json::buffer::Target) -> json::Index<json::buffer::View> {
+    fn view(
+        &mut self,
+        len: u64,
+        stride: Option<usize>,
+        target: json::buffer::Target,
+    ) -> json::Index<json::buffer::View> {
         let v = json::buffer::View {
             buffer: json::Index::new(0),
             byte_length: USize64(len),
@@ -282,7 +287,11 @@ impl Document {
         let mut primitives = Vec::new();
         for s in shapes {
             let v = 4 * s.quads;
-            let verts = self.view(s.vertex_bytes(), Some(GLB_VERTEX_BYTES as usize), Target::ArrayBuffer);
+            let verts = self.view(
+                s.vertex_bytes(),
+                Some(GLB_VERTEX_BYTES as usize),
+                Target::ArrayBuffer,
+            );
             let idx = self.view(s.index_bytes(), None, Target::ElementArrayBuffer);
             let pos = self.accessor(verts, 0, v, C::U16, T::Vec3, false, Some((s.min, s.max)));
             let nrm = self.accessor(verts, 8, v, C::I16, T::Vec3, true, None);
@@ -314,7 +323,12 @@ impl Document {
             UpAxis::AsIs => (corner, None),
             UpAxis::ZUp => (
                 [corner[0], corner[2], -corner[1]],
-                Some(json::scene::UnitQuaternion([-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2])),
+                Some(json::scene::UnitQuaternion([
+                    -std::f32::consts::FRAC_1_SQRT_2,
+                    0.0,
+                    0.0,
+                    std::f32::consts::FRAC_1_SQRT_2,
+                ])),
             ),
         };
         Some(self.root.push(json::Node {
@@ -393,7 +407,11 @@ fn node_name(reader: &Reader, index: usize) -> String {
 }
 
 /// Node `index` alone as a GLB in memory (a 3D Tiles tile's content), with its counts.
-pub fn node_glb(reader: &Reader, index: usize, up: UpAxis) -> Result<(Vec<u8>, ExportSummary), RenderError> {
+pub fn node_glb(
+    reader: &Reader,
+    index: usize,
+    up: UpAxis,
+) -> Result<(Vec<u8>, ExportSummary), RenderError> {
     let mut buf = Vec::new();
     let (voxels, prims) = node_primitives(reader, index, &mut buf)?;
     let shapes: Vec<PrimitiveShape> = prims.iter().map(Primitive::shape).collect();
@@ -467,7 +485,10 @@ pub fn export_glb_with(
         let (_, prims) = node_primitives(reader, i, &mut buf)?;
         let again: Vec<PrimitiveShape> = prims.iter().map(Primitive::shape).collect();
         if again.len() != shapes.len()
-            || again.iter().zip(shapes).any(|(a, b)| a.quads != b.quads || a.material != b.material)
+            || again
+                .iter()
+                .zip(shapes)
+                .any(|(a, b)| a.quads != b.quads || a.material != b.material)
         {
             return Err(RenderError::Option(
                 "the file changed between the two passes of the export".into(),
@@ -482,4 +503,152 @@ pub fn export_glb_with(
     debug_assert_eq!(written, bin);
     w.flush().map_err(io("writing"))?;
     Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use voxlod_format::voxel::{pack_color, pack_normal, Voxel};
+    use voxlod_format::{encode_node, FileSpec, Writer, MODE_THIN};
+
+    /// A one-node file: voxel (4, 5, 6) with faces +z and −x, origin (10, 20, 30), edge 0.5.
+    fn one_voxel(dir: &Path) -> Reader {
+        let path = dir.join("one.voxlod");
+        let n = pack_normal([0.0, 0.0, 1.0]);
+        let v = Voxel::new([4, 5, 6], 0b01_0010, n, pack_color([200, 100, 50, 255]));
+        let mut w = Writer::create(
+            &path,
+            FileSpec::new(256, MODE_THIN, [10.0, 20.0, 30.0], 0.5),
+        )
+        .unwrap();
+        w.write_node(0, [0, 0, 0], 0, &encode_node(&[v], 3).unwrap())
+            .unwrap();
+        w.finish(&serde_json::json!({})).unwrap();
+        Reader::open(&path).unwrap()
+    }
+
+    /// The GLB's JSON and binary chunk, checking the container's lengths.
+    fn chunks(glb: &[u8]) -> (serde_json::Value, &[u8]) {
+        let u = |at: usize| u32::from_le_bytes(glb[at..at + 4].try_into().unwrap()) as usize;
+        assert_eq!(&glb[0..4], b"glTF");
+        assert_eq!(u(4), 2);
+        assert_eq!(u(8), glb.len());
+        let jl = u(12);
+        assert_eq!(&glb[16..20], b"JSON");
+        assert_eq!(jl % 4, 0);
+        let bl = u(20 + jl);
+        assert_eq!(&glb[24 + jl..28 + jl], b"BIN\0");
+        assert_eq!(28 + jl + bl, glb.len());
+        (
+            serde_json::from_slice(&glb[20..20 + jl]).unwrap(),
+            &glb[28 + jl..],
+        )
+    }
+
+    /// World corners of the quads in the GLB (node transform applied; for `ZUp` also the
+    /// consumer's y-up to z-up turn, (x, y, z) → (x, −z, y)), in index order.
+    fn corners(glb: &[u8], up: UpAxis) -> Vec<[f64; 3]> {
+        let (j, bin) = chunks(glb);
+        let node = &j["nodes"][0];
+        let f = |v: &serde_json::Value| -> Vec<f64> {
+            v.as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect()
+        };
+        let (t, s) = (f(&node["translation"]), f(&node["scale"]));
+        let q = node.get("rotation").map_or(vec![0.0, 0.0, 0.0, 1.0], f);
+        let prim = &j["meshes"][0]["primitives"][0];
+        let acc = &j["accessors"][prim["attributes"]["POSITION"].as_u64().unwrap() as usize];
+        let view = &j["bufferViews"][acc["bufferView"].as_u64().unwrap() as usize];
+        let (off, stride) = (
+            view["byteOffset"].as_u64().unwrap() as usize,
+            view["byteStride"].as_u64().unwrap() as usize,
+        );
+        let ia = &j["accessors"][prim["indices"].as_u64().unwrap() as usize];
+        assert_eq!(
+            ia["componentType"], 5123,
+            "u16 indices for a small primitive"
+        );
+        let iv = &j["bufferViews"][ia["bufferView"].as_u64().unwrap() as usize];
+        let ioff = iv["byteOffset"].as_u64().unwrap() as usize;
+        (0..ia["count"].as_u64().unwrap() as usize)
+            .map(|k| {
+                let i = u16::from_le_bytes([bin[ioff + 2 * k], bin[ioff + 2 * k + 1]]) as usize;
+                let g: [f64; 3] = std::array::from_fn(|a| {
+                    let at = off + i * stride + 2 * a;
+                    u16::from_le_bytes([bin[at], bin[at + 1]]) as f64 * s[a]
+                });
+                // rotate g by the unit quaternion q = (x, y, z, w): g + 2w(v×g) + 2v×(v×g)
+                let v = [q[0], q[1], q[2]];
+                let cross = |a: [f64; 3], b: [f64; 3]| {
+                    [
+                        a[1] * b[2] - a[2] * b[1],
+                        a[2] * b[0] - a[0] * b[2],
+                        a[0] * b[1] - a[1] * b[0],
+                    ]
+                };
+                let c1 = cross(v, g);
+                let c2 = cross(v, c1);
+                let p: [f64; 3] =
+                    std::array::from_fn(|a| g[a] + 2.0 * q[3] * c1[a] + 2.0 * c2[a] + t[a]);
+                match up {
+                    UpAxis::AsIs => p,
+                    UpAxis::ZUp => [p[0], -p[2], p[1]],
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn one_voxel_two_faces_in_world_coordinates_either_way_up() {
+        let dir = tempfile::tempdir().unwrap();
+        let r = one_voxel(dir.path());
+        // the +z face: z = 30 + 0.5·7, x in 12..12.5, y in 22.5..23; the −x face: x = 12
+        for up in [UpAxis::AsIs, UpAxis::ZUp] {
+            let (glb, s) = node_glb(&r, 0, up).unwrap();
+            assert_eq!(
+                (s.voxels, s.quads, s.vertices, s.bytes),
+                (1, 2, 8, glb.len() as u64)
+            );
+            let c = corners(&glb, up);
+            assert_eq!(c.len(), 12);
+            let close = |a: f64, b: f64| (a - b).abs() < 1e-5;
+            let within = |x: f64, lo: f64, hi: f64| x > lo - 1e-5 && x < hi + 1e-5;
+            let tris: Vec<&[[f64; 3]]> = c.chunks(3).collect();
+            for t in &tris {
+                // counter-clockwise seen from outside: the right-hand normal is the face's
+                let e1: [f64; 3] = std::array::from_fn(|a| t[1][a] - t[0][a]);
+                let e2: [f64; 3] = std::array::from_fn(|a| t[2][a] - t[0][a]);
+                let n = [
+                    e1[1] * e2[2] - e1[2] * e2[1],
+                    e1[2] * e2[0] - e1[0] * e2[2],
+                    e1[0] * e2[1] - e1[1] * e2[0],
+                ];
+                if t.iter().all(|p| close(p[2], 33.5)) {
+                    assert!(
+                        n[2] > 0.0
+                            && t.iter()
+                                .all(|p| within(p[0], 12.0, 12.5) && within(p[1], 22.5, 23.0)),
+                        "{t:?}"
+                    );
+                } else {
+                    assert!(t.iter().all(|p| close(p[0], 12.0)), "{up:?}: {t:?}");
+                    assert!(
+                        n[0] < 0.0
+                            && t.iter()
+                                .all(|p| within(p[1], 22.5, 23.0) && within(p[2], 33.0, 33.5)),
+                        "{t:?}"
+                    );
+                }
+            }
+            assert_eq!(
+                tris.iter()
+                    .filter(|t| t.iter().all(|p| close(p[2], 33.5)))
+                    .count(),
+                2
+            );
+        }
+    }
 }

@@ -56,8 +56,16 @@ pub fn tile_uri(reader: &Reader, index: usize) -> String {
 fn node_box(reader: &Reader, index: usize) -> ([f64; 3], [f64; 3]) {
     let e = reader.nodes()[index];
     let spec = reader.spec();
-    let lo = spec.voxel_min_corner(e.level, e.pos(), [e.bounds_min[0], e.bounds_min[1], e.bounds_min[2]]);
-    let hi = spec.voxel_min_corner(e.level, e.pos(), [e.bounds_max[0], e.bounds_max[1], e.bounds_max[2]]);
+    let lo = spec.voxel_min_corner(
+        e.level,
+        e.pos(),
+        [e.bounds_min[0], e.bounds_min[1], e.bounds_min[2]],
+    );
+    let hi = spec.voxel_min_corner(
+        e.level,
+        e.pos(),
+        [e.bounds_max[0], e.bounds_max[1], e.bounds_max[2]],
+    );
     let edge = spec.voxel_size_at(e.level);
     (lo, hi.map(|c| c + edge))
 }

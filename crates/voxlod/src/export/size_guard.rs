@@ -122,7 +122,10 @@ mod tests {
             .unwrap_err()
             .to_string();
         // 5000, 1250, 312: level 2 is the first under 1000
-        assert!(e.contains("Level 2 is the coarsest that fits (about 312 B): --level 2"), "{e}");
+        assert!(
+            e.contains("Level 2 is the coarsest that fits (about 312 B): --level 2"),
+            "{e}"
+        );
         assert!(e.contains("more than --max-size 1000 B"), "{e}");
         assert!(e.contains("would write 4.88 KiB"), "{e}");
         assert!(e.contains("out.ply"), "{e}");

@@ -67,7 +67,9 @@ pub fn run(
     let exists = check_target(dir, force)?;
     let r = Reader::open(file)?;
     let level = match error {
-        Some(e) if !(e.is_finite() && e > 0.0) => bail!("--error {e}: give a positive size in world units"),
+        Some(e) if !(e.is_finite() && e > 0.0) => {
+            bail!("--error {e}: give a positive size in world units")
+        }
         Some(e) => level_for_error(&r, e),
         None => level,
     };
@@ -76,7 +78,11 @@ pub fn run(
         _ => PathBuf::from("."),
     };
     if !parent.is_dir() {
-        bail!("{}: the folder {} does not exist", dir.display(), parent.display());
+        bail!(
+            "{}: the folder {} does not exist",
+            dir.display(),
+            parent.display()
+        );
     }
     let name = dir
         .file_name()
@@ -92,10 +98,20 @@ pub fn run(
         let per_voxel = s.bytes as f64 / cut_voxels(level).max(1) as f64;
         let estimate = |l: u32| (cut_voxels(l) as f64 * per_voxel).ceil() as u64;
         limit
-            .check(&dir.display().to_string(), s.bytes, level, r.spec().levels, &estimate)
+            .check(
+                &dir.display().to_string(),
+                s.bytes,
+                level,
+                r.spec().levels,
+                &estimate,
+            )
             .map_err(|e| voxlod_render::RenderError::Option(e.to_string()))?;
-        std::fs::create_dir(&stage_path)
-            .map_err(|e| voxlod_render::RenderError::Option(format!("{}: cannot create: {e}", stage_path.display())))?;
+        std::fs::create_dir(&stage_path).map_err(|e| {
+            voxlod_render::RenderError::Option(format!(
+                "{}: cannot create: {e}",
+                stage_path.display()
+            ))
+        })?;
         stage.0 = Some(stage_path.clone());
         eprintln!(
             "writing a 3D Tiles tileset of levels {level}..={} of {}: {} tiles, {} quads, {} to {}",
@@ -111,12 +127,15 @@ pub fn run(
     // into place: an earlier tileset is moved aside first and removed after
     let old = parent.join(format!(".voxlod-tiles-old-{name}-{}", std::process::id()));
     if exists {
-        std::fs::rename(dir, &old).with_context(|| format!("{}: cannot move aside", dir.display()))?;
+        std::fs::rename(dir, &old)
+            .with_context(|| format!("{}: cannot move aside", dir.display()))?;
     }
-    std::fs::rename(&stage_path, dir).with_context(|| format!("{}: cannot rename into place", dir.display()))?;
+    std::fs::rename(&stage_path, dir)
+        .with_context(|| format!("{}: cannot rename into place", dir.display()))?;
     stage.0 = None;
     if exists {
-        std::fs::remove_dir_all(&old).with_context(|| format!("{}: cannot remove", old.display()))?;
+        std::fs::remove_dir_all(&old)
+            .with_context(|| format!("{}: cannot remove", old.display()))?;
     }
     println!(
         "wrote {}: 3D Tiles 1.1, levels {level}..={}, {} tiles ({} with content), {} quads, {}",
