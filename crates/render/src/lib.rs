@@ -45,10 +45,10 @@ mod export;
 mod export_source;
 mod faces;
 mod glb;
-mod tileset;
 mod pass;
 mod picture;
 mod source_draw;
+mod tileset;
 pub mod view;
 
 pub use camera::{model_bounds, robust_bounds, up_from_shape, Shot, View};
@@ -56,12 +56,12 @@ pub use draw::{Renderer, BACKGROUND};
 pub use error::RenderError;
 pub use export::{export_ply, export_ply_with, shading_normal, ExportSummary};
 pub use export_source::{export_source_ply, source_world_position, SourceExportSummary};
-pub use glb::{export_glb_with, node_glb, UpAxis, GLB_VERTEX_BYTES};
-pub use tileset::{export_tileset_with, tile_uri, TilesetSummary};
 pub use faces::{
     face_direction, material_color, node_faces, node_faces_by, unit_face_corners, ColorBy, Face,
 };
+pub use glb::{export_glb_with, node_glb, UpAxis, GLB_VERTEX_BYTES};
 pub use picture::Picture;
+pub use tileset::{export_tileset_with, tile_uri, TilesetSummary};
 
 use voxlod_format::Reader;
 
