@@ -406,33 +406,65 @@ fn node_name(reader: &Reader, index: usize) -> String {
     format!("node {} {} {} {}", e.level, e.x, e.y, e.z)
 }
 
-/// Node `index` alone as a GLB in memory (a 3D Tiles tile's content), with its counts.
+/// Node `index` alone as a GLB (a 3D Tiles tile's content), built but not yet written: the
+/// header and JSON chunk, and the binary chunk's parts, so that it streams to a file without a
+/// second copy.
+pub struct NodeGlb {
+    head: Vec<u8>,
+    prims: Vec<Primitive>,
+    shapes: Vec<PrimitiveShape>,
+    /// Its counts; `bytes` is the GLB's size.
+    pub summary: ExportSummary,
+}
+
+impl NodeGlb {
+    /// Builds node `index`'s GLB.
+    pub fn new(reader: &Reader, index: usize, up: UpAxis) -> Result<NodeGlb, RenderError> {
+        let mut buf = Vec::new();
+        let (voxels, prims) = node_primitives(reader, index, &mut buf)?;
+        let shapes: Vec<PrimitiveShape> = prims.iter().map(Primitive::shape).collect();
+        let mut doc = Document::new(reader);
+        let (corner, edge) = node_corner(reader, index);
+        let node = doc.add_node(node_name(reader, index), &shapes, corner, edge, up);
+        let bin = doc.bin;
+        let head = glb_head(&doc.finish(node.into_iter().collect())?, bin)?;
+        let quads = shapes.iter().map(|s| s.quads).sum::<u64>();
+        let summary = ExportSummary {
+            voxels,
+            quads,
+            vertices: 4 * quads,
+            bytes: head.len() as u64 + bin,
+        };
+        Ok(NodeGlb {
+            head,
+            prims,
+            shapes,
+            summary,
+        })
+    }
+
+    /// Writes the GLB to `w`.
+    pub fn write_to(&self, w: &mut impl Write) -> std::io::Result<()> {
+        w.write_all(&self.head)?;
+        for (p, s) in self.prims.iter().zip(&self.shapes) {
+            w.write_all(&p.vertices)?;
+            write_indices(w, s)?;
+        }
+        Ok(())
+    }
+}
+
+/// Node `index` alone as a GLB in memory, with its counts.
 pub fn node_glb(
     reader: &Reader,
     index: usize,
     up: UpAxis,
 ) -> Result<(Vec<u8>, ExportSummary), RenderError> {
-    let mut buf = Vec::new();
-    let (voxels, prims) = node_primitives(reader, index, &mut buf)?;
-    let shapes: Vec<PrimitiveShape> = prims.iter().map(Primitive::shape).collect();
-    let mut doc = Document::new(reader);
-    let (corner, edge) = node_corner(reader, index);
-    let node = doc.add_node(node_name(reader, index), &shapes, corner, edge, up);
-    let bin = doc.bin;
-    let head = glb_head(&doc.finish(node.into_iter().collect())?, bin)?;
-    let mut out = head;
-    for (p, s) in prims.iter().zip(&shapes) {
-        out.extend_from_slice(&p.vertices);
-        write_indices(&mut out, s).expect("writing to memory");
-    }
-    let quads = shapes.iter().map(|s| s.quads).sum::<u64>();
-    let summary = ExportSummary {
-        voxels,
-        quads,
-        vertices: 4 * quads,
-        bytes: out.len() as u64,
-    };
-    Ok((out, summary))
+    let g = NodeGlb::new(reader, index, up)?;
+    let mut out = Vec::with_capacity(g.summary.bytes as usize);
+    g.write_to(&mut out).expect("writing to memory");
+    debug_assert_eq!(out.len() as u64, g.summary.bytes);
+    Ok((out, g.summary))
 }
 
 /// Writes the voxels of `level` as a GLB at `path` (one glTF node per octree node under one

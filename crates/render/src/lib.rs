@@ -59,7 +59,7 @@ pub use export_source::{export_source_ply, source_world_position, SourceExportSu
 pub use faces::{
     face_direction, material_color, node_faces, node_faces_by, unit_face_corners, ColorBy, Face,
 };
-pub use glb::{export_glb_with, node_glb, UpAxis, GLB_VERTEX_BYTES};
+pub use glb::{export_glb_with, node_glb, NodeGlb, UpAxis, GLB_VERTEX_BYTES};
 pub use picture::Picture;
 pub use tileset::{export_tileset_with, tile_uri, TilesetSummary};
 

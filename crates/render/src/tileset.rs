@@ -1,6 +1,6 @@
 //! Export of the octree as an OGC 3D Tiles 1.1 tileset (OGC 22-025r4, "3D Tiles
 //! Specification 1.1"): `tileset.json`, an **explicit** tile tree that is the file's node tree,
-//! and one glTF binary per node ([`node_glb`]: the node's face-culled cubes with normals,
+//! and one glTF binary per node ([`NodeGlb`]: the node's face-culled cubes with normals,
 //! colours and materials, quantized on the node's grid).
 //!
 //! - Explicit rather than implicit tiling: the octree is sparse and its node index already
@@ -23,12 +23,13 @@
 //! Streamed: pass 1 sizes every tile (the exact bytes of each GLB) and lays out
 //! `tileset.json`; pass 2 writes the tiles in file order, one node in memory at a time.
 
+use std::io::Write;
 use std::path::Path;
 
 use serde_json::{json, Value};
 use voxlod_format::Reader;
 
-use crate::glb::{node_glb, UpAxis};
+use crate::glb::{NodeGlb, UpAxis};
 use crate::RenderError;
 
 /// What a tileset export writes.
@@ -136,13 +137,13 @@ pub fn export_tileset_with(
     let mut quads = vec![0u64; reader.nodes().len()];
     let mut s = TilesetSummary::default();
     for &i in &in_cut {
-        let (bytes, g) = node_glb(reader, i, UpAxis::ZUp)?;
+        let g = NodeGlb::new(reader, i, UpAxis::ZUp)?.summary;
         quads[i] = g.quads;
         s.tiles += 1;
         if g.quads > 0 {
             s.contents += 1;
             s.quads += g.quads;
-            s.bytes += bytes.len() as u64;
+            s.bytes += g.bytes;
         }
     }
     let (mut root_tile, _) = tile(reader, root, min_level, &quads);
@@ -165,18 +166,22 @@ pub fn export_tileset_with(
     }
     let mut written = 0u64;
     for &i in &in_cut {
-        let (bytes, g) = node_glb(reader, i, UpAxis::ZUp)?;
-        if g.quads != quads[i] {
+        let g = NodeGlb::new(reader, i, UpAxis::ZUp)?;
+        if g.summary.quads != quads[i] {
             return Err(RenderError::Option(
                 "the file changed between the two passes of the export".into(),
             ));
         }
-        if g.quads == 0 {
+        if g.summary.quads == 0 {
             continue;
         }
         let p = dir.join(tile_uri(reader, i));
-        std::fs::write(&p, &bytes).map_err(RenderError::io("writing", &p))?;
-        written += bytes.len() as u64;
+        let f = std::fs::File::create(&p).map_err(RenderError::io("creating", &p))?;
+        let mut w = std::io::BufWriter::with_capacity(1 << 20, f);
+        g.write_to(&mut w)
+            .and_then(|()| w.flush())
+            .map_err(RenderError::io("writing", &p))?;
+        written += g.summary.bytes;
     }
     let p = dir.join("tileset.json");
     std::fs::write(&p, &s.tileset_json).map_err(RenderError::io("writing", &p))?;
