@@ -11,6 +11,7 @@
 
 mod cli;
 mod cluster;
+mod export_gltf;
 mod faults;
 mod gen;
 mod gen_blocks;
@@ -25,6 +26,7 @@ mod python_reader;
 mod resume;
 mod shard;
 mod textures;
+mod tiles;
 mod tools;
 mod validation;
 mod view;

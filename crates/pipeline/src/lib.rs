@@ -61,4 +61,4 @@ pub use size::{format_size, parse_size};
 pub use stages::lod_write::octree_writer::{LevelStats, NodeSink, OctreeWriter, StoredPayloads};
 pub use stages::voxelize::textures::TextureCacheSummary;
 pub use summary::{BuildSummary, SourceSummary, StageTime};
-pub use system::{interrupt_after_chunks, interrupted, peak_rss, request_interrupt};
+pub use system::{free_disk, interrupt_after_chunks, interrupted, peak_rss, request_interrupt};

@@ -7,7 +7,9 @@
 //!   The nodes drawn are one level, or the screen-space error cut for the camera
 //!   ([`Lod`], [`cut::select`]: the voxels' real size in pixels, frustum culled); the camera frames the bulk of the model's voxels
 //!   ([`robust_bounds`], so stray fragments do not shrink it) from a [`View`].
-//! - [`export_ply`] writes one level as a quad mesh (binary PLY with normals and colours).
+//! - [`export_ply`] writes one level as a quad mesh (binary PLY with normals and colours);
+//!   [`export_glb_with`] the same quads as glTF 2.0 binary, [`node_glb`] one node's (a 3D
+//!   Tiles tile), [`export_tileset_with`] an OGC 3D Tiles 1.1 tileset of them.
 //! - [`view`] streams nodes by that same cut into a fixed GPU budget (least recently used
 //!   eviction, an upload limit per frame) and draws frames along a camera path (`voxlod view`),
 //!   or in a window with the `window` feature.
@@ -42,9 +44,11 @@ mod error;
 mod export;
 mod export_source;
 mod faces;
+mod glb;
 mod pass;
 mod picture;
 mod source_draw;
+mod tileset;
 pub mod view;
 
 pub use camera::{model_bounds, robust_bounds, up_from_shape, Shot, View};
@@ -55,7 +59,9 @@ pub use export_source::{export_source_ply, source_world_position, SourceExportSu
 pub use faces::{
     face_direction, material_color, node_faces, node_faces_by, unit_face_corners, ColorBy, Face,
 };
+pub use glb::{export_glb_with, node_glb, NodeGlb, UpAxis, GLB_VERTEX_BYTES};
 pub use picture::Picture;
+pub use tileset::{export_tileset_with, tile_uri, TilesetSummary};
 
 use voxlod_format::Reader;
 

@@ -61,7 +61,8 @@ enum Command {
     /// Draw an octree file to a PNG (headless GPU; lavapipe without a GPU).
     #[command(after_help = EXAMPLES_RENDER)]
     Render(render::RenderArgs),
-    /// Write one level of an octree file as a quad mesh (binary PLY with normals and colours).
+    /// Write one level of an octree file as a quad mesh (binary PLY, or glTF binary for .glb),
+    /// or the octree as a 3D Tiles tileset (--3d-tiles).
     #[command(after_help = EXAMPLES_EXPORT)]
     Export(export::ExportArgs),
     /// Stream an octree file by screen-space error into a GPU cache and draw it: a camera
@@ -142,9 +143,12 @@ const EXAMPLES_EXPORT: &str = "\
 Examples:
   voxlod export bunny.voxlod -o bunny.ply         # the finest level
   voxlod export bunny.voxlod --level 2 -o coarse.ply
+  voxlod export bunny.voxlod --level 1 -o bunny.glb    # glTF 2.0 binary (Blender, three.js)
+  voxlod export bunny.voxlod --3d-tiles bunny-tiles  # OGC 3D Tiles 1.1 (CesiumJS, 3d-tiles-renderer)
   voxlod export dragon.voxlod --source -o dragon-source.ply              # every leaf's source triangles
   voxlod export dragon.voxlod --source --node 0 1 1 1 -o leaf.ply        # one leaf (level 0, chunk 1 1 1)
-The size of the PLY is printed before it is written.";
+The size of an export is printed before it is written; over the disk's free space, or over 4 GiB
+without --max-size, it is refused, naming the coarsest level that fits.";
 
 const EXAMPLES_CLEAN: &str = "\
 Examples:

@@ -39,6 +39,8 @@ pub enum OutputKind {
     Jpeg,
     /// A PLY mesh (`export`, `gen`).
     Ply,
+    /// A glTF 2.0 binary (`export -o x.glb`).
+    Glb,
     /// A sharded build's plan (`plan`, JSON).
     Plan,
     /// A shard of a sharded build (`build --plan --shard`).
@@ -52,6 +54,7 @@ impl OutputKind {
             OutputKind::Png => "a PNG image",
             OutputKind::Jpeg => "a JPEG image",
             OutputKind::Ply => "a PLY mesh",
+            OutputKind::Glb => "a glTF binary",
             OutputKind::Plan => "a voxlod plan",
             OutputKind::Shard => "a voxlod shard",
         }
@@ -66,6 +69,8 @@ impl OutputKind {
             Some(OutputKind::Jpeg)
         } else if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
             Some(OutputKind::Ply)
+        } else if head.starts_with(b"glTF") {
+            Some(OutputKind::Glb)
         } else if head.starts_with(crate::shard::shard_file::MAGIC) {
             Some(OutputKind::Shard)
         } else if head.starts_with(b"{\n  \"format\": \"v") {
@@ -416,6 +421,7 @@ fn ext(kind: OutputKind) -> &'static str {
         OutputKind::Png => "png",
         OutputKind::Jpeg => "jpg",
         OutputKind::Ply => "ply",
+        OutputKind::Glb => "glb",
         OutputKind::Plan => "json",
         OutputKind::Shard => "vlshard",
     }

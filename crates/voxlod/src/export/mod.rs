@@ -1,0 +1,193 @@
+//! `voxlod export FILE --level K -o out.ply`: one level as a quad mesh (binary PLY, normals
+//! and colours) for MeshLab or Blender, or `-o out.glb` the same quads as glTF 2.0 binary;
+//! `--source [--node 0 X Y Z]`: the source triangles stored beside the leaves (FORMAT.md
+//! 14.4); `--3d-tiles DIR`: an OGC 3D Tiles 1.1 tileset ([`tiles`]); see `voxlod-render`.
+//! Every export is sized before it is written and refused when too
+//! big ([`size_guard`]).
+
+mod size_guard;
+mod tiles;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use clap::Args;
+use voxlod_format::Reader;
+use voxlod_pipeline::{format_size, parse_size, OutputGuard, OutputKind};
+
+use size_guard::SizeLimit;
+
+#[derive(Args)]
+pub struct ExportArgs {
+    /// An octree file.
+    file: PathBuf,
+    /// The level to export (0 = finest).
+    #[arg(short, long, default_value_t = 0)]
+    level: u32,
+    /// Output file: `.glb` writes glTF 2.0 binary, any other name binary PLY.
+    #[arg(short, long, required_unless_present = "tiles")]
+    output: Option<PathBuf>,
+    /// Write an OGC 3D Tiles 1.1 tileset into this new folder instead: `tileset.json` and one
+    /// `.glb` per node of levels --level and coarser.
+    #[arg(long = "3d-tiles", id = "tiles", value_name = "DIR", conflicts_with_all = ["output", "source"])]
+    tiles: Option<PathBuf>,
+    /// With --3d-tiles: cut by geometric error instead of --level: the finest level written
+    /// is the coarsest whose voxel edge is at most E (world units).
+    #[arg(long, value_name = "E", requires = "tiles", conflicts_with = "level")]
+    error: Option<f64>,
+    /// Export the source triangles stored beside the leaves (a file built with
+    /// --source-geometry) instead of voxel quads.
+    #[arg(long)]
+    source: bool,
+    /// With --source: only this leaf node (level 0 and its chunk position).
+    #[arg(long, num_args = 4, value_names = ["L", "X", "Y", "Z"], requires = "source")]
+    node: Option<Vec<u32>>,
+    /// Replace an existing output file even if it is not of the kind written; with
+    /// --3d-tiles, replace the tileset in DIR.
+    #[arg(long)]
+    force: bool,
+    /// Write an export bigger than 4 GiB, up to SIZE (e.g. 20GiB); an export bigger than the
+    /// free space of the output's file system is refused whatever this says.
+    #[arg(long, value_parser = parse_size, value_name = "SIZE")]
+    max_size: Option<u64>,
+}
+
+/// The folder an output is written in (`.` for a bare file name).
+fn output_dir(output: &Path) -> PathBuf {
+    match output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// What `-o` asks for, from its extension.
+fn output_kind(output: &Path) -> Result<OutputKind> {
+    let ext = output
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("glb") => Ok(OutputKind::Glb),
+        Some("gltf") => anyhow::bail!(
+            "{}: write glTF as one binary file: name it .glb (a .gltf with a separate .bin is not written)",
+            output.display()
+        ),
+        _ => Ok(OutputKind::Ply),
+    }
+}
+
+/// `--source`: the stored source triangles of one leaf or of all of them.
+fn run_source(
+    a: &ExportArgs,
+    output: &Path,
+    r: &Reader,
+    guard: &OutputGuard,
+    limit: &SizeLimit,
+) -> Result<()> {
+    let nodes = match &a.node {
+        Some(n) => {
+            let (level, pos) = (n[0], [n[1], n[2], n[3]]);
+            anyhow::ensure!(
+                level == 0,
+                "--node {level} …: source triangles are stored for leaf chunks (level 0) only"
+            );
+            let i = r.find(level, pos).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "{}: no node at level {level}, position {pos:?}",
+                    a.file.display()
+                )
+            })?;
+            anyhow::ensure!(
+                r.source_triangles(i)?.is_some(),
+                "{}: leaf {pos:?} has no source triangles",
+                a.file.display()
+            );
+            Some(vec![i])
+        }
+        None => None,
+    };
+    let s = voxlod_render::export_source_ply(r, nodes.as_deref(), guard.staged(), &mut |s| {
+        // source triangles exist at level 0 only: no coarser level to suggest
+        limit
+            .check(&output.display().to_string(), s.bytes, 0, 1, &|_| 0)
+            .map_err(|e| voxlod_render::RenderError::Option(e.to_string()))?;
+        eprintln!(
+            "writing the source triangles of {} leaves of {}: {} triangles, {} to {}",
+            s.leaves,
+            a.file.display(),
+            s.triangles,
+            format_size(s.bytes),
+            output.display()
+        );
+        Ok(())
+    })?;
+    guard.commit()?;
+    println!(
+        "wrote {}: source triangles of {} leaves, {} triangles, {} vertices, {}",
+        output.display(),
+        s.leaves,
+        s.triangles,
+        s.vertices,
+        format_size(s.bytes)
+    );
+    Ok(())
+}
+
+pub fn run(a: ExportArgs) -> Result<()> {
+    if let Some(dir) = &a.tiles {
+        return tiles::run(&a.file, dir, a.level, a.error, a.max_size, a.force);
+    }
+    let output = a.output.clone().expect("clap: -o or --3d-tiles");
+    // the output is checked (not the input, not another kind of file) and locked first, and
+    // written under a temporary name: an interrupted export leaves no partial file
+    let kind = if a.source {
+        OutputKind::Ply
+    } else {
+        output_kind(&output)?
+    };
+    let guard = OutputGuard::acquire(&output, &[&a.file], kind, a.force)?;
+    let r = Reader::open(&a.file)?;
+    let limit = SizeLimit::for_dir(a.max_size, &output_dir(&output));
+    if a.source {
+        return run_source(&a, &output, &r, &guard, &limit);
+    }
+    // the size is known before anything is written: refused when too big (issue 31 §3), else
+    // said first (a fine level of a big model is gigabytes), without a prompt, as
+    // command-line tools that write files do
+    let mut before = |s: &voxlod_render::ExportSummary| {
+        let estimate = size_guard::proportional(&r, a.level, s.bytes);
+        limit
+            .check(
+                &output.display().to_string(),
+                s.bytes,
+                a.level,
+                r.spec().levels,
+                &estimate,
+            )
+            .map_err(|e| voxlod_render::RenderError::Option(e.to_string()))?;
+        eprintln!(
+            "writing level {} of {}: {} quads, {} to {}",
+            a.level,
+            a.file.display(),
+            s.quads,
+            format_size(s.bytes),
+            output.display()
+        );
+        Ok(())
+    };
+    let s = if kind == OutputKind::Glb {
+        voxlod_render::export_glb_with(&r, a.level, guard.staged(), &mut before)?
+    } else {
+        voxlod_render::export_ply_with(&r, a.level, guard.staged(), &mut before)?
+    };
+    guard.commit()?;
+    println!(
+        "wrote {}: level {}, {} voxels, {} quads, {} vertices, {}",
+        output.display(),
+        a.level,
+        s.voxels,
+        s.quads,
+        s.vertices,
+        format_size(s.bytes)
+    );
+    Ok(())
+}

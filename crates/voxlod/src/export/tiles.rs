@@ -1,0 +1,150 @@
+//! `voxlod export FILE --3d-tiles DIR [--level K | --error E]`: the octree as an OGC 3D Tiles
+//! 1.1 tileset (`voxlod_render::export_tileset_with`). The folder is written whole or not at
+//! all: the tiles go into a staging folder beside `DIR`, renamed to `DIR` at the end (an
+//! earlier tileset there is replaced only with `--force`); the size is known and checked
+//! (`size_guard`) before the first tile is written.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use voxlod_format::Reader;
+use voxlod_pipeline::format_size;
+
+use super::size_guard::{level_voxels, SizeLimit};
+
+/// The finest level of a cut by geometric error `error` (world units): the coarsest level
+/// whose voxel edge is at most `error`, or level 0 when every edge is larger.
+pub fn level_for_error(reader: &Reader, error: f64) -> u32 {
+    let spec = reader.spec();
+    (0..spec.levels)
+        .rev()
+        .find(|&l| spec.voxel_size_at(l) <= error)
+        .unwrap_or(0)
+}
+
+/// A staging folder removed on drop unless it was renamed into place.
+struct Staging(Option<PathBuf>);
+
+impl Drop for Staging {
+    fn drop(&mut self) {
+        if let Some(p) = self.0.take() {
+            let _ = std::fs::remove_dir_all(p);
+        }
+    }
+}
+
+/// Checks that `dir` may receive a tileset: absent, an empty folder, or (with `force`) a
+/// folder holding an earlier `tileset.json`.
+fn check_target(dir: &Path, force: bool) -> Result<bool> {
+    let shown = dir.display();
+    let Ok(m) = std::fs::symlink_metadata(dir) else {
+        return Ok(false);
+    };
+    if !m.is_dir() {
+        bail!("{shown}: exists and is not a folder; --3d-tiles writes a folder");
+    }
+    let mut entries = std::fs::read_dir(dir).with_context(|| format!("{shown}: cannot list"))?;
+    if entries.next().is_none() {
+        return Ok(true);
+    }
+    if !dir.join("tileset.json").is_file() {
+        bail!("{shown}: the folder is not empty and holds no tileset; name a new or empty folder");
+    }
+    if !force {
+        bail!("{shown}: holds a tileset already; --force replaces it");
+    }
+    Ok(true)
+}
+
+pub fn run(
+    file: &Path,
+    dir: &Path,
+    level: u32,
+    error: Option<f64>,
+    max_size: Option<u64>,
+    force: bool,
+) -> Result<()> {
+    let exists = check_target(dir, force)?;
+    let r = Reader::open(file)?;
+    let level = match error {
+        Some(e) if !(e.is_finite() && e > 0.0) => {
+            bail!("--error {e}: give a positive size in world units")
+        }
+        Some(e) => level_for_error(&r, e),
+        None => level,
+    };
+    let parent = match dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if !parent.is_dir() {
+        bail!(
+            "{}: the folder {} does not exist",
+            dir.display(),
+            parent.display()
+        );
+    }
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "tiles".into());
+    let stage_path = parent.join(format!(".voxlod-tiles-{name}-{}", std::process::id()));
+    let limit = SizeLimit::for_dir(max_size, &parent);
+    let voxels = level_voxels(&r);
+    let mut stage = Staging(None);
+    let s = voxlod_render::export_tileset_with(&r, level, &stage_path, &mut |s| {
+        // other cuts: bytes in proportion to the voxels of the levels they hold
+        let cut_voxels = |l: u32| voxels[l as usize..].iter().sum::<u64>();
+        let per_voxel = s.bytes as f64 / cut_voxels(level).max(1) as f64;
+        let estimate = |l: u32| (cut_voxels(l) as f64 * per_voxel).ceil() as u64;
+        limit
+            .check(
+                &dir.display().to_string(),
+                s.bytes,
+                level,
+                r.spec().levels,
+                &estimate,
+            )
+            .map_err(|e| voxlod_render::RenderError::Option(e.to_string()))?;
+        std::fs::create_dir(&stage_path).map_err(|e| {
+            voxlod_render::RenderError::Option(format!(
+                "{}: cannot create: {e}",
+                stage_path.display()
+            ))
+        })?;
+        stage.0 = Some(stage_path.clone());
+        eprintln!(
+            "writing a 3D Tiles tileset of levels {level}..={} of {}: {} tiles, {} quads, {} to {}",
+            r.spec().levels - 1,
+            file.display(),
+            s.tiles,
+            s.quads,
+            format_size(s.bytes),
+            dir.display()
+        );
+        Ok(())
+    })?;
+    // into place: an earlier tileset is moved aside first and removed after
+    let old = parent.join(format!(".voxlod-tiles-old-{name}-{}", std::process::id()));
+    if exists {
+        std::fs::rename(dir, &old)
+            .with_context(|| format!("{}: cannot move aside", dir.display()))?;
+    }
+    std::fs::rename(&stage_path, dir)
+        .with_context(|| format!("{}: cannot rename into place", dir.display()))?;
+    stage.0 = None;
+    if exists {
+        std::fs::remove_dir_all(&old)
+            .with_context(|| format!("{}: cannot remove", old.display()))?;
+    }
+    println!(
+        "wrote {}: 3D Tiles 1.1, levels {level}..={}, {} tiles ({} with content), {} quads, {}",
+        dir.display(),
+        r.spec().levels - 1,
+        s.tiles,
+        s.contents,
+        s.quads,
+        format_size(s.bytes)
+    );
+    Ok(())
+}
