@@ -252,7 +252,7 @@ pub const SPANS: u32 = u32::MAX;
 pub const DROPPED: u32 = u32::MAX - 1;
 
 /// Calls `put(t, li)` for every chunk (linear index `li`) that keyed triangle `t` goes to
-/// (`keys` from [`ChunkKeys::of_grid`] on `grid`, `n` chunks per axis): its key's chunk, every
+/// (`keys` from [`ChunkKeys::of_world`] on `grid`, `n` chunks per axis): its key's chunk, every
 /// chunk of its range for [`SPANS`], none for [`DROPPED`]; in order, stopping at an error.
 #[inline]
 pub(crate) fn for_each_keyed_chunk(
@@ -272,7 +272,7 @@ pub(crate) fn for_each_keyed_chunk(
             put(t, k as usize)?;
             continue;
         }
-        let Some((lo, hi)) = grid.chunk_range(t) else {
+        let Some((lo, hi)) = grid.world_chunk_range(t) else {
             continue;
         };
         for z in lo[2]..=hi[2] {
@@ -423,7 +423,7 @@ impl<'g> Scatter<'g> {
         })
     }
 
-    /// Bins a batch of grid-space triangles given their [`ChunkKeys::of_grid`].
+    /// Bins a batch of world-space triangles given their [`ChunkKeys::of_world`].
     pub(crate) fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
         let (grid, n) = (self.grid, self.n);
         for_each_keyed_chunk(grid, n, tris, keys, |t, li| self.put(t, li))
@@ -828,13 +828,14 @@ mod tests {
                     Ok(())
                 })
                 .unwrap();
+                // the bins keep world coordinates
                 let want: Vec<Triangle> = tris
                     .iter()
-                    .map(|t| crate::to_grid(&grid, t))
-                    .filter(|g| {
-                        let (lo, hi) = grid.chunk_range(g).unwrap();
+                    .filter(|t| {
+                        let (lo, hi) = grid.chunk_range(&crate::to_grid(&grid, t)).unwrap();
                         (0..3).all(|a| lo[a] <= c.coord[a] && c.coord[a] <= hi[a])
                     })
+                    .copied()
                     .collect();
                 assert_eq!(got, want, "chunk {:?}", c.coord);
                 all.push(got);

@@ -494,3 +494,65 @@ fn near_ties_are_decided_on_the_input() {
         check_mesh("near ties", &tris, &grid, mode);
     }
 }
+
+/// A binary PLY of `double` positions, read as the tool reads it (`voxlod-ingest` rounds them to
+/// f32) and put on the grid the tool fits to its bounds: two specks fix the grid (its origin and
+/// voxel size are whatever the bounds give, not binary fractions), the other triangles sit
+/// within a few f32 ulps of that grid's corners, edges and faces, with decimal parts below the
+/// f32 resolution. The promise holds for the f32 values read.
+#[test]
+fn ply_doubles_on_the_grid_their_bounds_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("doubles.ply");
+    let (lo, size) = ([0.1f64, -0.37, 12.3], 7.3f64);
+    let mut rng = Rng(0x0f64_3232);
+    let mut verts: Vec<[f64; 3]> = Vec::new();
+    // the specks: tiny triangles at the cube's two extreme corners
+    for c in [lo, lo.map(|x| x + size)] {
+        for d in [[0.0, 0.0, 0.0], [1e-4, 0.0, 0.0], [0.0, 1e-4, 0.0]] {
+            verts.push([0, 1, 2].map(|k| c[k] + d[k] * if c == lo { 1.0 } else { -1.0 }));
+        }
+    }
+    // the grid the tool will fit: from the f32 values of the bounds
+    let r32 = |x: f64| x as f32 as f64;
+    let (o, s) = (lo.map(r32), (r32(lo[0] + size) - r32(lo[0])) / 256.0);
+    for _ in 0..600 {
+        let base = [0, 1, 2].map(|_| 10.0 + (rng.next_u64() % 230) as f64);
+        let j = rng.next_u64() % 3;
+        for v in 0..3u64 {
+            verts.push([0, 1, 2].map(|k| {
+                let c = if v == j || k == (v as usize) {
+                    base[k]
+                } else {
+                    base[k] + rng.f64() * 2.0 - 0.5
+                };
+                // within ~3 f32 ulps of the grid value, with digits below f32's resolution
+                o[k] + c * s + (rng.f64() - 0.5) * 6.0 * (o[k] + c * s).abs() * 2f64.powi(-24)
+            }));
+        }
+    }
+    let nf = verts.len() / 3;
+    let mut b = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty double x\nproperty double y\nproperty double z\nelement face {nf}\nproperty list uchar int vertex_indices\nend_header\n",
+        verts.len()
+    )
+    .into_bytes();
+    for v in &verts {
+        for x in v {
+            b.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    for f in 0..nf as i32 {
+        b.push(3);
+        for i in 0..3 {
+            b.extend_from_slice(&(3 * f + i).to_le_bytes());
+        }
+    }
+    std::fs::write(&path, b).unwrap();
+    let tris = read_world(&path);
+    assert_eq!(tris.len(), nf);
+    let grid = fit(&tris, 256);
+    for mode in [Mode::Conservative, Mode::Thin] {
+        check_mesh("PLY doubles", &tris, &grid, mode);
+    }
+}
