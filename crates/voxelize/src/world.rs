@@ -178,7 +178,13 @@ trait SignumOrZero {
 impl SignumOrZero for f64 {
     #[inline]
     fn signum_or_zero(self) -> f64 {
-        crate::overlap::sign(self)
+        if self > 0.0 {
+            1.0
+        } else if self < 0.0 {
+            -1.0
+        } else {
+            0.0
+        }
     }
 }
 
@@ -248,7 +254,7 @@ const U: f64 = f64::EPSILON / 2.0;
 /// here in f64 with its rounding bound plus the perturbation. `false` sends the triangle to the
 /// general path, which decides exactly ([`crate::TriSetup::with_world`]).
 pub(crate) fn small_certain(v: &[[f32; 3]; 3], world: &[[f32; 3]; 3]) -> bool {
-    let o = crate::overlap::to_f64(v);
+    let o = v.map(|p| p.map(|c| c as f64));
     let pert = Perturbation::of(&o);
     let mut p = [0.0f64; 3];
     let mut split = [false; 3];
@@ -277,7 +283,12 @@ pub(crate) fn small_certain(v: &[[f32; 3]; 3], world: &[[f32; 3]; 3]) -> bool {
     }
     let d1 = [0, 1, 2].map(|k| o[1][k] - o[0][k]);
     let d2 = [0, 1, 2].map(|k| o[2][k] - o[0][k]);
-    let n = crate::overlap::cross_f64(&o);
+    // `(v1 − v0) × (v2 − v0)` as `overlap::cross_f64` computes it
+    let n = [
+        d1[1] * d2[2] - d1[2] * d2[1],
+        d1[2] * d2[0] - d1[0] * d2[2],
+        d1[0] * d2[1] - d1[1] * d2[0],
+    ];
     let mut mag = [0.0; 3];
     for k in 0..3 {
         let (i, j) = ((k + 1) % 3, (k + 2) % 3);
