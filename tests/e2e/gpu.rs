@@ -12,10 +12,15 @@ struct ContractReport {
     /// level-0 voxels whose normals differ by more than one 10-bit step in some component
     /// (nearly cancelling normal sums; see the gpu crate docs)
     normal_outliers: usize,
+    /// voxels (any level) in one file and not the other: the GPU's sets are exact for the f32
+    /// grid coordinates, the CPU's for the input's world coordinates (docs/VOXELIZE.md), so
+    /// they differ where a triangle comes within that rounding of a voxel's corner, edge or face
+    set_differences: usize,
 }
 
 /// The GPU/CPU contract (crates/gpu docs, FORMAT.md 6), checked on the decoded files: the same
-/// header grid and the same nodes with the same voxel positions at every level; on level 0,
+/// header grid, the voxels in one file and not the other counted (`set_differences`); on level 0,
+/// for the voxels in both,
 /// colours within one unit per channel, normals within one 10-bit step per component except the
 /// counted outliers, and every face mask equal to `face_mask(normal) | border_caps(pos)` of that
 /// file's own voxel. The files are checked independently by [`check_octree`] (LOD structure).
@@ -28,21 +33,26 @@ fn gpu_contract(cpu: &Path, gpu: &Path) -> ContractReport {
         (hg.resolution, hg.levels, hg.origin, hg.voxel_size),
         "different grids"
     );
-    assert_eq!(
-        a.keys().collect::<Vec<_>>(),
-        b.keys().collect::<Vec<_>>(),
-        "different nodes"
-    );
     let mut r = ContractReport::default();
-    for (key, (mask_a, va)) in &a {
-        let (mask_b, vb) = &b[key];
-        assert_eq!(mask_a, mask_b, "{key:?}: child masks differ");
-        let pos = |v: &[Voxel]| v.iter().map(|v| v.pos()).collect::<Vec<_>>();
-        assert!(pos(va) == pos(vb), "{key:?}: voxel sets differ");
+    for (key, (_, vb)) in &b {
+        if !a.contains_key(key) {
+            r.set_differences += vb.len();
+        }
+    }
+    for (key, (_, va)) in &a {
+        let Some((_, vb)) = b.get(key) else {
+            r.set_differences += va.len();
+            continue;
+        };
+        let pa: std::collections::HashMap<_, _> = va.iter().map(|v| (v.pos(), v)).collect();
+        let pb: std::collections::HashMap<_, _> = vb.iter().map(|v| (v.pos(), v)).collect();
+        r.set_differences += pa.keys().filter(|p| !pb.contains_key(*p)).count();
+        r.set_differences += pb.keys().filter(|p| !pa.contains_key(*p)).count();
         if key.0 != 0 {
             continue;
         }
-        for (x, y) in va.iter().zip(vb) {
+        let both = va.iter().filter_map(|x| pb.get(&x.pos()).map(|y| (x, *y)));
+        for (x, y) in both {
             for v in [x, y] {
                 assert_eq!(
                     v.mask(),
@@ -135,13 +145,15 @@ fn gpu_backend_writes_the_same_file_as_cpu() {
         let r = gpu_contract(&cpu, &gpu);
         eprintln!("{mode}: {r:?}, {tris} triangles decided on the host");
         assert!(r.leaves > 10_000, "{r:?}");
+        assert_eq!(r.set_differences, 0, "{mode}: {r:?}");
         // the bunny has no voxel where opposite faces meet
         assert_eq!(r.normal_outliers, 0, "{mode}: {r:?}");
     }
 }
 
 /// GPU (lavapipe) against CPU on real meshes of very different triangle sizes at 256³: the same
-/// voxel sets at every level, colours within one step, and normals within one step except in a
+/// voxel sets at every level up to one voxel in 10⁴ (the GPU is exact for the f32 grid
+/// coordinates, the CPU for the input's world coordinates), colours within one step, and normals within one step except in a
 /// small share of voxels ([`gpu_contract`]). Those are voxels where opposite-facing surfaces
 /// meet inside one voxel (double-sided walls), so the area-weighted normal nearly cancels and
 /// its direction is rounding noise (the GPU sums in 96-bit fixed point, the CPU in f32); bound:
@@ -175,5 +187,8 @@ fn gpu_backend_matches_cpu_on_real_meshes() {
         let r = gpu_contract(&cpu, &gpu);
         eprintln!("{mesh}: {r:?}");
         assert!(r.normal_outliers * 100 <= r.leaves, "{mesh}: {r:?}");
+        // exact for f32 grid coordinates (GPU) against exact for the input's (CPU): at most
+        // one voxel in 10⁴ may differ (near-ties within the f32 rounding)
+        assert!(r.set_differences * 10_000 <= r.leaves, "{mesh}: {r:?}");
     }
 }

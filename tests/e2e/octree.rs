@@ -49,7 +49,8 @@ fn leaves_equal_direct_voxelization_without_tiling() {
         let mut tris = Vec::new();
         src.stream(
             &mut |b| {
-                tris.extend(b.iter().map(|t| voxlod_tile::to_grid(&grid, t)));
+                // world coordinates: the CPU backend decides on them (`add_world`)
+                tris.extend_from_slice(b);
                 Ok(())
             },
             &mut |_, _| {},
@@ -62,7 +63,7 @@ fn leaves_equal_direct_voxelization_without_tiling() {
             for y in 0..n {
                 for x in 0..n {
                     vz.begin([x * 256, y * 256, z * 256]);
-                    vz.add(&tris);
+                    vz.add_world(&grid, &tris);
                     let want = vz.finish();
                     match nodes.get(&(0, [x, y, z])) {
                         Some((_, got)) => {

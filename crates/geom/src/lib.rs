@@ -47,8 +47,9 @@ pub const DEFAULT_COLOR: [u8; 4] = [255, 255, 255, 255];
 /// One triangle with its per-vertex attributes, as ingest yields it and as tile bins store it
 /// (112 bytes, plain old data, little-endian on disk).
 ///
-/// Positions are in world units when ingest yields them and in grid units (voxels, see
-/// [`Grid::to_grid`]) once the tile stage has binned them.
+/// Positions are in world units when ingest yields them and in the tile stage's bins (the
+/// voxelizer decides on them exactly); the voxelizer's weights and the source geometry use them
+/// moved to grid units (voxels, see [`Grid::to_grid`]).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 pub struct Triangle {

@@ -54,6 +54,15 @@
 //! 2²⁹ times wider). Only a chunk with more listed triangles than the list holds is re-voxelized
 //! as a whole on the CPU (`voxlod_voxelize::ChunkVoxelizer`, same mode).
 //!
+//! "Exact" here means exact for the **f32 grid coordinates** the GPU is fed
+//! (`Grid::to_grid` of the input's positions), what `ChunkVoxelizer::add` decides. The CPU
+//! backend of a build decides on the input's own world coordinates instead
+//! (`ChunkVoxelizer::add_world`, docs/VOXELIZE.md "Exact in the input's own coordinates"); the
+//! two sets differ where a triangle comes within the f32 rounding of the grid coordinates
+//! (about 2⁻²³ of the largest coordinate) of a voxel's corner, edge or face. Widening the
+//! shaders' bands by that rounding and deciding the listed triangles on world coordinates is
+//! not done.
+//!
 //! [`GpuVoxelizer::last_uncertain`], [`GpuVoxelizer::last_fallback_triangles`] and
 //! [`GpuVoxelizer::last_fell_back`] report them per chunk.
 //!

@@ -32,7 +32,7 @@ pub fn count(
     Ok(counts)
 }
 
-/// Pass 3: writes the bins file at `path` (grid coordinates, records laid out by `layout`),
+/// Pass 3: writes the bins file at `path` (world coordinates, records laid out by `layout`),
 /// buffering at most `buffer_bytes` of records in memory between flushes. `src` must yield
 /// the triangles `counts` was made from.
 pub fn scatter(
@@ -53,19 +53,14 @@ pub fn scatter(
     let keys = counts.keys();
     let mut done = 0u64;
     let total = src.count();
-    // the move to the grid and the chunk ranges where the triangles are read, the binning here;
-    // with dropped chunks, a triangle in none of the kept ones is rejected there, unmoved
+    // the chunk ranges where the triangles are read, the binning here; with dropped chunks, a
+    // triangle in none of the kept ones is rejected there. The records keep the input's world
+    // coordinates (the voxelizer decides on them exactly: `ChunkVoxelizer::add_world`).
     let prepare = |tris: &mut [Triangle]| {
         if !counts.dropped.is_empty() {
             return tris.iter_mut().map(|t| counts.keep_key(keys, t)).collect();
         }
-        for t in tris.iter_mut() {
-            // `to_grid` in place
-            for v in &mut t.v {
-                *v = grid.to_grid(*v);
-            }
-        }
-        keys.of_grid(tris)
+        keys.of_world(tris)
     };
     src.for_each_prepared(&prepare, &mut |tris, k| {
         sc.push_keyed(tris, &k)?;
@@ -184,8 +179,8 @@ impl ChunkCounts {
     }
 
     /// For a scatter with dropped chunks (precondition): [`DROPPED`] if no chunk of triangle `t`'s range
-    /// (world coordinates) is kept, else its key ([`ChunkKeys::of_grid`]) with `t` moved to
-    /// the grid. The range is [`Grid::world_chunk_range`], the one of the moved triangle.
+    /// (world coordinates) is kept, else its key ([`ChunkKeys::of_grid`]); `t` stays in world
+    /// coordinates. The range is [`Grid::world_chunk_range`], the one of the moved triangle.
     #[inline]
     fn keep_key(&self, keys: ChunkKeys, t: &mut Triangle) -> u32 {
         debug_assert!(!self.dropped.is_empty(), "no chunk was dropped");
@@ -203,9 +198,6 @@ impl ChunkCounts {
         };
         if !kept {
             return DROPPED;
-        }
-        for v in &mut t.v {
-            *v = self.grid.to_grid(*v);
         }
         key
     }
@@ -260,7 +252,7 @@ pub const SPANS: u32 = u32::MAX;
 pub const DROPPED: u32 = u32::MAX - 1;
 
 /// Calls `put(t, li)` for every chunk (linear index `li`) that keyed triangle `t` goes to
-/// (`keys` from [`ChunkKeys::of_grid`] on `grid`, `n` chunks per axis): its key's chunk, every
+/// (`keys` from [`ChunkKeys::of_world`] on `grid`, `n` chunks per axis): its key's chunk, every
 /// chunk of its range for [`SPANS`], none for [`DROPPED`]; in order, stopping at an error.
 #[inline]
 pub(crate) fn for_each_keyed_chunk(
@@ -280,7 +272,7 @@ pub(crate) fn for_each_keyed_chunk(
             put(t, k as usize)?;
             continue;
         }
-        let Some((lo, hi)) = grid.chunk_range(t) else {
+        let Some((lo, hi)) = grid.world_chunk_range(t) else {
             continue;
         };
         for z in lo[2]..=hi[2] {
@@ -431,7 +423,7 @@ impl<'g> Scatter<'g> {
         })
     }
 
-    /// Bins a batch of grid-space triangles given their [`ChunkKeys::of_grid`].
+    /// Bins a batch of world-space triangles given their [`ChunkKeys::of_world`].
     pub(crate) fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
         let (grid, n) = (self.grid, self.n);
         for_each_keyed_chunk(grid, n, tris, keys, |t, li| self.put(t, li))
@@ -557,7 +549,7 @@ pub fn scatter_bound(counts: &ChunkCounts, layout: RecordLayout, buffer_bytes: u
 }
 
 /// The finished bins file: non-empty leaf chunks in Morton order, each with its triangles
-/// (grid coordinates, in input order) as [blocks](crate::block) of one [`RecordLayout`], in
+/// (world coordinates, in input order) as [blocks](crate::block) of one [`RecordLayout`], in
 /// pieces: runs of consecutive blocks, `[byte offset, bytes, triangles]`, read one after
 /// another. [`scatter`] writes a piece per flush of a chunk's slice, [`crate::RunScatter`] a
 /// piece per chunk per run.
@@ -836,13 +828,14 @@ mod tests {
                     Ok(())
                 })
                 .unwrap();
+                // the bins keep world coordinates
                 let want: Vec<Triangle> = tris
                     .iter()
-                    .map(|t| crate::to_grid(&grid, t))
-                    .filter(|g| {
-                        let (lo, hi) = grid.chunk_range(g).unwrap();
+                    .filter(|t| {
+                        let (lo, hi) = grid.chunk_range(&crate::to_grid(&grid, t)).unwrap();
                         (0..3).all(|a| lo[a] <= c.coord[a] && c.coord[a] <= hi[a])
                     })
+                    .copied()
                     .collect();
                 assert_eq!(got, want, "chunk {:?}", c.coord);
                 all.push(got);

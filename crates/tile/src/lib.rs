@@ -10,7 +10,7 @@
 //!    format. Both are [`Passes`]: something that can hand out the same triangles any number
 //!    of times, in the same order.
 //! 2. [`count`]: with the grid known, each triangle's chunk range is counted per chunk.
-//! 3. [`scatter`]: triangles (now in grid coordinates) are encoded as compact records
+//! 3. [`scatter`]: triangles (in world coordinates, as read) are encoded as compact records
 //!    ([`RecordLayout`]: only the attributes the mesh has) into one slice per non-empty chunk
 //!    of a buffer of fixed budget; a full slice is appended to the bins file as
 //!    [blocks](block) (each distinct corner once, 16-bit indices, flags once), one *piece* of
@@ -21,8 +21,8 @@
 //! runs, each sorted by chunk and encoded as blocks, and a chunk's bin is its pieces in the
 //! runs (same triangles, same order for [`Bins::read_chunk`]).
 //!
-//! Per-triangle work that does not depend on the order (the move to grid coordinates, the
-//! chunk ranges as [`ChunkKeys`]) runs in each pass's prepare step
+//! Per-triangle work that does not depend on the order (the chunk ranges as [`ChunkKeys`],
+//! of the triangles moved to the grid) runs in each pass's prepare step
 //! ([`Passes::for_each_prepared`]), on the threads that read the triangles; the counting and
 //! binning, which need the order, on the calling thread.
 //!

@@ -162,7 +162,7 @@ impl RunScatter {
         &self.grid
     }
 
-    /// Bins a batch of grid-space triangles given their [`crate::ChunkKeys::of_grid`] (keys
+    /// Bins a batch of world-space triangles given their [`crate::ChunkKeys::of_world`] (keys
     /// of this grid): a one-chunk key goes to that chunk, [`crate::SPANS`] to every chunk of
     /// the triangle's range, [`crate::DROPPED`] nowhere.
     pub fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
@@ -419,10 +419,10 @@ mod tests {
         for buffer in [1u64 << 30, 100 * 1024, 0] {
             let path = dir.path().join(format!("bins-runs-{buffer}"));
             let mut rs = RunScatter::create(&grid, &path, layout, buffer).unwrap();
-            // batches of another size than the spool's, moved to the grid as the passes do
+            // batches of another size than the spool's, keyed as the passes do (world
+            // coordinates)
             for b in tris.chunks(333) {
-                let moved: Vec<Triangle> = b.iter().map(|t| crate::to_grid(&grid, t)).collect();
-                rs.push_keyed(&moved, &keys.of_grid(&moved)).unwrap();
+                rs.push_keyed(b, &keys.of_world(b)).unwrap();
             }
             let bins = rs.finish().unwrap();
             let runs = bins.pieces().iter().map(Vec::len).max().unwrap();
@@ -474,9 +474,8 @@ mod tests {
         let grid = Grid::fit(&bounds, 512).unwrap();
         let path = dir.path().join("bins");
         let mut rs = RunScatter::create(&grid, &path, layout, 0).unwrap();
-        let moved: Vec<Triangle> = tris.iter().map(|t| crate::to_grid(&grid, t)).collect();
-        let keys = ChunkCounts::new(&grid).unwrap().keys().of_grid(&moved);
-        rs.push_keyed(&moved, &keys).unwrap();
+        let keys = ChunkCounts::new(&grid).unwrap().keys().of_world(&tris);
+        rs.push_keyed(&tris, &keys).unwrap();
         let bins = rs.finish().unwrap();
         let (chunks, pieces) = (bins.chunks().to_vec(), bins.pieces().to_vec());
         assert!(Bins::open_pieces(&path, chunks.clone(), layout, pieces.clone()).is_ok());

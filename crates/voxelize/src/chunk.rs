@@ -12,7 +12,7 @@ use voxlod_format::voxel::{
     border_caps, face_mask, pack_color, pack_normal_f64, Voxel, NORMAL_SCALE,
 };
 use voxlod_geom::morton::{morton8_by_table, unmorton8};
-use voxlod_geom::{Triangle, CHUNK, TRI_HAS_NORMALS};
+use voxlod_geom::{Grid, Triangle, CHUNK, TRI_HAS_NORMALS};
 use voxlod_texture::{linear_to_srgb, TextureSet};
 
 use crate::column::Columns;
@@ -21,7 +21,7 @@ use crate::material::MaterialSums;
 use crate::overlap::{cross_f64, interior_voxel, to_f64, TriSetup};
 use crate::small::{self, Small};
 use crate::texcolor::{linear_color, TexAt};
-use crate::{scanline, single, Method, Mode};
+use crate::{scanline, single, world, Method, Mode};
 
 /// The most bytes of triangles and pairs a chunk keeps for its attribute pass
 /// ([`crate::single`]); a chunk with more clips every pair instead (a mesh with very many
@@ -329,6 +329,19 @@ impl ChunkVoxelizer {
     /// This is the marking pass: it finds the voxels and counts the contributions; the
     /// attributes are computed by [`finish`](Self::finish), in the same triangle order.
     pub fn add(&mut self, tris: &[Triangle]) {
+        self.add_in(tris, None);
+    }
+
+    /// Add triangles in **world** coordinates of `grid`: as [`add`](Self::add) of the triangles
+    /// moved to the grid (`grid.to_grid` of every vertex), except that every overlap decision
+    /// is exact for the world coordinates and the grid as stated (its f64 origin and voxel
+    /// size), not for the f32 grid coordinates ([`TriSetup::with_world`], [`crate::world`]).
+    /// The attributes are computed from the moved triangles, as `add` does.
+    pub fn add_world(&mut self, grid: &Grid, tris: &[Triangle]) {
+        self.add_in(tris, Some(grid));
+    }
+
+    fn add_in(&mut self, tris: &[Triangle], grid: Option<&Grid>) {
         let o = self.origin.map(|c| c as i64);
         let lo = o.map(|c| c.min(i32::MAX as i64) as i32);
         let hi = o.map(|c| (c + CHUNK as i64 - 1).min(i32::MAX as i64) as i32);
@@ -340,10 +353,20 @@ impl ChunkVoxelizer {
             && self.textures.is_none()
             && self.materials.is_none();
         for t in tris {
+            let (moved, world) = match grid {
+                Some(g) => {
+                    let mut m = *t;
+                    m.v = t.v.map(|p| g.to_grid(p));
+                    (m, Some((&t.v, g)))
+                }
+                None => (*t, None),
+            };
+            let t = &moved;
             if small && {
                 // a flat triangle needs only the areas ([`crate::single`])
                 self.small.area_only = single::is_flat(t);
                 small::split(&t.v, lo, hi, &mut self.small)
+                    && world.is_none_or(|(w, _)| world::small_certain(&t.v, w))
             } {
                 self.add_small(t);
                 continue;
@@ -365,7 +388,7 @@ impl ChunkVoxelizer {
                     }
                 }
             }
-            let Some(s) = TriSetup::new(&t.v, self.mode) else {
+            let Some(s) = TriSetup::with_world(&t.v, world, self.mode) else {
                 self.skipped += 1;
                 continue;
             };
@@ -505,7 +528,7 @@ impl ChunkVoxelizer {
                 add(count, pairs[0].slot, w, x, None);
                 continue;
             }
-            let flat = skip && single::is_flat(t);
+            let flat = skip && single::is_flat(t) && face(t).is_some();
             let xflat = flat.then(|| single::flat_values(t));
             let record = xflat.map(|x| (x, record_words(&x)));
             if let Some((x, r)) = record {
@@ -516,7 +539,23 @@ impl ChunkVoxelizer {
                     continue;
                 }
             }
-            let s = TriSetup::new(&t.v, *mode).expect("a marked triangle has a setup");
+            let setup = if face(t).is_some() {
+                TriSetup::new(&t.v, *mode)
+            } else {
+                None
+            };
+            let Some(s) = setup else {
+                // a triangle of nonzero area in world coordinates whose f32 grid coordinates
+                // are collinear (smaller than their rounding; `add_world`): it touches its
+                // voxels with weight 0, like a tie, with its mean vertex colour and normal
+                let c = [0, 1, 2, 3].map(|k| t.c.iter().map(|c| c[k] as f64).sum::<f64>() / 3.0);
+                let n = [0, 1, 2].map(|k| t.n.iter().map(|n| n[k] as f64).sum::<f64>());
+                let x = values(n, c);
+                for p in pairs {
+                    add(count, p.slot, 0.0, x, None);
+                }
+                continue;
+            };
             let o_s = s.swizzle(o);
             let ip = xflat.is_none().then(|| Interp::new(t, &s, textures));
             cols.set(&s);

@@ -153,6 +153,7 @@ pub mod scanline;
 pub mod single;
 mod small;
 pub mod texcolor;
+pub mod world;
 
 pub use chunk::{ChunkVoxelizer, VoxelSums};
 pub use clip::clipped_area;

@@ -64,7 +64,9 @@
 //! conservative counterpart (`D_p ⊂ p`), so thin ⊆ conservative.
 
 use crate::predicates::{orient2d, plane_side};
+use crate::world::{self, Frame, Perturbation};
 use crate::Mode;
+use voxlod_geom::Grid;
 
 /// `sign` with `sign(0) = 0`.
 #[inline]
@@ -243,6 +245,18 @@ pub struct TriSetup {
     /// Error bound of the f64 depth predicates (`n_z·(z+1) − (d_lo − n_x x − n_y y)` and
     /// `n_z·z − (d_hi − …)`) against the exact box/diamond extremes.
     bp: f64,
+    /// The input's own coordinates ([`TriSetup::with_world`]): every exact decision is made on
+    /// them, and the filter bounds above include the perturbation of the f32 grid coordinates.
+    world: Option<WorldTri>,
+    /// The perturbation parts of `be` and `bp` ([`Perturbation`]; 0 without `world`).
+    band: (f64, f64),
+}
+
+/// A triangle's world vertices and the grid's frame, swizzled like [`TriSetup::v`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct WorldTri {
+    w: [[f64; 3]; 3],
+    frame: Frame,
 }
 
 impl TriSetup {
@@ -282,11 +296,31 @@ impl TriSetup {
     ///   `≥ 2⁻²⁹⁸`, times a vertex `≥ 2⁻⁴⁴⁷`, all normal in f64; no overflow: `|v| < 2¹²⁸`,
     ///   products `< 2³⁸⁸`. [`TINY`] is added anyway.
     pub fn new(v: &[[f32; 3]; 3], mode: Mode) -> Option<TriSetup> {
+        Self::with_world(v, None, mode)
+    }
+
+    /// The setup of triangle `v` (f32 grid coordinates, `grid.to_grid` of `world`) whose every
+    /// decision is exact for the **world** vertices `world` and the grid `grid` as stated
+    /// (origin and voxel size as f64 numbers), not for the rounded `v`: the filter bounds of
+    /// [`TriSetup::new`] are widened by the [`Perturbation`] of `v`, and inside them the
+    /// predicates are decided in world coordinates ([`crate::world`]). The closed voxel box is
+    /// exact too: a box end that `v` puts on an integer is checked against the world value.
+    /// `None` if a coordinate is not finite or the world vertices are exactly collinear.
+    pub fn with_world(
+        v: &[[f32; 3]; 3],
+        world: Option<(&[[f32; 3]; 3], &Grid)>,
+        mode: Mode,
+    ) -> Option<TriSetup> {
         // The paper's triangle setup, in order.
         if !v.iter().flatten().all(|c| c.is_finite()) {
             return None;
         }
         let o = to_f64(v);
+        let world = world.map(|(w, g)| (to_f64(w), Frame::of(g)));
+        let pert = match &world {
+            Some(_) => Perturbation::of(&o),
+            None => Perturbation::default(),
+        };
         let mut n_o = cross_f64(&o);
         let a = [o[1][0] - o[0][0], o[1][1] - o[0][1], o[1][2] - o[0][2]];
         let b = [o[2][0] - o[0][0], o[2][1] - o[0][1], o[2][2] - o[0][2]];
@@ -299,13 +333,25 @@ impl TriSetup {
         let mut filtered = true;
         for k in 0..3 {
             // all products exactly 0 (no underflow, see above): n̂_k = 0, and n_k = 0 too
-            if mag[k] == 0.0 || n_o[k].abs() > 5.0 * U * mag[k] {
+            if (mag[k] == 0.0 && world.is_none()) || n_o[k].abs() > 5.0 * U * mag[k] + pert.dn {
                 continue;
             }
             // the projection on the plane ⟂ k: n_x over (y, z), n_y over (z, x), n_z over (x, y)
             let (i, j) = ((k + 1) % 3, (k + 2) % 3);
-            let p = |w: [f64; 3]| [w[i], w[j]];
-            let exact = orient2d(p(o[0]), p(o[1]), p(o[2]));
+            let exact = match &world {
+                // the world projection's orientation (f32 values: robust is exact), scaled
+                // to grid units
+                Some((w, f)) => {
+                    let p = |q: [f64; 3]| [q[i], q[j]];
+                    let e = orient2d(p(w[0]), p(w[1]), p(w[2]));
+                    let g = e / (f.voxel_size * f.voxel_size);
+                    sign(e) * g.abs().max(f64::MIN_POSITIVE)
+                }
+                None => {
+                    let p = |w: [f64; 3]| [w[i], w[j]];
+                    orient2d(p(o[0]), p(o[1]), p(o[2]))
+                }
+            };
             if sign(exact) != sign(n_o[k]) {
                 n_o[k] = exact + 0.0;
                 filtered = false;
@@ -350,13 +396,14 @@ impl TriSetup {
                 };
                 ne[k][i] = nk;
                 let w = nk[0].abs() + nk[1].abs();
-                be[k][i] = if w == 0.0 {
-                    // a zero-area projection: the edge function is exactly 0, the test passes
-                    0.0
-                } else if filtered {
-                    8.0 * U * w * (2.0 * big_m + 1.0) + TINY
-                } else {
+                be[k][i] = if !filtered {
                     f64::INFINITY
+                } else if w == 0.0 {
+                    // a zero-area projection: the edge function is exactly 0, the test passes
+                    // (in world coordinates only within the perturbation)
+                    pert.de
+                } else {
+                    8.0 * U * w * (2.0 * big_m + 1.0) + TINY + pert.de
                 };
             }
         }
@@ -375,10 +422,14 @@ impl TriSetup {
             }
         };
         let bp = if filtered {
-            16.0 * U * (mag[0] + mag[1] + mag[2]) * (2.0 * big_m + 2.0) + TINY
+            16.0 * U * (mag[0] + mag[1] + mag[2]) * (2.0 * big_m + 2.0) + TINY + pert.dp(n)
         } else {
             f64::INFINITY
         };
+        let world = world.map(|(w, f)| WorldTri {
+            w: [sw(w[0]), sw(w[1]), sw(w[2])],
+            frame: f.swizzled(swz),
+        });
 
         let mut bmin = [0i32; 3];
         let mut bmax = [0i32; 3];
@@ -387,6 +438,21 @@ impl TriSetup {
             let mx = v[0][k].max(v[1][k]).max(v[2][k]);
             bmin[k] = clamp_i32(mn.ceil() - 1.0);
             bmax[k] = clamp_i32(mx.floor());
+            // `to_grid` keeps every comparison with an integer or makes it a tie, so only an
+            // end on an integer can be off by one: settle it on the world values
+            if let Some(wt) = &world {
+                let f = &wt.frame;
+                let on = |c: f64, ord: std::cmp::Ordering| {
+                    (0..3).any(|i| v[i][k] == c && world::cmp_corner(f, k, wt.w[i][k], c) != ord)
+                };
+                // the exact minimum is above mn unless a vertex there is at or below it
+                if mn == mn.floor() && mn.abs() < 2e9 && !on(mn, std::cmp::Ordering::Greater) {
+                    bmin[k] = clamp_i32(mn);
+                }
+                if mx == mx.floor() && mx.abs() < 2e9 && !on(mx, std::cmp::Ordering::Less) {
+                    bmax[k] = clamp_i32(mx - 1.0);
+                }
+            }
         }
         Some(TriSetup {
             mode,
@@ -405,7 +471,16 @@ impl TriSetup {
             flip,
             be,
             bp,
+            world,
+            band: (pert.de, pert.dp(n)),
         })
+    }
+
+    /// The parts of the edge functions' and of the depth predicates' filter bounds that cover
+    /// the perturbation of the f32 grid coordinates (0 for a setup of [`TriSetup::new`]);
+    /// `crate::scanline` widens its runs' margins by them.
+    pub(crate) fn perturbation_band(&self) -> (f64, f64) {
+        self.band
     }
 
     /// Swizzles a point or voxel given in original coordinates.
@@ -557,6 +632,23 @@ impl TriSetup {
         }
         let [ca, cb] = PLANE[k];
         let p = |w: [f64; 3]| [w[ca], w[cb]];
+        if let Some(wt) = &self.world {
+            // on the world values, at every corner (vertex) of the cell's square (diamond):
+            // the f32 edge's direction may have a zero component the exact one has not
+            let (va, vb) = (p(wt.w[i]), p(wt.w[(i + 1) % 3]));
+            let inside = |q: [f64; 2]| s * world::orient2d(&wt.frame, [ca, cb], va, vb, q) >= 0.0;
+            let (a, b) = (a as f64, b as f64);
+            let q: [[f64; 2]; 4] = match self.mode {
+                Mode::Conservative => [[a, b], [a + 1.0, b], [a, b + 1.0], [a + 1.0, b + 1.0]],
+                Mode::Thin => [
+                    [a, b + 0.5],
+                    [a + 1.0, b + 0.5],
+                    [a + 0.5, b],
+                    [a + 0.5, b + 1.0],
+                ],
+            };
+            return q.into_iter().any(inside);
+        }
         let (va, vb) = (p(self.v[i]), p(self.v[(i + 1) % 3]));
         let inside = |q: [f64; 2]| s * orient2d(va, vb, q) >= 0.0;
         let [n0, n1] = self.ne[k][i];
@@ -577,7 +669,10 @@ impl TriSetup {
     /// `n̂·(q − v₀)` with the exact normal, pointing up: its sign.
     #[inline]
     fn plane_at(&self, q: [f64; 3]) -> f64 {
-        self.flip * plane_side(&self.v, q)
+        match &self.world {
+            Some(wt) => self.flip * world::plane_side(&wt.frame, &wt.w, q),
+            None => self.flip * plane_side(&self.v, q),
+        }
     }
 
     /// Exact `up(z)` of column `(x, y)`: the box's corner furthest along `n`

@@ -131,7 +131,12 @@ impl Slices {
         // −1 (the lower end is ⌈f⌉ − 1 ≥ f − 1); above, d_hi and 0 (the upper end is ⌊g⌋ ≤ g)
         let n = s.n;
         let (gx, gy) = (-n[0] / n[2], -n[1] / n[2]);
-        let lines = [s.d_lo / n[2] - 1.0, s.d_hi / n[2]];
+        // with world coordinates ([`TriSetup::with_world`]) the exact depth range and side
+        // functions may differ from these by the perturbation of the f32 grid coordinates: the
+        // lines move out by it and each margin grows by it
+        let (de, dp) = s.perturbation_band();
+        let dz = 2.0 * dp / n[2];
+        let lines = [s.d_lo / n[2] - 1.0 - dz, s.d_hi / n[2] + dz];
         let mut run = [RunBound {
             alpha: 0.0,
             inv_alpha: 0.0,
@@ -151,7 +156,7 @@ impl Slices {
                     inv_alpha: 1.0 / (a + b * gy),
                     beta0: c + b * z0,
                     beta1: b * gx,
-                    mu: RUN_MARGIN * (a.abs() + b.abs()),
+                    mu: RUN_MARGIN * (a.abs() + b.abs()) + 2.0 * de,
                 };
                 k += 1;
                 // ZX: A·z + B·x + C
@@ -162,7 +167,7 @@ impl Slices {
                     inv_alpha: 1.0 / (a * gy),
                     beta0: c + a * z0,
                     beta1: b + a * gx,
-                    mu: RUN_MARGIN * (a.abs() + b.abs()),
+                    mu: RUN_MARGIN * (a.abs() + b.abs()) + 2.0 * de,
                 };
                 k += 1;
             }

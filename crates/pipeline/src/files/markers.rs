@@ -41,6 +41,10 @@ pub(crate) struct BinsMarker {
     chunks: Vec<[u64; 5]>,
     #[serde(default)]
     pieces: Vec<Vec<[u64; 3]>>,
+    /// The records hold world coordinates (since issue 32; older bins hold grid coordinates
+    /// and are written again).
+    #[serde(default)]
+    world: bool,
 }
 
 impl Marker for BinsMarker {
@@ -61,11 +65,15 @@ impl BinsMarker {
         BinsMarker {
             chunks,
             pieces: bins.pieces().to_vec(),
+            world: true,
         }
     }
 
     /// The bins this marker describes, opened (None if the file does not match it).
     pub(crate) fn open(self, path: &std::path::Path, layout: RecordLayout) -> Option<Bins> {
+        if !self.world {
+            return None;
+        }
         let chunks = self.chunks()?;
         Bins::open_pieces(path, chunks, layout, self.pieces).ok()
     }

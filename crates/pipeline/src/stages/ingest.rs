@@ -378,9 +378,8 @@ fn read_input(
         .transpose()?;
     let mut early_counts = vgrid.and_then(|g| ChunkCounts::new(&g).ok());
     let keys = early_counts.as_ref().map(|c| c.keys());
-    // binning in runs: the triangles move to the grid where they are decoded, as in the
-    // tile stage's scatter pass
-    let move_to = runs.as_ref().map(|r| *r.grid());
+    // binning in runs: the chunk keys are taken where the triangles are decoded, as in the
+    // tile stage's scatter pass (the records keep world coordinates)
     if runs.is_some() {
         early_counts = None;
     }
@@ -393,15 +392,8 @@ fn read_input(
             return (b, None);
         }
         b.add_triangles(tris);
-        let Some(grid) = move_to else {
-            return (b, keys.map(|k| k.of_world(tris)));
-        };
-        for t in tris.iter_mut() {
-            for v in &mut t.v {
-                *v = grid.to_grid(*v);
-            }
-        }
-        (b, keys.map(|k| k.of_grid(tris)))
+        // the bins keep world coordinates (`ChunkVoxelizer::add_world` decides on them)
+        (b, keys.map(|k| k.of_world(tris)))
     };
     let stats = ctx
         .pool

@@ -20,6 +20,7 @@ mod single;
 mod small;
 mod textures;
 mod thin_separating;
+mod world_exact;
 
 /// Every file of this folder is compiled as a module of this binary.
 #[test]

@@ -61,7 +61,7 @@ pub(crate) fn run(
     let path = ctx.work.file(WorkFile::Source);
     let mut log = LeafLog::open(&path)?;
     let resumed = log.records() > 0;
-    let r = append_chunks(ctx, bins, attrs, workers, &mut log);
+    let r = append_chunks(ctx, bins, &tiled.grid, attrs, workers, &mut log);
     log.finish()?;
     r?;
     let mut m = SourceMarker::default();
@@ -104,6 +104,7 @@ fn workers(ctx: &BuildContext, bins: &Bins) -> Result<usize, StageError> {
 fn append_chunks(
     ctx: &BuildContext,
     bins: &Bins,
+    grid: &voxlod_geom::Grid,
     attrs: SourceAttributes,
     workers: usize,
     log: &mut LeafLog,
@@ -117,7 +118,9 @@ fn append_chunks(
     let build_one = |i: usize| -> Result<Built, StageError> {
         let mut b = SourceBuilder::new(chunks[i].coord, attrs);
         bins.read_chunk(i, READ_BATCH, &mut |tris| {
-            tris.iter().for_each(|t| b.add(t));
+            // the bins hold world coordinates; the source geometry is in grid units
+            tris.iter()
+                .for_each(|t| b.add(&voxlod_tile::to_grid(grid, t)));
             Ok(())
         })?;
         let counts = b.counts;

@@ -22,8 +22,10 @@ pub(crate) mod passes;
 
 /// The tile stage's artifact.
 pub(crate) struct Tiled {
-    /// The bins, open for reading.
+    /// The bins, open for reading (triangles in world coordinates).
     pub bins: Bins,
+    /// The grid the bins are cut on.
+    pub grid: voxlod_geom::Grid,
 }
 
 /// Runs the tile stage, or opens the bins its marker describes. Takes the chunk counts the
@@ -65,7 +67,10 @@ pub(crate) fn run(
     if spool.exists() {
         std::fs::remove_file(&spool).map_err(StageError::io("removing", &spool))?;
     }
-    Ok(Tiled { bins })
+    Ok(Tiled {
+        bins,
+        grid: ingested.grid,
+    })
 }
 
 /// The passes over the ingested triangles (the spool, or the memory-mapped input again),

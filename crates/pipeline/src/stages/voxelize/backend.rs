@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, Result};
 use voxlod_format::Voxel;
-use voxlod_geom::Triangle;
+use voxlod_geom::{Grid, Triangle};
 use voxlod_texture::TextureSet;
 use voxlod_tile::{Bins, TileError};
 use voxlod_voxelize::ChunkVoxelizer;
@@ -28,12 +28,21 @@ pub(crate) trait ChunkSource {
     }
     /// Feeds the triangles to `f` in batches, from the first, until `f` breaks.
     fn replay(&self, f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>) -> Result<(), StageError>;
+    /// The grid of the chunk's triangles.
+    fn grid(&self) -> &Grid;
+    /// [`ChunkSource::replay`] with the triangles in world coordinates (as the bins hold them),
+    /// for a voxelizer that decides on the input's own coordinates (`ChunkVoxelizer::add_world`).
+    fn replay_world(
+        &self,
+        f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>,
+    ) -> Result<(), StageError>;
 }
 
-/// Chunk `index` of the tile stage's bins.
+/// Chunk `index` of the tile stage's bins (world coordinates on `grid`).
 pub(crate) struct BinChunk<'a> {
     pub bins: &'a Bins,
     pub index: usize,
+    pub grid: &'a Grid,
 }
 
 impl ChunkSource for BinChunk<'_> {
@@ -47,6 +56,20 @@ impl ChunkSource for BinChunk<'_> {
         self.bins.chunks()[self.index].origin()
     }
     fn replay(&self, f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>) -> Result<(), StageError> {
+        let mut moved = Vec::new();
+        self.replay_world(&mut |tris| {
+            moved.clear();
+            moved.extend(tris.iter().map(|t| voxlod_tile::to_grid(self.grid, t)));
+            f(&moved)
+        })
+    }
+    fn grid(&self) -> &Grid {
+        self.grid
+    }
+    fn replay_world(
+        &self,
+        f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>,
+    ) -> Result<(), StageError> {
         // the tile crate's callback can only stop a read with an error: a break is that
         // error carrying `ReadStopped`, recognised by its type
         let r = self
@@ -129,8 +152,9 @@ impl Voxelize for CpuVoxelizers {
         })?;
         let before = vz.skipped();
         vz.begin(chunk.origin());
-        chunk.replay(&mut |tris| {
-            vz.add(tris);
+        let grid = *chunk.grid();
+        chunk.replay_world(&mut |tris| {
+            vz.add_world(&grid, tris);
             ControlFlow::Continue(())
         })?;
         let voxels = vz.finish();
@@ -238,6 +262,7 @@ pub(crate) fn select(
     cpu_workers: usize,
     threads: usize,
     bins: &Bins,
+    grid: &Grid,
     textures: Option<Arc<TextureSet>>,
     materials: bool,
 ) -> Result<(Box<dyn Voxelize>, String)> {
@@ -292,11 +317,11 @@ pub(crate) fn select(
     }
     #[cfg(feature = "gpu")]
     {
-        select_gpu(s, bins, cpu)
+        select_gpu(s, bins, grid, cpu)
     }
     #[cfg(not(feature = "gpu"))]
     {
-        let _ = bins;
+        let _ = (bins, grid);
         match s.backend {
             Backend::Gpu => {
                 anyhow::bail!("--backend gpu: this voxlod was built without the `gpu` feature")
@@ -315,6 +340,7 @@ pub(crate) fn select(
 fn select_gpu(
     s: &BuildSettings,
     bins: &Bins,
+    grid: &Grid,
     cpu: impl Fn() -> (Box<dyn Voxelize>, String),
 ) -> Result<(Box<dyn Voxelize>, String)> {
     let backend = s.backend;
@@ -365,7 +391,7 @@ fn select_gpu(
     if method == voxlod_gpu::GpuMethod::Hybrid {
         let c = match s.cutoff {
             Cutoff::Fixed(c) => c,
-            Cutoff::Auto => search_cutoff(&mut gpu, bins)?,
+            Cutoff::Auto => search_cutoff(&mut gpu, bins, grid)?,
         };
         gpu.set_method(method, c);
         desc += &format!(
@@ -424,14 +450,14 @@ fn voxelize_streamed(
 /// and returns the fastest (the paper's suggested future work). The voxels do not depend on
 /// the cutoff, so neither does the output file.
 #[cfg(feature = "gpu")]
-fn search_cutoff(gpu: &mut voxlod_gpu::GpuVoxelizer, bins: &Bins) -> Result<f32> {
+fn search_cutoff(gpu: &mut voxlod_gpu::GpuVoxelizer, bins: &Bins, grid: &Grid) -> Result<f32> {
     let Some(i) = (0..bins.chunks().len()).max_by_key(|&i| bins.chunks()[i].count) else {
         return Ok(DEFAULT_CUTOFF);
     };
     let mut time = |c: f32| -> Result<f64> {
         gpu.set_method(voxlod_gpu::GpuMethod::Hybrid, c);
         let t = std::time::Instant::now();
-        voxelize_streamed(gpu, &BinChunk { bins, index: i }, 256 * 1024)
+        voxelize_streamed(gpu, &BinChunk { bins, index: i, grid }, 256 * 1024)
             .context("timing a cutoff")?;
         Ok(t.elapsed().as_secs_f64())
     };

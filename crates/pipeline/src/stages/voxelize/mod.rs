@@ -78,6 +78,7 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, Sta
         ctx.memory.voxelizers,
         threads,
         &tiled.bins,
+        &tiled.grid,
         textures,
         materials,
     )?;
@@ -113,7 +114,7 @@ pub(crate) fn run_with(
     let leaves_path = ctx.work.file(WorkFile::Leaves);
     let mut log = LeafLog::open(&leaves_path)?;
     let start = log.records() as usize;
-    if let Err(e) = append_chunks(ctx, &tiled.bins, &*vz, &mut log) {
+    if let Err(e) = append_chunks(ctx, &tiled.bins, &tiled.grid, &*vz, &mut log) {
         log.finish()?;
         return Err(e);
     }
@@ -151,6 +152,7 @@ thread_local! {
 fn append_chunks(
     ctx: &BuildContext,
     bins: &Bins,
+    grid: &voxlod_geom::Grid,
     vz: &dyn Voxelize,
     log: &mut LeafLog,
 ) -> Result<(), StageError> {
@@ -162,7 +164,11 @@ fn append_chunks(
     // a leaf that is not the root gets its half (its share of its parent) here, on its worker
     let halves = ctx.settings.resolution > voxlod_geom::CHUNK;
     let voxelize_one = |i: usize| -> Result<Encoded, StageError> {
-        let r = vz.voxelize(&BinChunk { bins, index: i })?;
+        let r = vz.voxelize(&BinChunk {
+            bins,
+            index: i,
+            grid,
+        })?;
         if r.voxels.is_empty() {
             return Ok(Encoded {
                 skipped: r.skipped,
