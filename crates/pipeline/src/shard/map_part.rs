@@ -241,18 +241,12 @@ fn bin_part(
 ) -> Result<(Bins, voxlod_ingest::IngestStats, Bounds)> {
     let mut runs = RunScatter::create(grid, path, layout, memory.scatter_buffer)?;
     let keys = ChunkCounts::new(grid)?.keys();
-    let g = *grid;
-    // on the decoding threads: bounds in world coordinates, then the move to the grid and
-    // the chunk keys (as the one-machine build's ingest pass does)
+    // on the decoding threads: bounds and chunk keys, as the one-machine build's ingest pass
+    // takes them; the records keep world coordinates (`ChunkVoxelizer::add_world` decides on them)
     let prepare = move |tris: &mut [Triangle]| {
         let mut b = Bounds::default();
         b.add_triangles(tris);
-        for t in tris.iter_mut() {
-            for v in &mut t.v {
-                *v = g.to_grid(*v);
-            }
-        }
-        (b, keys.of_grid(tris))
+        (b, keys.of_world(tris))
     };
     let mut bounds = Bounds::default();
     let base = part.bytes[0];
