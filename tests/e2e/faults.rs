@@ -894,8 +894,14 @@ fn leftovers_of_killed_writers_are_cleaned() {
     };
     let t = Instant::now();
     while part(d).is_empty() || std::fs::metadata(d.join(part(d)[0].clone())).unwrap().len() == 0 {
-        assert!(t.elapsed() < Duration::from_secs(60), "gen wrote no part file");
-        assert!(child.try_wait().unwrap().is_none(), "gen ended before it was killed");
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "gen wrote no part file"
+        );
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "gen ended before it was killed"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     child.kill().unwrap();
@@ -934,8 +940,14 @@ fn leftovers_of_killed_writers_are_cleaned() {
     let o = voxlod(&["clean", s(d)], d);
     ok(&o);
     let text = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(text.contains("removed the leftovers of 1 killed output"), "{text}");
-    assert!(part(d).is_empty() && !d.join(".voxlod-lock-big.ply").exists(), "{text}");
+    assert!(
+        text.contains("removed the leftovers of 1 killed output"),
+        "{text}"
+    );
+    assert!(
+        part(d).is_empty() && !d.join(".voxlod-lock-big.ply").exists(),
+        "{text}"
+    );
     assert!(busy_lock.exists() && d.join(".voxlod-part-busy.png-123-abc").exists());
     let _ = Command::new("kill")
         .args(["-TERM", "--", &format!("-{}", holder.id())])

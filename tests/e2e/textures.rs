@@ -678,7 +678,10 @@ fn gltf_from_an_independent_converter_matches_its_obj() {
             "{} is missing (npm ci --prefix tests/converters installs it)",
             tool.display()
         );
-        assert!(std::env::var("CI").as_deref() != Ok("true"), "{why}; CI=true requires it");
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "{why}; CI=true requires it"
+        );
         eprintln!("gltf_from_an_independent_converter_matches_its_obj: skipped: {why}");
         return;
     }
@@ -691,7 +694,13 @@ fn gltf_from_an_independent_converter_matches_its_obj() {
     assert!(mtl.contains("Kd 0.639216"), "{mtl}");
     let mtl: String = mtl
         .lines()
-        .map(|l| if l.starts_with("Kd ") { "Kd 1.000000 1.000000 1.000000" } else { l })
+        .map(|l| {
+            if l.starts_with("Kd ") {
+                "Kd 1.000000 1.000000 1.000000"
+            } else {
+                l
+            }
+        })
         .collect::<Vec<_>>()
         .join("\n");
     std::fs::write(d.path().join("textured_simple_reoriented.mtl"), mtl).unwrap();

@@ -109,7 +109,9 @@ mod tests {
     use super::*;
 
     fn lcg(s: &mut u64) -> u8 {
-        *s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        *s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (*s >> 33) as u8
     }
 
@@ -146,7 +148,9 @@ mod tests {
                     C::Rgba => 4,
                 };
                 let row_bytes = (w as usize * samples * depth as usize).div_ceil(8);
-                let data: Vec<u8> = (0..row_bytes * h as usize).map(|_| lcg(&mut seed)).collect();
+                let data: Vec<u8> = (0..row_bytes * h as usize)
+                    .map(|_| lcg(&mut seed))
+                    .collect();
                 let mut png_bytes = Vec::new();
                 {
                     let mut e = png::Encoder::new(&mut png_bytes, w, h);

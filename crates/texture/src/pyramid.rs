@@ -93,7 +93,10 @@ impl LevelRows {
     /// Adds the next level-0 row; when it is the last one of level-`k` row `j`, writes that
     /// row to `out` (`width()` texels) and returns true.
     pub(crate) fn push(&mut self, row: &[[u8; 4]], out: &mut Vec<[u8; 4]>) -> bool {
-        assert!(row.len() == self.w as usize && self.y < self.h, "rows in order, each w wide");
+        assert!(
+            row.len() == self.w as usize && self.y < self.h,
+            "rows in order, each w wide"
+        );
         let lut = lut();
         for (x, t) in row.iter().enumerate() {
             let i = self.col[x] as usize;

@@ -182,20 +182,22 @@ impl TileWriter {
         let (mut level_row, mut tiles) = (Vec::new(), Vec::new());
         let file = self.out.get_ref();
         // a finished row of level `k` goes into its band; a full (or last) band is written
-        let mut put_row = |k: usize, texels: &[[u8; 4]], tiles: &mut Vec<u8>| -> std::io::Result<()> {
-            let (wk, hk) = sizes[k];
-            let (band, done) = &mut bands[k];
-            band.extend_from_slice(texels);
-            *done += 1;
-            if *done % TILE == 0 || *done == hk {
-                band_tiles(band, wk, tiles);
-                let tile_row = (*done - 1) / TILE;
-                let at = first_tile + level_first[k] + tile_row as u64 * wk.div_ceil(TILE) as u64;
-                file.write_all_at(tiles, at * TILE_BYTES)?;
-                band.clear();
-            }
-            Ok(())
-        };
+        let mut put_row =
+            |k: usize, texels: &[[u8; 4]], tiles: &mut Vec<u8>| -> std::io::Result<()> {
+                let (wk, hk) = sizes[k];
+                let (band, done) = &mut bands[k];
+                band.extend_from_slice(texels);
+                *done += 1;
+                if *done % TILE == 0 || *done == hk {
+                    band_tiles(band, wk, tiles);
+                    let tile_row = (*done - 1) / TILE;
+                    let at =
+                        first_tile + level_first[k] + tile_row as u64 * wk.div_ceil(TILE) as u64;
+                    file.write_all_at(tiles, at * TILE_BYTES)?;
+                    band.clear();
+                }
+                Ok(())
+            };
         for _ in 0..h {
             if let Err(e) = next_row(&mut row) {
                 // nothing of this texture stays: the file ends where it began

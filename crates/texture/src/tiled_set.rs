@@ -106,7 +106,8 @@ impl Source<'_> {
         const PNG_DECODER_BYTES: usize = 64 << 20;
         let streamed = match &self.m.embedded {
             Some(b) if is_png(&b.0) => {
-                PngRows::open(std::io::Cursor::new(&b.0[..]), PNG_DECODER_BYTES).map(|r| r.map(Rows::Embedded))
+                PngRows::open(std::io::Cursor::new(&b.0[..]), PNG_DECODER_BYTES)
+                    .map(|r| r.map(Rows::Embedded))
             }
             Some(_) => Ok(None),
             None => match png_file(self.path) {
@@ -256,7 +257,10 @@ impl TextureSet {
                     // one texture at a time, by rows where it can be, dropped once its tiles
                     // are written
                     let size = sizes[i].expect("probed");
-                    match sources[i].add_tiles(&mut out, key, size, share).map_err(what)? {
+                    match sources[i]
+                        .add_tiles(&mut out, key, size, share)
+                        .map_err(what)?
+                    {
                         Ok(_) => written.push(i),
                         Err(e) => warnings.push(sources[i].warning(&e)),
                     }

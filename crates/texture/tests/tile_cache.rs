@@ -275,7 +275,11 @@ fn textures_bigger_than_the_share_are_decoded_by_rows_or_refused() {
         let (w, h) = ((n >> k).max(1), (n >> k).max(1));
         for y in 0..h {
             for x in 0..w {
-                assert_eq!(big.texel(k, x, y), want.texel(k, x, y), "level {k} ({x}, {y})");
+                assert_eq!(
+                    big.texel(k, x, y),
+                    want.texel(k, x, y),
+                    "level {k} ({x}, {y})"
+                );
             }
         }
     }

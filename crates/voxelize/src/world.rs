@@ -111,7 +111,8 @@ impl Scale {
         debug_assert_eq!(h as f64, 2.0 * c);
         let (m, e) = decode(frame.voxel_size);
         // c·s = h·m·2^(e−1)
-        self.big(frame.origin[k]) + ((BigInt::from(h) * BigInt::from(m)) << ((e - 1 - self.min_e) as usize))
+        self.big(frame.origin[k])
+            + ((BigInt::from(h) * BigInt::from(m)) << ((e - 1 - self.min_e) as usize))
     }
 }
 
@@ -136,7 +137,10 @@ pub fn cmp_corner(frame: &Frame, k: usize, p: f64, c: f64) -> Ordering {
 /// The sign of `orient2d(a, b, q)` (as [`crate::predicates::orient2d`]) for world points `a`,
 /// `b` on axes `axes` of the frame and the grid corner `q` (multiples of ½), exactly.
 pub fn orient2d(frame: &Frame, axes: [usize; 2], a: [f64; 2], b: [f64; 2], q: [f64; 2]) -> f64 {
-    if let (Some(q0), Some(q1)) = (frame.corner_f64(axes[0], q[0]), frame.corner_f64(axes[1], q[1])) {
+    if let (Some(q0), Some(q1)) = (
+        frame.corner_f64(axes[0], q[0]),
+        frame.corner_f64(axes[1], q[1]),
+    ) {
         return crate::predicates::orient2d(a, b, [q0, q1]).signum_or_zero();
     }
     let sc = Scale::new(&[a[0], a[1], b[0], b[1]], frame);
@@ -322,7 +326,11 @@ pub(crate) fn small_certain(v: &[[f32; 3]; 3], world: &[[f32; 3]; 3]) -> bool {
     if count == 3 {
         let d = [0, 1, 2].map(|k| p[k] - o[0][k]);
         let g = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
-        let bound = 16.0 * U * (0..3).map(|k| (mag[k] + n[k].abs()) * d[k].abs()).sum::<f64>()
+        let bound = 16.0
+            * U
+            * (0..3)
+                .map(|k| (mag[k] + n[k].abs()) * d[k].abs())
+                .sum::<f64>()
             + pert.dp(n)
             + 1e-300;
         if !(g.abs() > bound) {

@@ -574,7 +574,10 @@ mod tests {
         w(".voxlod-part-e.ply-x-ff", 10);
         w(".voxlod-partial", 10);
         let found = find_output_leftovers(d).unwrap();
-        let names: Vec<_> = found.iter().map(|l| (l.name.as_str(), l.files.len())).collect();
+        let names: Vec<_> = found
+            .iter()
+            .map(|l| (l.name.as_str(), l.files.len()))
+            .collect();
         assert_eq!(names, vec![("a-b.ply", 2), ("c.png", 2), ("d.voxlod", 1)]);
         assert_eq!(found[0].in_use_by, None);
         assert_eq!(found[1].in_use_by, Some(Some(std::process::id())));

@@ -143,7 +143,12 @@ impl<'a> WRef<'a> {
         let w = t.map(|p| p.map(|c| c as f64));
         let g = w.map(|p| [0, 1, 2].map(|k| (p[k] - origin[k]) / s));
         let e = [sub(g[1], g[0]), sub(g[2], g[1]), sub(g[0], g[2])];
-        let mut axes = vec![unit(0), unit(1), unit(2), cross(sub(g[1], g[0]), sub(g[2], g[0]))];
+        let mut axes = vec![
+            unit(0),
+            unit(1),
+            unit(2),
+            cross(sub(g[1], g[0]), sub(g[2], g[0])),
+        ];
         for ei in e {
             for k in 0..3 {
                 axes.push(cross(ei, unit(k)));
@@ -161,7 +166,8 @@ impl<'a> WRef<'a> {
     }
 
     fn wb(&self) -> &[[BigInt; 3]; 3] {
-        self.wb.get_or_init(|| self.w.map(|p| p.map(|x| self.ex.big(x))))
+        self.wb
+            .get_or_init(|| self.w.map(|p| p.map(|x| self.ex.big(x))))
     }
 
     /// Exact signs of the world normal's components.
@@ -299,7 +305,11 @@ impl<'a> WRef<'a> {
             }
             for i in 0..3 {
                 let a = 4 + 3 * i + k;
-                let best = diamond.iter().map(|&q| -o * self.sgn(a, q, i)).max().unwrap();
+                let best = diamond
+                    .iter()
+                    .map(|&q| -o * self.sgn(a, q, i))
+                    .max()
+                    .unwrap();
                 if best < 0 {
                     return false;
                 }
@@ -323,7 +333,11 @@ impl<'a> WRef<'a> {
             (m.ceil() as i32 - 2).max(0)
         });
         let hi = [0, 1, 2].map(|k| {
-            let m = self.g.iter().map(|v| v[k]).fold(f64::NEG_INFINITY, f64::max);
+            let m = self
+                .g
+                .iter()
+                .map(|v| v[k])
+                .fold(f64::NEG_INFINITY, f64::max);
             (m.floor() as i32 + 1).min(self.res as i32 - 1)
         });
         (lo, hi)
@@ -512,7 +526,12 @@ fn near_ties_are_decided_on_the_input() {
                     _ => true,
                 };
                 let c = if on_grid {
-                    base[k] + if kind == 3 { (j as f64) * ((rng.next_u64() % 3) as f64) } else { 0.0 }
+                    base[k]
+                        + if kind == 3 {
+                            (j as f64) * ((rng.next_u64() % 3) as f64)
+                        } else {
+                            0.0
+                        }
                 } else {
                     base[k] + (rng.f64() * 2.5 - 0.5) * (1.0 + (j as f64))
                 };

@@ -457,8 +457,16 @@ fn search_cutoff(gpu: &mut voxlod_gpu::GpuVoxelizer, bins: &Bins, grid: &Grid) -
     let mut time = |c: f32| -> Result<f64> {
         gpu.set_method(voxlod_gpu::GpuMethod::Hybrid, c);
         let t = std::time::Instant::now();
-        voxelize_streamed(gpu, &BinChunk { bins, index: i, grid }, 256 * 1024)
-            .context("timing a cutoff")?;
+        voxelize_streamed(
+            gpu,
+            &BinChunk {
+                bins,
+                index: i,
+                grid,
+            },
+            256 * 1024,
+        )
+        .context("timing a cutoff")?;
         Ok(t.elapsed().as_secs_f64())
     };
     time(DEFAULT_CUTOFF)?; // warm-up: pipelines, buffers
