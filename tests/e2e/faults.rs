@@ -955,6 +955,67 @@ fn leftovers_of_killed_writers_are_cleaned() {
     let _ = holder.wait();
 }
 
+/// A 3D Tiles export stages its folder as `.voxlod-part-NAME-PID-TIME` under the output's lock
+/// (`.voxlod-lock-NAME`), like a file output: what a killed export left (here made by hand: a
+/// staged folder with a tile in it and the lock file nobody holds) is listed and removed by
+/// `clean`, and also by the next export to the same folder; a finished export (a new one and
+/// one replacing a tileset with `--force`) leaves nothing beside its folder.
+#[test]
+fn a_killed_tiles_exports_staging_folder_is_cleaned() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(&voxlod(
+        &["build", "-q", s(&sample()), "-o", "s.voxlod", "-r", "256"],
+        d,
+    ));
+    let hidden = |d: &Path| {
+        let mut v: Vec<String> = std::fs::read_dir(d)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with(".voxlod-"))
+            .collect();
+        v.sort();
+        v
+    };
+    let leave = |d: &Path| {
+        let staged = d.join(".voxlod-part-tiles-4242-17f3a9");
+        std::fs::create_dir_all(staged.join("tiles")).unwrap();
+        std::fs::write(staged.join("tiles/0.glb"), vec![1u8; 5000]).unwrap();
+        std::fs::write(d.join(".voxlod-lock-tiles"), b"4242").unwrap();
+    };
+    leave(d);
+    let o = voxlod(&["clean", "--dry-run", s(d)], d);
+    ok(&o);
+    let t = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        t.contains("left by a killed run")
+            && t.contains(".voxlod-part-tiles-4242-17f3a9")
+            && t.contains("would be removed"),
+        "{t}"
+    );
+    let o = voxlod(&["clean", s(d)], d);
+    ok(&o);
+    let t = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        t.contains("removed the leftovers of 1 killed output"),
+        "{t}"
+    );
+    assert!(hidden(d).is_empty(), "{:?}", hidden(d));
+
+    // the next export to the same folder removes them too, and leaves nothing itself
+    leave(d);
+    ok(&voxlod(&["export", "s.voxlod", "--3d-tiles", "tiles"], d));
+    assert!(d.join("tiles/tileset.json").is_file());
+    assert!(hidden(d).is_empty(), "{:?}", hidden(d));
+    ok(&voxlod(
+        &["export", "s.voxlod", "--3d-tiles", "tiles", "--force"],
+        d,
+    ));
+    assert!(d.join("tiles/tileset.json").is_file());
+    assert!(hidden(d).is_empty(), "{:?}", hidden(d));
+}
+
 /// Messages still open after the first pass (issue 17, "Messages"): each names the file and
 /// the place, in words.
 #[test]

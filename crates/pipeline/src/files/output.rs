@@ -163,6 +163,85 @@ impl OutputGuard {
         Ok(guard)
     }
 
+    /// The lock and staged name for an output that is a **folder** (`export --3d-tiles DIR`):
+    /// `folder`'s parent must exist (the caller checks what may be replaced); the staged name
+    /// `.voxlod-part-NAME-PID-TIME` is then a folder the caller creates and fills, renamed into
+    /// place by [`commit_folder`](Self::commit_folder) and removed with everything in it if
+    /// the guard is dropped first. A killed export leaves it (and the lock file) for
+    /// `voxlod clean`, like a killed build's staged file.
+    pub fn acquire_folder(folder: &Path) -> Result<OutputGuard> {
+        if folder.as_os_str().is_empty() {
+            bail!("the output folder path is empty");
+        }
+        let dir = output_dir(folder);
+        if !dir.is_dir() {
+            bail!(
+                "{}: the folder {} does not exist",
+                folder.display(),
+                dir.display()
+            );
+        }
+        let name = file_name(folder);
+        let lock_path = dir.join(format!(".voxlod-lock-{name}"));
+        let lock = lock_file(&lock_path, folder, dir)?;
+        let guard = OutputGuard {
+            output: folder.to_path_buf(),
+            staged: dir.join(format!(
+                ".voxlod-part-{name}-{}-{:x}",
+                std::process::id(),
+                std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| d.as_nanos() as u64)
+            )),
+            lock_path,
+            lock,
+        };
+        check_free_space(folder, dir)?;
+        remove_leftovers(dir, &name);
+        Ok(guard)
+    }
+
+    /// Puts the staged folder in place of the output folder: created there if absent, else
+    /// exchanged with the old one in one atomic `renameat2(RENAME_EXCHANGE)` (no moment without a
+    /// tileset; on a file system without it, the old folder is moved aside first) and the old
+    /// one, now under the staged name, removed. The folder's parent is synced.
+    pub fn commit_folder(&self) -> Result<()> {
+        let shown = self.output.display();
+        let exists = std::fs::symlink_metadata(&self.output).is_ok();
+        if !exists {
+            std::fs::rename(&self.staged, &self.output).map_err(|e| {
+                anyhow::anyhow!("{shown}: cannot rename into place: {}", os_text(&e))
+            })?;
+        } else if let Err(e) = exchange(&self.staged, &self.output) {
+            // no RENAME_EXCHANGE here: aside, in, then the old one removed
+            let aside = PathBuf::from(format!("{}-old", self.staged.display()));
+            std::fs::rename(&self.output, &aside).map_err(|e2| {
+                anyhow::anyhow!(
+                    "{shown}: cannot exchange ({}) nor move aside: {}",
+                    os_text(&e),
+                    os_text(&e2)
+                )
+            })?;
+            if let Err(e) = std::fs::rename(&self.staged, &self.output) {
+                let _ = std::fs::rename(&aside, &self.output);
+                bail!("{shown}: cannot rename into place: {}", os_text(&e));
+            }
+            let _ = std::fs::rename(&aside, &self.staged);
+        }
+        // the old folder (now at the staged name) goes with everything in it
+        if exists {
+            std::fs::remove_dir_all(&self.staged).map_err(|e| {
+                anyhow::anyhow!(
+                    "{}: cannot remove the replaced folder: {}",
+                    self.staged.display(),
+                    os_text(&e)
+                )
+            })?;
+        }
+        voxlod_io::sync_dir(output_dir(&self.output));
+        Ok(())
+    }
+
     /// The unique temporary name to write the output under (beside it, so that
     /// [`commit`](Self::commit) is an atomic rename).
     pub fn staged(&self) -> &Path {
@@ -204,7 +283,7 @@ impl OutputGuard {
 
 impl Drop for OutputGuard {
     fn drop(&mut self) {
-        let _ = std::fs::remove_file(&self.staged);
+        remove_entry(&self.staged);
         // removed while still locked (the lock goes with the descriptor, closed after this)
         if same_inode(&self.lock, &self.lock_path) {
             let _ = std::fs::remove_file(&self.lock_path);
@@ -295,9 +374,57 @@ fn remove_leftovers(dir: &Path, name: &str) {
     if let Ok(entries) = std::fs::read_dir(dir) {
         for e in entries.flatten() {
             if e.file_name().to_string_lossy().starts_with(&prefix) {
-                let _ = std::fs::remove_file(e.path());
+                remove_entry(&e.path());
             }
         }
+    }
+}
+
+/// Removes a file, or a folder with everything in it (a staged tileset); errors ignored.
+fn remove_entry(path: &Path) {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.is_dir() => {
+            let _ = std::fs::remove_dir_all(path);
+        }
+        Ok(_) => {
+            let _ = std::fs::remove_file(path);
+        }
+        Err(_) => {}
+    }
+}
+
+/// The bytes of a file, or of every file under a folder (symlinks not followed).
+fn entry_bytes(path: &Path) -> u64 {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.is_dir() => std::fs::read_dir(path).map_or(0, |rd| {
+            rd.flatten().map(|e| entry_bytes(&e.path())).sum::<u64>()
+        }),
+        Ok(m) => m.len(),
+        Err(_) => 0,
+    }
+}
+
+/// Exchanges the two paths atomically (`renameat2` with `RENAME_EXCHANGE`, Linux ≥ 3.15 on
+/// most local file systems).
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    use std::ffi::CString;
+    use std::os::unix::ffi::OsStrExt;
+    let ca = CString::new(a.as_os_str().as_bytes())?;
+    let cb = CString::new(b.as_os_str().as_bytes())?;
+    // SAFETY: two NUL-terminated paths relative to the working directory.
+    let r = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            ca.as_ptr(),
+            libc::AT_FDCWD,
+            cb.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
     }
 }
 
@@ -344,7 +471,8 @@ pub fn find_output_leftovers(dir: &Path) -> Result<Vec<OutputLeftovers>> {
         let Some(name) = leftover_name(&file) else {
             continue;
         };
-        if !e.file_type().is_ok_and(|t| t.is_file()) {
+        // files, and the staged folders of tileset exports
+        if !e.file_type().is_ok_and(|t| t.is_file() || t.is_dir()) {
             continue;
         }
         let l = by_name.entry(name.clone()).or_insert(OutputLeftovers {
@@ -353,7 +481,7 @@ pub fn find_output_leftovers(dir: &Path) -> Result<Vec<OutputLeftovers>> {
             bytes: 0,
             in_use_by: None,
         });
-        l.bytes += e.metadata().map_or(0, |m| m.len());
+        l.bytes += entry_bytes(&e.path());
         l.files.push(e.path());
     }
     let mut found: Vec<OutputLeftovers> = by_name.into_values().collect();
@@ -400,8 +528,14 @@ pub fn remove_output_leftovers(dir: &Path, name: &str) -> Result<u64> {
     for e in entries.flatten() {
         let file = e.file_name().to_string_lossy().into_owned();
         if file.starts_with(&prefix) && leftover_name(&file).as_deref() == Some(name) {
-            let len = e.metadata().map_or(0, |m| m.len());
-            std::fs::remove_file(e.path()).map_err(|err| {
+            let len = entry_bytes(&e.path());
+            let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
+            let removed = if is_dir {
+                std::fs::remove_dir_all(e.path())
+            } else {
+                std::fs::remove_file(e.path())
+            };
+            removed.map_err(|err| {
                 anyhow::anyhow!("removing {}: {}", e.path().display(), os_text(&err))
             })?;
             bytes += len;
@@ -597,6 +731,55 @@ mod tests {
             assert!(d.join(f).exists(), "{f} was removed");
         }
         drop(held);
+    }
+
+    /// A staged folder (a tileset export's) is a leftover like a staged file: found with the
+    /// bytes of the files inside, removed with them; `acquire_folder` stages a folder name,
+    /// `commit_folder` exchanges it with an existing folder and removes the old one, and a guard
+    /// dropped before its commit removes its staged folder.
+    #[test]
+    fn staged_folders_are_leftovers_and_commit_exchanges() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        let staged = d.join(".voxlod-part-t-12-ab");
+        std::fs::create_dir_all(staged.join("sub")).unwrap();
+        std::fs::write(staged.join("sub/x"), vec![0u8; 700]).unwrap();
+        std::fs::write(staged.join("y"), vec![0u8; 300]).unwrap();
+        let found = find_output_leftovers(d).unwrap();
+        assert_eq!(found.len(), 1);
+        assert_eq!((found[0].name.as_str(), found[0].bytes), ("t", 1000));
+        // and the lock file it took, with our pid in it
+        assert!(remove_output_leftovers(d, "t").unwrap() >= 1000);
+        assert!(!staged.exists());
+
+        let out = d.join("t");
+        std::fs::create_dir(&out).unwrap();
+        std::fs::write(out.join("old"), b"old").unwrap();
+        let g = OutputGuard::acquire_folder(&out).unwrap();
+        assert!(g
+            .staged()
+            .file_name()
+            .unwrap()
+            .to_string_lossy()
+            .starts_with(".voxlod-part-t-"));
+        std::fs::create_dir(g.staged()).unwrap();
+        std::fs::write(g.staged().join("new"), b"new").unwrap();
+        g.commit_folder().unwrap();
+        drop(g);
+        assert!(out.join("new").is_file() && !out.join("old").exists());
+        let names: Vec<_> = std::fs::read_dir(d)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("t")]);
+
+        let g = OutputGuard::acquire_folder(&out).unwrap();
+        std::fs::create_dir(g.staged()).unwrap();
+        std::fs::write(g.staged().join("half"), b"h").unwrap();
+        let staged = g.staged().to_path_buf();
+        drop(g);
+        assert!(!staged.exists() && out.join("new").is_file());
     }
 
     #[test]

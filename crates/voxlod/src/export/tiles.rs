@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use voxlod_format::Reader;
-use voxlod_pipeline::format_size;
+use voxlod_pipeline::{format_size, OutputGuard};
 
 use super::size_guard::{level_voxels, SizeLimit};
 
@@ -22,30 +22,19 @@ pub fn level_for_error(reader: &Reader, error: f64) -> u32 {
         .unwrap_or(0)
 }
 
-/// A staging folder removed on drop unless it was renamed into place.
-struct Staging(Option<PathBuf>);
-
-impl Drop for Staging {
-    fn drop(&mut self) {
-        if let Some(p) = self.0.take() {
-            let _ = std::fs::remove_dir_all(p);
-        }
-    }
-}
-
 /// Checks that `dir` may receive a tileset: absent, an empty folder, or (with `force`) a
 /// folder holding an earlier `tileset.json`.
-fn check_target(dir: &Path, force: bool) -> Result<bool> {
+fn check_target(dir: &Path, force: bool) -> Result<()> {
     let shown = dir.display();
     let Ok(m) = std::fs::symlink_metadata(dir) else {
-        return Ok(false);
+        return Ok(());
     };
     if !m.is_dir() {
         bail!("{shown}: exists and is not a folder; --3d-tiles writes a folder");
     }
     let mut entries = std::fs::read_dir(dir).with_context(|| format!("{shown}: cannot list"))?;
     if entries.next().is_none() {
-        return Ok(true);
+        return Ok(());
     }
     if !dir.join("tileset.json").is_file() {
         bail!("{shown}: the folder is not empty and holds no tileset; name a new or empty folder");
@@ -53,7 +42,7 @@ fn check_target(dir: &Path, force: bool) -> Result<bool> {
     if !force {
         bail!("{shown}: holds a tileset already; --force replaces it");
     }
-    Ok(true)
+    Ok(())
 }
 
 pub fn run(
@@ -64,7 +53,7 @@ pub fn run(
     max_size: Option<u64>,
     force: bool,
 ) -> Result<()> {
-    let exists = check_target(dir, force)?;
+    check_target(dir, force)?;
     let r = Reader::open(file)?;
     let level = match error {
         Some(e) if !(e.is_finite() && e > 0.0) => {
@@ -84,14 +73,12 @@ pub fn run(
             parent.display()
         );
     }
-    let name = dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "tiles".into());
-    let stage_path = parent.join(format!(".voxlod-tiles-{name}-{}", std::process::id()));
+    // the output's lock and its staged folder `.voxlod-part-NAME-PID-TIME` beside it (removed
+    // if this fails; left to `voxlod clean` if the process is killed)
+    let guard = OutputGuard::acquire_folder(dir)?;
+    let stage_path = guard.staged().to_path_buf();
     let limit = SizeLimit::for_dir(max_size, &parent);
     let voxels = level_voxels(&r);
-    let mut stage = Staging(None);
     let s = voxlod_render::export_tileset_with(&r, level, &stage_path, &mut |s| {
         // other cuts: bytes in proportion to the voxels of the levels they hold
         let cut_voxels = |l: u32| voxels[l as usize..].iter().sum::<u64>();
@@ -112,7 +99,6 @@ pub fn run(
                 stage_path.display()
             ))
         })?;
-        stage.0 = Some(stage_path.clone());
         eprintln!(
             "writing a 3D Tiles tileset of levels {level}..={} of {}: {} tiles, {} quads, {} to {}",
             r.spec().levels - 1,
@@ -124,19 +110,8 @@ pub fn run(
         );
         Ok(())
     })?;
-    // into place: an earlier tileset is moved aside first and removed after
-    let old = parent.join(format!(".voxlod-tiles-old-{name}-{}", std::process::id()));
-    if exists {
-        std::fs::rename(dir, &old)
-            .with_context(|| format!("{}: cannot move aside", dir.display()))?;
-    }
-    std::fs::rename(&stage_path, dir)
-        .with_context(|| format!("{}: cannot rename into place", dir.display()))?;
-    stage.0 = None;
-    if exists {
-        std::fs::remove_dir_all(&old)
-            .with_context(|| format!("{}: cannot remove", old.display()))?;
-    }
+    // into place: exchanged atomically with an earlier tileset, which is then removed
+    guard.commit_folder()?;
     println!(
         "wrote {}: 3D Tiles 1.1, levels {level}..={}, {} tiles ({} with content), {} quads, {}",
         dir.display(),
