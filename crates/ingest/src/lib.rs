@@ -377,6 +377,14 @@ impl MeshSource {
         }
     }
 
+    /// For a sample of scattered records (the plan's): `true` reads a memory-mapped PLY without
+    /// readahead, `false` with it again. Nothing for other inputs.
+    pub fn advise_random(&self, random: bool) {
+        if let Reader::Ply(p) = &self.reader {
+            p.advise_random(random);
+        }
+    }
+
     /// [`MeshSource::stream_prepared`] over the triangles of one part of
     /// [`MeshSource::face_parts`] only: the same triangles, in the same order, as those records
     /// give in a whole stream. Only that part's records and the vertices they use are read.

@@ -237,6 +237,20 @@ impl PlySource {
         }
     }
 
+    /// Tells the kernel how the mapped file will be read: `true` at random (no readahead: a
+    /// sample of scattered face records reads only their pages, not the 8 MiB around each),
+    /// `false` in order again (the default readahead).
+    pub fn advise_random(&self, random: bool) {
+        if let Some(m) = &self.map {
+            let advice = if random {
+                memmap2::Advice::Random
+            } else {
+                memmap2::Advice::Normal
+            };
+            let _ = m.mmap().advise(advice);
+        }
+    }
+
     pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
         match (&self.map, self.header.encoding) {
             (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, None, em),

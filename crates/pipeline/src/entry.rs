@@ -237,6 +237,8 @@ fn plan_parts(
     let mut counts = voxlod_tile::ChunkCounts::new(&grid)?;
     let mut sampled = 0u64;
     let bar = crate::progress::Bar::items(ctx.progress, "sample", windows);
+    // the windows are scattered: without readahead each reads its own pages only
+    ctx.source.advise_random(true);
     for k in 0..windows {
         let a = first + count * k / windows;
         let b = (a + w).min(end);
@@ -258,6 +260,7 @@ fn plan_parts(
         sampled += st.polygons;
         bar.set(k + 1, windows);
     }
+    ctx.source.advise_random(false);
     bar.finish();
     // each sampled chunk's count scaled to all records (at least 1); unsampled chunks weigh 0
     let leaves: Vec<(u64, u64)> = counts
