@@ -44,6 +44,21 @@ impl<'a> Interp<'a> {
         v: &[[f64; 3]; 3],
         textures: Option<&'a TextureSet>,
     ) -> Interp<'a> {
+        let n = cross_f64(&to_f64(&t.v));
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        Self::from_swizzled_normal(t, v, n, len, textures)
+    }
+
+    /// [`Interp::from_swizzled`] with the normal `n = (v1 − v0) × (v2 − v0)` of the triangle's
+    /// grid vertices and `|n|` already computed (as there, bit for bit): `t.v` is not read, so
+    /// `t` may hold the world positions of the triangle whose grid vertices `v` are.
+    pub(crate) fn from_swizzled_normal(
+        t: &Triangle,
+        v: &[[f64; 3]; 3],
+        n: [f64; 3],
+        len: f64,
+        textures: Option<&'a TextureSet>,
+    ) -> Interp<'a> {
         let [p0, p1, p2] = *v;
         let e1 = [p1[0] - p0[0], p1[1] - p0[1]];
         let e2 = [p2[0] - p0[0], p2[1] - p0[1]];
@@ -74,8 +89,6 @@ impl<'a> Interp<'a> {
             }
             [a0, gx, gy]
         });
-        let n = cross_f64(&to_f64(&t.v));
-        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
         let face = n.map(|c| c / len);
         let centroid = [0, 1].map(|k| (p0[k] + p1[k] + p2[k]) / 3.0);
         let tex = textures.and_then(|set| TexAt::new(t, set, grad, len));
