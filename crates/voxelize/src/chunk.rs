@@ -193,6 +193,17 @@ struct Batch {
     interior: Vec<Option<([u32; 3], f32, [f32; 8])>>,
 }
 
+/// The in-chunk position of grid voxel `voxel` in the chunk at `o` (written out: `array::map`
+/// compiled to a call here).
+#[inline(always)]
+fn local_of(voxel: [i32; 3], o: [i64; 3]) -> [u32; 3] {
+    [
+        (voxel[0] as i64 - o[0]) as u32,
+        (voxel[1] as i64 - o[1]) as u32,
+        (voxel[2] as i64 - o[2]) as u32,
+    ]
+}
+
 /// `grid.to_grid(p)` bit for bit, with `inv = 1.0 / grid.voxel_size` given (made once per
 /// batch instead of once per vertex).
 #[inline(always)]
@@ -408,9 +419,10 @@ impl ChunkVoxelizer {
                     .extend(batch.v.iter().zip(tris).map(|(v, t)| {
                         small::interior(v, lo, hi).map(|i| {
                             // `face(t)` from the normal `interior` computed
-                            let face = i.n.map(|c| c * (1.0 / i.norm));
+                            let inv = 1.0 / i.norm;
+                            let face = [i.n[0] * inv, i.n[1] * inv, i.n[2] * inv];
                             let (w, x) = interior_values(t, face, i.norm, None);
-                            let local = [0, 1, 2].map(|k| (i.voxel[k] as i64 - o[k]) as u32);
+                            let local = local_of(i.voxel, o);
                             (local, w, x)
                         })
                     }));
@@ -529,13 +541,13 @@ impl ChunkVoxelizer {
             "the small path takes no materials"
         );
         let mut add = |voxel: [i32; 3], w: f32, x: [f32; 8]| {
-            let local = [0, 1, 2].map(|k| (voxel[k] as i64 - o[k]) as u32);
-            let slot = slots.mark(local);
+            let slot = slots.mark(local_of(voxel, o));
             slots.add(slot, w, x);
         };
         if sm.interior {
             // `face(t)` from the normal `split` computed
-            let face = sm.n.map(|c| c * (1.0 / sm.norm));
+            let inv = 1.0 / sm.norm;
+            let face = [sm.n[0] * inv, sm.n[1] * inv, sm.n[2] * inv];
             let (w, x) = interior_values(t, face, sm.norm, None);
             add(sm.pieces[0].voxel, w, x);
             return;
@@ -941,13 +953,15 @@ fn interior_values(
     textures: Option<&TextureSet>,
 ) -> (f32, [f32; 8]) {
     let normal = if t.flags & TRI_HAS_NORMALS != 0 {
-        let m = [0, 1, 2].map(|k| t.n[0][k] as f64 + t.n[1][k] as f64 + t.n[2][k] as f64);
+        let m = |k: usize| t.n[0][k] as f64 + t.n[1][k] as f64 + t.n[2][k] as f64;
+        let m = [m(0), m(1), m(2)];
         unit_or(m, face)
     } else {
         face
     };
-    let mut c =
-        [0, 1, 2, 3].map(|k| (t.c[0][k] as u32 + t.c[1][k] as u32 + t.c[2][k] as u32) as f64 / 3.0);
+    // written out: `array::map` here compiled to calls in the hot small-triangle path
+    let c = |k: usize| (t.c[0][k] as u32 + t.c[1][k] as u32 + t.c[2][k] as u32) as f64 / 3.0;
+    let mut c = [c(0), c(1), c(2), c(3)];
     if let Some(set) = textures {
         c = linear_color(c, TexAt::centroid(t, set, len));
     }

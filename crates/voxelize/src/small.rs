@@ -68,7 +68,8 @@ pub(crate) struct Piece {
 
 /// The cut polygons of [`cut`]: a binary tree in an array, node `i`'s lower side at `2i + 1`
 /// and its upper side at `2i + 2`, the triangle at 0, one level per split axis (at most
-/// three: 15 nodes). Kept in [`Small`] so that no polygon is made (zeroed) per triangle.
+/// three: 15 nodes; nodes 0–2 are not used, the first cut goes to small arrays). Kept in
+/// [`Small`] so that no polygon is made (zeroed) per triangle.
 const NODES: usize = 15;
 
 /// The voxels of one small triangle ([`split`]): up to eight [`Piece`]s, or, if `interior`,
@@ -466,10 +467,11 @@ fn octants(s: &Signs, n: [f64; 3], split: [bool; 3], count: usize) -> u8 {
 
 /// The clipped parts of the candidates the triangle meets (`inside`, [`octants`]) into `out`:
 /// the swizzled triangle `out.sv` cut by the split planes `x_k = p_k`, swizzled axis 0 first,
-/// both sides of each cut kept ([`Poly::split_into`]), level by level in `out.polys`; then, in
-/// the order lower side before upper side, each leaf whose candidate (bits `first + …`) the
-/// triangle meets becomes a [`Piece`] with its area (`scale = |n|/|n_z|`) and, unless
-/// `out.area_only`, its centroid ([`Poly::area_centroid`]).
+/// both sides of each cut kept ([`Poly::split_into`]: the first cut into two small arrays,
+/// the second into nodes 3–6 of `out.polys`, the third into nodes 7–14); then, in the order
+/// lower side before upper side (main's recursion), each part whose candidate (bits over
+/// `first`) the triangle meets becomes a [`Piece`] with its area (`scale = |n|/|n_z|`) and,
+/// unless `out.area_only`, its centroid ([`Poly::area_centroid`]).
 fn cut(
     out: &mut Small,
     split: [bool; 3],
@@ -488,87 +490,109 @@ fn cut(
             count += 1;
         }
     }
-    out.len = 0;
-    if count == 1 {
-        // one cut of the triangle (the most common case after the interior one): both sides
-        // in registers-sized arrays (a triangle cut once has at most four vertices per side),
-        // both voxels met
-        let (m, k) = (ms[0], swz[ms[0]]);
-        let (mut lp, mut hp) = ([[0.0f64; 3]; 4], [[0.0f64; 3]; 4]);
-        let (mut ll, mut hl) = (0usize, 0usize);
-        let lo = Vertices {
-            p: &mut lp,
-            len: &mut ll,
-        };
-        let hi = Vertices {
-            p: &mut hp,
-            len: &mut hl,
-        };
-        match m {
-            0 => split_vertices_into::<0>(&out.sv, p[k], lo, hi),
-            1 => split_vertices_into::<1>(&out.sv, p[k], lo, hi),
-            _ => split_vertices_into::<2>(&out.sv, p[k], lo, hi),
+    let Small {
+        sv,
+        area_only,
+        len,
+        pieces,
+        polys,
+        ..
+    } = out;
+    *len = 0;
+    let mut put = |part: &[[f64; 3]], bits: u8| {
+        if inside >> bits & 1 == 1 {
+            let voxel = [
+                first[0] + (bits & 1) as i32,
+                first[1] + (bits >> 1 & 1) as i32,
+                first[2] + (bits >> 2 & 1) as i32,
+            ];
+            push_piece(pieces, len, *area_only, part, voxel, scale);
         }
-        debug_assert_eq!(inside, 0xff);
-        let mut upper = first;
-        upper[k] += 1;
-        push_piece(out, &lp[..ll], first, scale);
-        push_piece(out, &hp[..hl], upper, scale);
+    };
+    // the first cut, of the triangle itself: both sides in small arrays (a triangle cut once
+    // has at most four vertices per side)
+    let (m, k) = (ms[0], swz[ms[0]]);
+    let (mut lp, mut hp) = ([[0.0f64; 3]; 4], [[0.0f64; 3]; 4]);
+    let (mut ll, mut hl) = (0usize, 0usize);
+    let lo = Vertices {
+        p: &mut lp,
+        len: &mut ll,
+    };
+    let hi = Vertices {
+        p: &mut hp,
+        len: &mut hl,
+    };
+    match m {
+        0 => split_vertices_into::<0>(&sv[..], p[k], lo, hi),
+        1 => split_vertices_into::<1>(&sv[..], p[k], lo, hi),
+        _ => split_vertices_into::<2>(&sv[..], p[k], lo, hi),
+    }
+    let first_cut: [(&[[f64; 3]], u8); 2] = [(&lp[..ll], 0), (&hp[..hl], 1 << k)];
+    if count == 1 {
+        // (the most common case after the interior one) both voxels met
+        for (part, bits) in first_cut {
+            put(part, bits);
+        }
         return;
     }
-    // each node's candidate bits (original axes)
+    // the second cut of both sides, into nodes 3..7 (node 3 + 2·side + its side)
+    let (m, k) = (ms[1], swz[ms[1]]);
     let mut bits = [0u8; NODES];
-    for (level, &m) in ms[..count].iter().enumerate() {
-        let k = swz[m];
-        let (b, polys) = (p[k], &mut out.polys);
-        if level == 0 {
-            // the triangle itself (node 0), from its three vertices
-            let (lo, hi) = polys[1..3].split_at_mut(1);
-            let (src, lo, hi) = (&out.sv[..], lo[0].out(), hi[0].out());
-            match m {
-                0 => split_vertices_into::<0>(src, b, lo, hi),
-                1 => split_vertices_into::<1>(src, b, lo, hi),
-                _ => split_vertices_into::<2>(src, b, lo, hi),
-            }
-        } else {
-            for i in (1 << level) - 1..(1 << (level + 1)) - 1 {
-                let (src, rest) = polys.split_at_mut(2 * i + 1);
-                let (lo, hi) = rest.split_at_mut(1);
-                let (src, lo, hi) = (&src[i], &mut lo[0], &mut hi[0]);
-                match m {
-                    0 => src.split_into::<0>(b, lo, hi),
-                    1 => src.split_into::<1>(b, lo, hi),
-                    _ => src.split_into::<2>(b, lo, hi),
-                }
-            }
+    for (side, (src, b0)) in first_cut.into_iter().enumerate() {
+        let i = 3 + 2 * side;
+        let (lo, hi) = polys[i..i + 2].split_at_mut(1);
+        let (lo, hi) = (lo[0].out(), hi[0].out());
+        match m {
+            0 => split_vertices_into::<0>(src, p[k], lo, hi),
+            1 => split_vertices_into::<1>(src, p[k], lo, hi),
+            _ => split_vertices_into::<2>(src, p[k], lo, hi),
         }
-        for i in (1 << level) - 1..(1 << (level + 1)) - 1 {
-            bits[2 * i + 1] = bits[i];
-            bits[2 * i + 2] = bits[i] | 1 << k;
-        }
+        bits[i] = b0;
+        bits[i + 1] = b0 | 1 << k;
     }
-    for i in (1 << count) - 1..(1 << (count + 1)) - 1 {
-        let b = bits[i];
-        if inside >> b & 1 == 1 {
-            let voxel = [0, 1, 2].map(|k| first[k] + (b >> k & 1) as i32);
-            let poly = out.polys[i];
-            push_piece(out, poly.vertices(), voxel, scale);
+    if count == 2 {
+        for i in 3..7 {
+            put(polys[i].vertices(), bits[i]);
         }
+        return;
+    }
+    // the third cut of the four, into nodes 7..15
+    let (m, k) = (ms[2], swz[ms[2]]);
+    let (src, rest) = polys.split_at_mut(7);
+    for i in 3..7 {
+        let j = 2 * (i - 3);
+        let (lo, hi) = rest[j..j + 2].split_at_mut(1);
+        let (lo, hi) = (&mut lo[0], &mut hi[0]);
+        match m {
+            0 => src[i].split_into::<0>(p[k], lo, hi),
+            1 => src[i].split_into::<1>(p[k], lo, hi),
+            _ => src[i].split_into::<2>(p[k], lo, hi),
+        }
+        put(lo.vertices(), bits[i]);
+        put(hi.vertices(), bits[i] | 1 << k);
     }
 }
 
-/// Appends the piece of `voxel` whose part of the triangle has vertices `part`: its area
-/// (`scale = |n|/|n_z|`) and, unless `out.area_only`, its centroid ([`Poly::area_centroid`]).
+/// Appends the piece of `voxel` whose part of the triangle has vertices `part` to
+/// `pieces[..len]`: its area (`scale = |n|/|n_z|`) and, unless `area_only`, its centroid
+/// ([`Poly::area_centroid`]).
 #[inline(always)]
-fn push_piece(out: &mut Small, part: &[[f64; 3]], voxel: [i32; 3], scale: f64) {
-    let (w, q) = if out.area_only {
+fn push_piece(
+    pieces: &mut [Piece; 8],
+    len: &mut usize,
+    area_only: bool,
+    part: &[[f64; 3]],
+    voxel: [i32; 3],
+    scale: f64,
+) {
+    let (w, q) = if area_only {
         (area_of(part, scale), None)
     } else {
         let (w, c) = area_centroid_of(part, scale);
         (w, c.map(|c| [c[0], c[1]]))
     };
-    out.pieces[out.len] = Piece { voxel, w, q };
-    out.len += 1;
+    pieces[*len] = Piece { voxel, w, q };
+    *len += 1;
 }
 
 #[cfg(test)]
