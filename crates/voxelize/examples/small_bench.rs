@@ -6,12 +6,12 @@
 //! positions, colours and flags) and the grid the build fits to the whole input at `RES`³
 //! (`Grid::fit` of its bounds) in `OUT`, a plain little-endian file:
 //!
-//! `cargo run --release -p voxlod-voxelize --example small_bench -- dump /work/data/gen1e8.ply /work/data/s30/g8.bin 4000000 1024`
+//! `cargo run --release -p voxlod-voxelize --example small_bench -- dump gen1e8.ply g8.bin 3000000 1024`
 //!
-//! `small_bench run FILE [ROUNDS=3] [general]` bins those triangles by chunk
+//! `small_bench run FILE [ROUNDS=3] [small|general] [CATEGORY]` bins those triangles by chunk
 //! (`Grid::world_chunk_range`, input order kept), then per round voxelizes every chunk on one
 //! thread in batches of 8,192 triangles and prints the thread's CPU time, nanoseconds per
-//! triangle (of those kept), the small path's share and an FNV-1a hash of every chunk's records
+//! binned triangle (one in two chunks counts twice), the small path's share and an FNV-1a hash of every chunk's records
 //! (equal hashes: equal records). `general` turns the small path off
 //! (`ChunkVoxelizer::set_small_path(false)`: the reference, whose records may differ in the last
 //! bits, so its hash differs). A fifth argument `0`–`4` keeps only the triangles whose closed

@@ -235,7 +235,7 @@ impl Poly {
 /// [`Poly::area`] of the polygon with vertices `p`.
 #[inline]
 pub(crate) fn area_of(p: &[[f64; 3]], area_scale: f64) -> f64 {
-    if p.len() == 0 {
+    if p.is_empty() {
         return 0.0;
     }
     let p0 = p[0];
@@ -255,7 +255,7 @@ pub(crate) fn area_of(p: &[[f64; 3]], area_scale: f64) -> f64 {
 /// [`Poly::area_centroid`] of the polygon with vertices `p`.
 #[inline]
 pub(crate) fn area_centroid_of(p: &[[f64; 3]], area_scale: f64) -> (f64, Option<[f64; 3]>) {
-    if p.len() == 0 {
+    if p.is_empty() {
         return (0.0, None);
     }
     let p0 = p[0];
