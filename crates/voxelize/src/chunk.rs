@@ -21,7 +21,7 @@ use crate::material::MaterialSums;
 use crate::overlap::{cross_f64, interior_voxel, to_f64, TriSetup};
 use crate::small::{self, Small};
 use crate::texcolor::{linear_color, TexAt};
-use crate::{scanline, single, world, Method, Mode};
+use crate::{scanline, single, Method, Mode};
 
 /// The most bytes of triangles and pairs a chunk keeps for its attribute pass
 /// ([`crate::single`]); a chunk with more clips every pair instead (a mesh with very many
@@ -137,6 +137,8 @@ pub struct ChunkVoxelizer {
     small_path: bool,
     /// the voxels and parts of the current small triangle
     small: Small,
+    /// the small path's scratch for one batch of triangles
+    batch: Batch,
     /// triangles added by the small path since this voxelizer was made
     small_count: u64,
     /// this chunk's kept pairs and triangles outgrew [`DEFER_BYTES`]: the rest of the chunk is
@@ -178,6 +180,41 @@ struct Pair {
     swz: u32,
 }
 
+/// Triangles per batch of the small path ([`ChunkVoxelizer::add_world`]).
+const BATCH: usize = 64;
+
+/// The small path's scratch for one batch of triangles (reused).
+#[derive(Default)]
+struct Batch {
+    /// per triangle: its grid vertices
+    v: Vec<[[f32; 3]; 3]>,
+    /// per triangle: if it lies inside one voxel's interior, that voxel's position in the
+    /// chunk and the triangle's contribution (weight and values)
+    interior: Vec<Option<([u32; 3], f32, [f32; 8])>>,
+}
+
+/// The in-chunk position of grid voxel `voxel` in the chunk at `o` (written out: `array::map`
+/// compiled to a call here).
+#[inline(always)]
+fn local_of(voxel: [i32; 3], o: [i64; 3]) -> [u32; 3] {
+    [
+        (voxel[0] as i64 - o[0]) as u32,
+        (voxel[1] as i64 - o[1]) as u32,
+        (voxel[2] as i64 - o[2]) as u32,
+    ]
+}
+
+/// `grid.to_grid(p)` bit for bit, with `inv = 1.0 / grid.voxel_size` given (made once per
+/// batch instead of once per vertex).
+#[inline(always)]
+fn to_grid_by(grid: &Grid, inv: f64, p: [f32; 3]) -> [f32; 3] {
+    [
+        ((p[0] as f64 - grid.origin[0]) * inv) as f32,
+        ((p[1] as f64 - grid.origin[1]) * inv) as f32,
+        ((p[2] as f64 - grid.origin[2]) * inv) as f32,
+    ]
+}
+
 impl ChunkVoxelizer {
     /// A voxelizer for `mode`.
     pub fn new(mode: Mode) -> Self {
@@ -189,6 +226,7 @@ impl ChunkVoxelizer {
                 blocks: Vec::new(),
                 touched: Vec::new(),
                 last: NO_BRICK,
+                last_voxel: NO_VOXEL,
                 idx: Vec::new(),
                 count: Vec::new(),
                 sums: Vec::new(),
@@ -198,6 +236,7 @@ impl ChunkVoxelizer {
             single_skip: true,
             small_path: true,
             small: Small::default(),
+            batch: Batch::default(),
             small_count: 0,
             eager: false,
             defer_bytes: DEFER_BYTES,
@@ -352,77 +391,63 @@ impl ChunkVoxelizer {
             && self.mode == Mode::Conservative
             && self.textures.is_none()
             && self.materials.is_none();
-        for t in tris {
-            let (moved, world) = match grid {
-                Some(g) => {
-                    let mut m = *t;
-                    m.v = t.v.map(|p| g.to_grid(p));
-                    (m, Some((&t.v, g)))
-                }
-                None => (*t, None),
-            };
-            let t = &moved;
-            if small && {
-                // a flat triangle needs only the areas ([`crate::single`])
-                self.small.area_only = single::is_flat(t);
-                small::split(&t.v, lo, hi, &mut self.small)
-                    && world.is_none_or(|(w, _)| world::small_certain(&t.v, w))
-            } {
-                self.add_small(t);
-                continue;
+        // `Grid::to_grid` with its reciprocal of the voxel size made once
+        let inv = grid.map(|g| 1.0 / g.voxel_size);
+        let to_grid = |t: &Triangle| match (grid, inv) {
+            (Some(g), Some(s)) => t.v.map(|p| to_grid_by(g, s, p)),
+            _ => t.v,
+        };
+        if !small {
+            for t in tris {
+                let moved = Triangle {
+                    v: to_grid(t),
+                    ..*t
+                };
+                self.add_general(&moved, grid.map(|g| (&t.v, g)), lo, hi);
             }
-            // a triangle inside one voxel's interior (most of a scan's): that voxel, no overlap
-            // test; its contribution is the whole triangle ([`interior_contribution`])
-            if self.mode == Mode::Conservative {
-                if let Some(p) = interior_voxel(&t.v) {
-                    if (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]) && face(t).is_some() {
-                        let local = [0, 1, 2].map(|k| (p[k] as i64 - o[k]) as u32);
+        } else {
+            let mut batch = std::mem::take(&mut self.batch);
+            for tris in tris.chunks(BATCH) {
+                // the triangles inside one voxel's interior (most of a fine scan's) and their
+                // contributions first, all of them: no step waits on the previous triangle's
+                // long chain of conversions, square root and divisions
+                batch.v.clear();
+                batch.v.extend(tris.iter().map(to_grid));
+                batch.interior.clear();
+                batch
+                    .interior
+                    .extend(batch.v.iter().zip(tris).map(|(v, t)| {
+                        small::interior(v, lo, hi).map(|i| {
+                            // `face(t)` from the normal `interior` computed
+                            let inv = 1.0 / i.norm;
+                            let face = [i.n[0] * inv, i.n[1] * inv, i.n[2] * inv];
+                            let (w, x) = interior_values(t, face, i.norm, None);
+                            let local = local_of(i.voxel, o);
+                            (local, w, x)
+                        })
+                    }));
+                // then every triangle in order
+                for (i, t) in tris.iter().enumerate() {
+                    if let Some((local, w, x)) = batch.interior[i] {
+                        self.small_count += 1;
                         let slot = self.slots.mark(local);
-                        self.marked.push(Marked {
-                            t: *t,
-                            first: self.pairs.len() as u32,
-                            interior: true,
-                        });
-                        self.pairs.push(Pair { slot, swz: 0 });
+                        self.slots.add(slot, w, x);
                         continue;
                     }
+                    let v = batch.v[i];
+                    // a flat triangle needs only the areas ([`crate::single`])
+                    self.small.area_only = single::is_flat(t);
+                    if small::split(&v, grid.map(|_| &t.v), lo, hi, &mut self.small) {
+                        // `t` holds the world positions with a grid: only its attributes are
+                        // read
+                        self.add_small(t);
+                        continue;
+                    }
+                    let moved = Triangle { v, ..*t };
+                    self.add_general(&moved, grid.map(|g| (&t.v, g)), lo, hi);
                 }
             }
-            let Some(s) = TriSetup::with_world(&t.v, world, self.mode) else {
-                self.skipped += 1;
-                continue;
-            };
-            let lo_s = s.swizzle(lo);
-            let hi_s = s.swizzle(hi);
-            if (0..3).any(|k| s.bmax[k] < lo_s[k] || s.bmin[k] > hi_s[k]) {
-                continue;
-            }
-            let first = self.pairs.len();
-            let o_s = s.swizzle(o);
-            let (slots, pairs) = (&mut self.slots, &mut self.pairs);
-            let each = |p: [i32; 3], _first: bool| {
-                let g = s.unswizzle(p);
-                let local = [0, 1, 2].map(|k| (g[k] as i64 - o[k]) as u32);
-                debug_assert!(local.iter().all(|&c| c < CHUNK));
-                let slot = slots.mark(local);
-                let l = [0, 1, 2].map(|k| (p[k] as i64 - o_s[k]) as u32);
-                pairs.push(Pair {
-                    slot,
-                    swz: l[0] | l[1] << 8 | l[2] << 16,
-                });
-            };
-            match self.method {
-                Method::Sat => s.scan(lo_s, hi_s, each),
-                Method::Scanline => scanline::scan(&s, lo_s, hi_s, each),
-                Method::ScanlineIlv => scanline::scan_ilv(&s, lo_s, hi_s, each),
-            }
-            if self.pairs.len() > first {
-                self.marked.push(Marked {
-                    t: *t,
-                    first: first as u32,
-                    interior: false,
-                });
-            }
+            self.batch = batch;
         }
         // memory stays bounded by the chunk's voxels, not its triangles: past the budget the
         // chunk gives up the skip and clips every pair, accumulating each batch at once
@@ -436,9 +461,77 @@ impl ChunkVoxelizer {
         }
     }
 
+    /// One triangle by the general path (`t` in grid coordinates; `world`: its world positions
+    /// and the grid, for [`TriSetup::with_world`]): marks its voxels and keeps the pairs for
+    /// the attribute pass; in conservative mode a triangle inside one voxel's interior marks
+    /// that voxel without the overlap test.
+    fn add_general(
+        &mut self,
+        t: &Triangle,
+        world: Option<(&[[f32; 3]; 3], &Grid)>,
+        lo: [i32; 3],
+        hi: [i32; 3],
+    ) {
+        let o = self.origin.map(|c| c as i64);
+        // a triangle inside one voxel's interior (most of a scan's): that voxel, no overlap
+        // test; its contribution is the whole triangle ([`interior_contribution`])
+        if self.mode == Mode::Conservative {
+            if let Some(p) = interior_voxel(&t.v) {
+                if (0..3).all(|k| p[k] >= lo[k] && p[k] <= hi[k]) && face(t).is_some() {
+                    let local = [0, 1, 2].map(|k| (p[k] as i64 - o[k]) as u32);
+                    let slot = self.slots.mark(local);
+                    self.marked.push(Marked {
+                        t: *t,
+                        first: self.pairs.len() as u32,
+                        interior: true,
+                    });
+                    self.pairs.push(Pair { slot, swz: 0 });
+                    return;
+                }
+            }
+        }
+        let Some(s) = TriSetup::with_world(&t.v, world, self.mode) else {
+            self.skipped += 1;
+            return;
+        };
+        let lo_s = s.swizzle(lo);
+        let hi_s = s.swizzle(hi);
+        if (0..3).any(|k| s.bmax[k] < lo_s[k] || s.bmin[k] > hi_s[k]) {
+            return;
+        }
+        let first = self.pairs.len();
+        let o_s = s.swizzle(o);
+        let (slots, pairs) = (&mut self.slots, &mut self.pairs);
+        let each = |p: [i32; 3], _first: bool| {
+            let g = s.unswizzle(p);
+            let local = [0, 1, 2].map(|k| (g[k] as i64 - o[k]) as u32);
+            debug_assert!(local.iter().all(|&c| c < CHUNK));
+            let slot = slots.mark(local);
+            let l = [0, 1, 2].map(|k| (p[k] as i64 - o_s[k]) as u32);
+            pairs.push(Pair {
+                slot,
+                swz: l[0] | l[1] << 8 | l[2] << 16,
+            });
+        };
+        match self.method {
+            Method::Sat => s.scan(lo_s, hi_s, each),
+            Method::Scanline => scanline::scan(&s, lo_s, hi_s, each),
+            Method::ScanlineIlv => scanline::scan_ilv(&s, lo_s, hi_s, each),
+        }
+        if self.pairs.len() > first {
+            self.marked.push(Marked {
+                t: *t,
+                first: first as u32,
+                interior: false,
+            });
+        }
+    }
+
     /// A small triangle ([`crate::small`], its parts in `self.small`): marks its voxels and adds
     /// its contributions at once (weights and interpolation points those the attribute pass
-    /// would compute; the whole triangle for one inside a voxel's interior).
+    /// would compute; the whole triangle for one inside a voxel's interior). Only the
+    /// attributes of `t` are read (its positions may be world ones): the geometry is
+    /// `self.small`'s.
     fn add_small(&mut self, t: &Triangle) {
         self.small_count += 1;
         let o = self.origin.map(|c| c as i64);
@@ -448,13 +541,13 @@ impl ChunkVoxelizer {
             "the small path takes no materials"
         );
         let mut add = |voxel: [i32; 3], w: f32, x: [f32; 8]| {
-            let local = [0, 1, 2].map(|k| (voxel[k] as i64 - o[k]) as u32);
-            let slot = slots.mark(local);
+            let slot = slots.mark(local_of(voxel, o));
             slots.add(slot, w, x);
         };
         if sm.interior {
             // `face(t)` from the normal `split` computed
-            let face = sm.n.map(|c| c * (1.0 / sm.norm));
+            let inv = 1.0 / sm.norm;
+            let face = [sm.n[0] * inv, sm.n[1] * inv, sm.n[2] * inv];
             let (w, x) = interior_values(t, face, sm.norm, None);
             add(sm.pieces[0].voxel, w, x);
             return;
@@ -465,7 +558,7 @@ impl ChunkVoxelizer {
                 add(p.voxel, p.w as f32, x);
             }
         } else {
-            let ip = Interp::from_swizzled(t, &sm.sv, None);
+            let ip = Interp::from_swizzled_normal(t, &sm.sv, sm.n, sm.norm, None);
             for p in sm.pieces() {
                 let q = p.q.unwrap_or(ip.centroid);
                 add(p.voxel, p.w as f32, ip.at(q[0], q[1], p.w));
@@ -700,6 +793,9 @@ struct Slots {
     touched: Vec<(u32, [u64; 8])>,
     /// the brick index and block + 1 of the last voxel marked ([`NO_BRICK`]: none)
     last: (u32, u32),
+    /// the in-chunk position `x | y << 8 | z << 16` and slot of the last voxel marked
+    /// ([`NO_VOXEL`]: none)
+    last_voxel: (u32, u32),
     /// per occupied voxel (its slot), in the order of first touch: the Morton code of its
     /// in-chunk position
     idx: Vec<u32>,
@@ -711,6 +807,9 @@ struct Slots {
 
 /// No brick ([`Slots::last`]).
 const NO_BRICK: (u32, u32) = (u32::MAX, 0);
+
+/// No voxel ([`Slots::last_voxel`]; no position has the top byte set).
+const NO_VOXEL: (u32, u32) = (u32::MAX, 0);
 
 /// A voxel's count and where its sums are, side by side so that the attribute pass's test of
 /// the count and its step to the sums read one cache line.
@@ -746,6 +845,7 @@ impl Slots {
         }
         self.touched.clear();
         self.last = NO_BRICK;
+        self.last_voxel = NO_VOXEL;
         self.blocks.clear();
         self.idx.clear();
         self.count.clear();
@@ -782,6 +882,21 @@ impl Slots {
     /// making the slot (and its brick's block of slots) on first touch.
     #[inline(always)]
     fn mark(&mut self, local: [u32; 3]) -> u32 {
+        // consecutive small triangles of a scan often share their voxel
+        let key = local[0] | local[1] << 8 | local[2] << 16;
+        if key == self.last_voxel.0 {
+            let slot = self.last_voxel.1;
+            self.count[slot as usize].k += 1;
+            return slot;
+        }
+        let slot = self.mark_new(local);
+        self.last_voxel = (key, slot);
+        slot
+    }
+
+    /// [`Slots::mark`] of a voxel other than the last one marked.
+    #[inline(always)]
+    fn mark_new(&mut self, local: [u32; 3]) -> u32 {
         let idx = morton8_by_table(local[0] as u8, local[1] as u8, local[2] as u8);
         let bi = idx >> 9;
         // a column's voxels and a triangle's neighbouring columns mostly stay in one brick
@@ -838,13 +953,15 @@ fn interior_values(
     textures: Option<&TextureSet>,
 ) -> (f32, [f32; 8]) {
     let normal = if t.flags & TRI_HAS_NORMALS != 0 {
-        let m = [0, 1, 2].map(|k| t.n[0][k] as f64 + t.n[1][k] as f64 + t.n[2][k] as f64);
+        let m = |k: usize| t.n[0][k] as f64 + t.n[1][k] as f64 + t.n[2][k] as f64;
+        let m = [m(0), m(1), m(2)];
         unit_or(m, face)
     } else {
         face
     };
-    let mut c =
-        [0, 1, 2, 3].map(|k| (t.c[0][k] as u32 + t.c[1][k] as u32 + t.c[2][k] as u32) as f64 / 3.0);
+    // written out: `array::map` here compiled to calls in the hot small-triangle path
+    let c = |k: usize| (t.c[0][k] as u32 + t.c[1][k] as u32 + t.c[2][k] as u32) as f64 / 3.0;
+    let mut c = [c(0), c(1), c(2), c(3)];
     if let Some(set) = textures {
         c = linear_color(c, TexAt::centroid(t, set, len));
     }
@@ -984,6 +1101,7 @@ mod tests {
             blocks: Vec::new(),
             touched: Vec::new(),
             last: NO_BRICK,
+            last_voxel: NO_VOXEL,
             idx: Vec::new(),
             count: (0..accs.len())
                 .map(|i| Count {

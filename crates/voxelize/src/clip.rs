@@ -123,44 +123,15 @@ impl Poly {
     /// every vertex inside receives a copy of `self`.
     #[inline(always)]
     pub(crate) fn split_into<const K: usize>(&self, b: f64, lo: &mut Poly, hi: &mut Poly) {
-        // du: distance inside the lower side (b − x), dl = −du: inside the upper side (x − b);
-        // IEEE subtraction is sign-symmetric, so dl is what clip_into computes
-        let mut du = [0.0f64; MAX_POLY];
-        let mut dl = [0.0f64; MAX_POLY];
-        for i in 0..self.len {
-            du[i] = b - self.p[i][K];
-            dl[i] = self.p[i][K] - b;
-        }
-        lo.len = 0;
-        hi.len = 0;
-        for i in 0..self.len {
-            let j = if i + 1 == self.len { 0 } else { i + 1 };
-            if du[i] >= 0.0 {
-                lo.push(self.p[i]);
-            }
-            if dl[i] >= 0.0 {
-                hi.push(self.p[i]);
-            }
-            let (da, dc) = (du[i], du[j]);
-            if (da > 0.0 && dc < 0.0) || (da < 0.0 && dc > 0.0) {
-                // lo's point from the end below b, hi's from the end above
-                let (pl, ph, dul, dlh) = if da > 0.0 {
-                    (self.p[i], self.p[j], da, dl[j])
-                } else {
-                    (self.p[j], self.p[i], dc, dl[i])
-                };
-                let tl = dul / (dul - (b - ph[K]));
-                let th = dlh / (dlh - (pl[K] - b));
-                let at = |pin: [f64; 3], pout: [f64; 3], t: f64, j: usize| {
-                    if j == K {
-                        b
-                    } else {
-                        pin[j] + t * (pout[j] - pin[j])
-                    }
-                };
-                lo.push([at(pl, ph, tl, 0), at(pl, ph, tl, 1), at(pl, ph, tl, 2)]);
-                hi.push([at(ph, pl, th, 0), at(ph, pl, th, 1), at(ph, pl, th, 2)]);
-            }
+        split_vertices_into::<K>(&self.p[..self.len], b, lo.out(), hi.out())
+    }
+
+    /// The polygon as the output of [`split_vertices_into`].
+    #[inline(always)]
+    pub(crate) fn out(&mut self) -> Vertices<'_> {
+        Vertices {
+            p: &mut self.p,
+            len: &mut self.len,
         }
     }
 
@@ -248,21 +219,7 @@ impl Poly {
     /// values do not depend on the point (a triangle with flat attributes, [`crate::single`]).
     #[inline]
     pub fn area(&self, area_scale: f64) -> f64 {
-        if self.len == 0 {
-            return 0.0;
-        }
-        let p0 = self.p[0];
-        let mut a2 = 0.0;
-        for i in 1..self.len.saturating_sub(1) {
-            let u = [self.p[i][0] - p0[0], self.p[i][1] - p0[1]];
-            let w = [self.p[i + 1][0] - p0[0], self.p[i + 1][1] - p0[1]];
-            a2 += u[0] * w[1] - u[1] * w[0];
-        }
-        if a2 != 0.0 {
-            0.5 * a2.abs() * area_scale
-        } else {
-            0.0
-        }
+        area_of(self.vertices(), area_scale)
     }
 
     /// Area and centroid of the polygon, which lies in a plane whose normal `n` has `n[2] ≠ 0`:
@@ -271,36 +228,134 @@ impl Poly {
     /// is zero the centroid is the mean of the vertices, and `None` if there are none.
     #[inline]
     pub fn area_centroid(&self, area_scale: f64) -> (f64, Option<[f64; 3]>) {
-        if self.len == 0 {
-            return (0.0, None);
+        area_centroid_of(self.vertices(), area_scale)
+    }
+}
+
+/// [`Poly::area`] of the polygon with vertices `p`.
+#[inline]
+pub(crate) fn area_of(p: &[[f64; 3]], area_scale: f64) -> f64 {
+    if p.is_empty() {
+        return 0.0;
+    }
+    let p0 = p[0];
+    let mut a2 = 0.0;
+    for i in 1..p.len().saturating_sub(1) {
+        let u = [p[i][0] - p0[0], p[i][1] - p0[1]];
+        let w = [p[i + 1][0] - p0[0], p[i + 1][1] - p0[1]];
+        a2 += u[0] * w[1] - u[1] * w[0];
+    }
+    if a2 != 0.0 {
+        0.5 * a2.abs() * area_scale
+    } else {
+        0.0
+    }
+}
+
+/// [`Poly::area_centroid`] of the polygon with vertices `p`.
+#[inline]
+pub(crate) fn area_centroid_of(p: &[[f64; 3]], area_scale: f64) -> (f64, Option<[f64; 3]>) {
+    if p.is_empty() {
+        return (0.0, None);
+    }
+    let p0 = p[0];
+    let mut a2 = 0.0;
+    let mut c = [0.0; 3];
+    for i in 1..p.len().saturating_sub(1) {
+        let u = [p[i][0] - p0[0], p[i][1] - p0[1]];
+        let w = [p[i + 1][0] - p0[0], p[i + 1][1] - p0[1]];
+        let ai = u[0] * w[1] - u[1] * w[0];
+        a2 += ai;
+        for k in 0..3 {
+            c[k] += ai * (p0[k] + p[i][k] + p[i + 1][k]);
         }
-        let p0 = self.p[0];
-        let mut a2 = 0.0;
-        let mut c = [0.0; 3];
-        for i in 1..self.len.saturating_sub(1) {
-            let u = [self.p[i][0] - p0[0], self.p[i][1] - p0[1]];
-            let w = [self.p[i + 1][0] - p0[0], self.p[i + 1][1] - p0[1]];
-            let ai = u[0] * w[1] - u[1] * w[0];
-            a2 += ai;
+    }
+    if a2 != 0.0 {
+        let s = 1.0 / (3.0 * a2);
+        (
+            0.5 * a2.abs() * area_scale,
+            Some([c[0] * s, c[1] * s, c[2] * s]),
+        )
+    } else {
+        let inv = 1.0 / p.len() as f64;
+        let mut m = [0.0; 3];
+        for q in p {
             for k in 0..3 {
-                c[k] += ai * (p0[k] + self.p[i][k] + self.p[i + 1][k]);
+                m[k] += q[k] * inv;
             }
         }
-        if a2 != 0.0 {
-            let s = 1.0 / (3.0 * a2);
-            (
-                0.5 * a2.abs() * area_scale,
-                Some([c[0] * s, c[1] * s, c[2] * s]),
-            )
-        } else {
-            let inv = 1.0 / self.len as f64;
-            let mut m = [0.0; 3];
-            for q in self.vertices() {
-                for k in 0..3 {
-                    m[k] += q[k] * inv;
+        (0.0, Some(m))
+    }
+}
+
+/// Where [`split_vertices_into`] writes one side: vertex storage (its length is the capacity,
+/// [`MAX_POLY`] for a [`Poly`]) and the number of vertices in use. A vertex past the capacity
+/// is dropped, as [`Poly`] drops one past [`MAX_POLY`] (which a convex polygon never reaches).
+pub(crate) struct Vertices<'a> {
+    pub p: &'a mut [[f64; 3]],
+    pub len: &'a mut usize,
+}
+
+impl Vertices<'_> {
+    #[inline(always)]
+    fn push(&mut self, q: [f64; 3]) {
+        debug_assert!(*self.len < self.p.len());
+        if *self.len < self.p.len() {
+            self.p[*self.len] = q;
+            *self.len += 1;
+        }
+    }
+}
+
+/// [`Poly::split_into`] of the polygon with vertices `src` (at most [`MAX_POLY`]) into `lo`
+/// and `hi`: a triangle given as its three vertices is cut without being copied into a
+/// [`Poly`] first, with `src.len()` known the loops unroll, and the sides may be smaller
+/// arrays than a [`Poly`] (a triangle cut once has at most four vertices per side).
+#[inline(always)]
+pub(crate) fn split_vertices_into<const K: usize>(
+    src: &[[f64; 3]],
+    b: f64,
+    mut lo: Vertices,
+    mut hi: Vertices,
+) {
+    debug_assert!(src.len() <= MAX_POLY);
+    // du: distance inside the lower side (b − x), dl = −du: inside the upper side (x − b);
+    // IEEE subtraction is sign-symmetric, so dl is what clip_into computes
+    let mut du = [0.0f64; MAX_POLY];
+    let mut dl = [0.0f64; MAX_POLY];
+    for i in 0..src.len() {
+        du[i] = b - src[i][K];
+        dl[i] = src[i][K] - b;
+    }
+    *lo.len = 0;
+    *hi.len = 0;
+    for i in 0..src.len() {
+        let j = if i + 1 == src.len() { 0 } else { i + 1 };
+        if du[i] >= 0.0 {
+            lo.push(src[i]);
+        }
+        if dl[i] >= 0.0 {
+            hi.push(src[i]);
+        }
+        let (da, dc) = (du[i], du[j]);
+        if (da > 0.0 && dc < 0.0) || (da < 0.0 && dc > 0.0) {
+            // lo's point from the end below b, hi's from the end above
+            let (pl, ph, dul, dlh) = if da > 0.0 {
+                (src[i], src[j], da, dl[j])
+            } else {
+                (src[j], src[i], dc, dl[i])
+            };
+            let tl = dul / (dul - (b - ph[K]));
+            let th = dlh / (dlh - (pl[K] - b));
+            let at = |pin: [f64; 3], pout: [f64; 3], t: f64, j: usize| {
+                if j == K {
+                    b
+                } else {
+                    pin[j] + t * (pout[j] - pin[j])
                 }
-            }
-            (0.0, Some(m))
+            };
+            lo.push([at(pl, ph, tl, 0), at(pl, ph, tl, 1), at(pl, ph, tl, 2)]);
+            hi.push([at(ph, pl, th, 0), at(ph, pl, th, 1), at(ph, pl, th, 2)]);
         }
     }
 }

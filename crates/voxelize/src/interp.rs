@@ -44,6 +44,21 @@ impl<'a> Interp<'a> {
         v: &[[f64; 3]; 3],
         textures: Option<&'a TextureSet>,
     ) -> Interp<'a> {
+        let n = cross_f64(&to_f64(&t.v));
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        Self::from_swizzled_normal(t, v, n, len, textures)
+    }
+
+    /// [`Interp::from_swizzled`] with the normal `n = (v1 − v0) × (v2 − v0)` of the triangle's
+    /// grid vertices and `|n|` already computed (as there, bit for bit): `t.v` is not read, so
+    /// `t` may hold the world positions of the triangle whose grid vertices `v` are.
+    pub(crate) fn from_swizzled_normal(
+        t: &Triangle,
+        v: &[[f64; 3]; 3],
+        n: [f64; 3],
+        len: f64,
+        textures: Option<&'a TextureSet>,
+    ) -> Interp<'a> {
         let [p0, p1, p2] = *v;
         let e1 = [p1[0] - p0[0], p1[1] - p0[1]];
         let e2 = [p2[0] - p0[0], p2[1] - p0[1]];
@@ -61,23 +76,21 @@ impl<'a> Interp<'a> {
         let mut cx = [0.0; 4];
         let mut cy = [0.0; 4];
         for k in 0..4 {
-            let a = [0, 1, 2].map(|i| t.c[i][k] as f64);
+            let a = [t.c[0][k] as f64, t.c[1][k] as f64, t.c[2][k] as f64];
             c0[k] = a[0];
             (cx[k], cy[k]) = grad(a);
         }
         let vn = (t.flags & TRI_HAS_NORMALS != 0).then(|| {
             let (mut a0, mut gx, mut gy) = ([0.0; 3], [0.0; 3], [0.0; 3]);
             for k in 0..3 {
-                let a = [0, 1, 2].map(|i| t.n[i][k] as f64);
+                let a = [t.n[0][k] as f64, t.n[1][k] as f64, t.n[2][k] as f64];
                 a0[k] = a[0];
                 (gx[k], gy[k]) = grad(a);
             }
             [a0, gx, gy]
         });
-        let n = cross_f64(&to_f64(&t.v));
-        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        let face = n.map(|c| c / len);
-        let centroid = [0, 1].map(|k| (p0[k] + p1[k] + p2[k]) / 3.0);
+        let face = [n[0] / len, n[1] / len, n[2] / len];
+        let centroid = [(p0[0] + p1[0] + p2[0]) / 3.0, (p0[1] + p1[1] + p2[1]) / 3.0];
         let tex = textures.and_then(|set| TexAt::new(t, set, grad, len));
         Interp {
             o: [p0[0], p0[1]],

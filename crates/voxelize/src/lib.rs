@@ -152,6 +152,8 @@ pub mod predicates;
 pub mod scanline;
 pub mod single;
 mod small;
+#[cfg(test)]
+mod small_reference;
 pub mod texcolor;
 pub mod world;
 

@@ -69,6 +69,8 @@ pub(crate) fn flat_values(t: &Triangle) -> [f32; 8] {
 #[inline]
 pub(crate) fn flat_values_of(t: &Triangle, n: [f64; 3], len: f64) -> [f32; 8] {
     debug_assert!(is_flat(t));
-    let face = n.map(|c| c / len);
-    values(face, t.c[0].map(|c| c as f64))
+    // written out: `array::map` compiled to calls here
+    let face = [n[0] / len, n[1] / len, n[2] / len];
+    let c = t.c[0];
+    values(face, [c[0] as f64, c[1] as f64, c[2] as f64, c[3] as f64])
 }

@@ -224,7 +224,6 @@ impl Perturbation {
     /// The bounds for f32 grid vertices `v` (`M` and `E` from them).
     pub fn of(v: &[[f64; 3]; 3]) -> Perturbation {
         let m = v.iter().flatten().fold(0.0f64, |m, c| m.max(c.abs()));
-        let eta = m * (1.0 / (1u64 << 23) as f64) + 2f64.powi(-140);
         let ext = (0..3)
             .map(|k| {
                 let lo = v[0][k].min(v[1][k]).min(v[2][k]);
@@ -232,6 +231,14 @@ impl Perturbation {
                 hi - lo
             })
             .fold(0.0f64, f64::max);
+        Self::of_bounds(m, ext)
+    }
+
+    /// The bounds from `M` (the largest coordinate magnitude) and the largest extent
+    /// `max_k (max − min)` of the vertices, as [`Perturbation::of`] finds them.
+    #[inline]
+    pub fn of_bounds(m: f64, ext: f64) -> Perturbation {
+        let eta = m * (1.0 / (1u64 << 23) as f64) + 2f64.powi(-140);
         let e = ext + 2.0 * eta;
         // a little over each bound, for the rounding of these formulas
         let dn = 8.0 * eta * (e + eta) * 1.01;
@@ -244,100 +251,6 @@ impl Perturbation {
     pub fn dp(&self, n: [f64; 3]) -> f64 {
         self.dp0 + 2.02 * self.eta * (n[0].abs() + n[1].abs() + n[2].abs())
     }
-}
-
-/// Unit roundoff of f64.
-const U: f64 = f64::EPSILON / 2.0;
-
-/// Whether the small path ([`crate::small`]) decides triangle `v` (f32 grid coordinates,
-/// `to_grid` of `world`) as the exact world coordinates would: every decision it makes is
-/// certain under the [`Perturbation`] of `v`. Those decisions are the closed voxel range
-/// (certain unless an end is on an integer: `to_grid` keeps comparisons with integers or makes
-/// them ties), the signs of the normal's components and of the edge differences, and the
-/// orient2d / orient3d signs at the one grid point `P` the range straddles; each is checked
-/// here in f64 with its rounding bound plus the perturbation. `false` sends the triangle to the
-/// general path, which decides exactly ([`crate::TriSetup::with_world`]).
-pub(crate) fn small_certain(v: &[[f32; 3]; 3], world: &[[f32; 3]; 3]) -> bool {
-    let o = v.map(|p| p.map(|c| c as f64));
-    let pert = Perturbation::of(&o);
-    let mut p = [0.0f64; 3];
-    let mut split = [false; 3];
-    for k in 0..3 {
-        let mn = o[0][k].min(o[1][k]).min(o[2][k]);
-        let mx = o[0][k].max(o[1][k]).max(o[2][k]);
-        if mn == mn.floor() || mx == mx.floor() {
-            return false;
-        }
-        let (a, b) = (mn.ceil() - 1.0, mx.floor());
-        split[k] = b > a;
-        p[k] = b;
-    }
-    let count = split.iter().filter(|&&s| s).count();
-    if count == 0 {
-        return true;
-    }
-    // edge differences: a zero in f32 must be a zero in the world values
-    for e in 0..3 {
-        let (a, b) = (e, (e + 1) % 3);
-        for k in 0..3 {
-            if o[b][k] - o[a][k] == 0.0 && world[b][k] != world[a][k] {
-                return false;
-            }
-        }
-    }
-    let d1 = [0, 1, 2].map(|k| o[1][k] - o[0][k]);
-    let d2 = [0, 1, 2].map(|k| o[2][k] - o[0][k]);
-    // `(v1 − v0) × (v2 − v0)` as `overlap::cross_f64` computes it
-    let n = [
-        d1[1] * d2[2] - d1[2] * d2[1],
-        d1[2] * d2[0] - d1[0] * d2[2],
-        d1[0] * d2[1] - d1[1] * d2[0],
-    ];
-    let mut mag = [0.0; 3];
-    for k in 0..3 {
-        let (i, j) = ((k + 1) % 3, (k + 2) % 3);
-        mag[k] = (d1[i] * d2[j]).abs() + (d1[j] * d2[i]).abs();
-        if !(n[k].abs() > 5.0 * U * mag[k] + pert.dn) {
-            return false;
-        }
-    }
-    let planes: &[usize] = match count {
-        1 => &[],
-        2 => match split.iter().position(|&s| !s) {
-            Some(0) => &[0],
-            Some(1) => &[1],
-            _ => &[2],
-        },
-        _ => &[0, 1, 2],
-    };
-    for &c in planes {
-        let (i, j) = ((c + 1) % 3, (c + 2) % 3);
-        for e in 0..3 {
-            let (a, b) = (o[e], o[(e + 1) % 3]);
-            let (ei, ej) = (b[i] - a[i], b[j] - a[j]);
-            let (di, dj) = (p[i] - a[i], p[j] - a[j]);
-            let f = ei * dj - ej * di;
-            let bound = 8.0 * U * ((ei * dj).abs() + (ej * di).abs()) + pert.de + 1e-300;
-            if !(f.abs() > bound) {
-                return false;
-            }
-        }
-    }
-    if count == 3 {
-        let d = [0, 1, 2].map(|k| p[k] - o[0][k]);
-        let g = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
-        let bound = 16.0
-            * U
-            * (0..3)
-                .map(|k| (mag[k] + n[k].abs()) * d[k].abs())
-                .sum::<f64>()
-            + pert.dp(n)
-            + 1e-300;
-        if !(g.abs() > bound) {
-            return false;
-        }
-    }
-    true
 }
 
 #[cfg(test)]
