@@ -17,6 +17,7 @@ mod gen;
 mod gen_blocks;
 mod gpu;
 mod hostile;
+mod index_bins;
 mod json_schema;
 mod licence;
 mod materials;

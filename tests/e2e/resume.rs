@@ -45,6 +45,9 @@ fn interrupted_build_resumes_to_identical_bytes() {
             "ingest must not run again"
         );
         assert_eq!(summary["tile_source"], tile_source, "{}", s.display());
+        // the mapped binary PLY's bins hold face indices (resumed as such), the spool's blocks
+        let index = if tile_source == "input" { 4 } else { 0 };
+        assert_eq!(summary["bin_index_bytes"], index, "{}", s.display());
         // positions and flags only: the bunny has neither normals nor colours
         assert_eq!(summary["record_bytes"], 40);
         assert_eq!(

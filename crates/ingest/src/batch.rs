@@ -16,8 +16,10 @@ use voxlod_geom::Triangle;
 pub(crate) type Prepared = Box<dyn Any + Send>;
 /// The caller's `prepare` step, type-erased.
 pub(crate) type Prepare<'a> = &'a (dyn Fn(&mut [Triangle]) -> Prepared + Sync);
-/// The caller's callback, type-erased.
-pub(crate) type Callback<'a> = &'a mut dyn FnMut(&[Triangle], Prepared) -> Result<(), IngestError>;
+/// The caller's callback, type-erased: the batch, each triangle's face record (empty unless
+/// the reader tracks them: [`LocalBatch::faces`]) and what `prepare` made of the batch.
+pub(crate) type Callback<'a> =
+    &'a mut dyn FnMut(&[Triangle], &[u64], Prepared) -> Result<(), IngestError>;
 
 /// Triangles per batch handed to the caller's callback (64 Ki triangles = 5.5 MiB).
 pub const BATCH: usize = 1 << 16;
@@ -121,7 +123,9 @@ impl<'a> Emitter<'a> {
             Some(p) => p,
             None => (self.prepare)(&mut lb.tris),
         };
-        (self.f)(&lb.tris, prepared)?;
+        let faces = lb.faces.as_deref().unwrap_or(&[]);
+        debug_assert!(faces.is_empty() || faces.len() == n);
+        (self.f)(&lb.tris, faces, prepared)?;
         (self.progress)(self.bytes_done.min(self.bytes_total), self.bytes_total);
         self.added(n.min(u32::MAX as usize) as u32);
         Ok(())
@@ -142,7 +146,7 @@ impl<'a> Emitter<'a> {
     fn flush(&mut self) -> Result<(), IngestError> {
         if !self.batch.is_empty() {
             let prepared = (self.prepare)(&mut self.batch);
-            (self.f)(&self.batch, prepared)?;
+            (self.f)(&self.batch, &[], prepared)?;
             self.batch.clear();
         }
         (self.progress)(self.bytes_done.min(self.bytes_total), self.bytes_total);
@@ -195,6 +199,13 @@ pub(crate) struct LocalBatch {
     pub repeated: u64,
     /// The emitter's `prepare` step run on `tris` by the worker, once they are complete.
     pub prepared: Option<Prepared>,
+    /// If set, the face record of each triangle of `tris` (for bins of face indices): the
+    /// record the batch starts at (`first`) plus the records taken before this one. Every
+    /// record counts once in `polygons` before its triangle is added, so the record of a
+    /// triangle is `first + polygons - 1` when it is added.
+    pub faces: Option<Vec<u64>>,
+    /// The face record this batch starts at (with `faces`).
+    pub first: u64,
 }
 
 impl Sink for LocalBatch {
@@ -223,6 +234,10 @@ impl LocalBatch {
             self.degenerate += 1;
         } else {
             self.tris.push(t);
+            if let Some(f) = &mut self.faces {
+                debug_assert!(self.polygons > 0, "a record is counted before its triangle");
+                f.push(self.first + self.polygons - 1);
+            }
         }
     }
 }

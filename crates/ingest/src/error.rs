@@ -149,6 +149,27 @@ pub enum IngestError {
         /// What is wrong, in words.
         message: String,
     },
+    /// A stream of triangles with their face records
+    /// ([`crate::MeshSource::stream_indexed_prepared`]) met a face record that is not a
+    /// triangle record at its fixed offset: the faces are not fixed-size records after all.
+    /// The caller reads the input the general way instead.
+    #[error("{}: face {face} is not a triangle record of the element's fixed size, so faces cannot be found by index", .path.display())]
+    NotFixedRecords {
+        /// The input file.
+        path: PathBuf,
+        /// The first face record that is not a triangle record.
+        face: u64,
+    },
+    /// A triangle asked for by its face record ([`crate::MeshSource::triangles_at`]) is not
+    /// what the stream gave for it (a record that is no longer a non-degenerate triangle):
+    /// the input changed during the build.
+    #[error("{}: face {face} no longer holds the triangle read from it earlier in this build: the input changed during the build", .path.display())]
+    FaceChanged {
+        /// The input file.
+        path: PathBuf,
+        /// The face record.
+        face: u64,
+    },
     /// The caller's batch callback failed; streaming stopped there. Its error is kept whole
     /// (and shown as it is): the caller takes its own type back with `downcast`.
     #[error(transparent)]

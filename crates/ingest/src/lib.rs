@@ -402,6 +402,68 @@ impl MeshSource {
         self.stream_some(Some(part), prepare, f, progress)
     }
 
+    /// The number of face records if they are fixed-size triangle records that can be found
+    /// by index (the input of [`MeshSource::face_parts`]: a memory-mapped binary PLY with
+    /// fixed-size vertex records and one face element, the last, of triangle records of one
+    /// size that fill the file): then [`MeshSource::stream_indexed_prepared`] gives each
+    /// triangle's face record and [`MeshSource::triangles_at`] the triangles of records.
+    /// `None` for any other input.
+    pub fn fixed_face_count(&self) -> Option<u64> {
+        match &self.reader {
+            Reader::Ply(p) => p.fixed_face_count(),
+            Reader::Obj(_) | Reader::Gltf(_) | Reader::Stl(_) => None,
+        }
+    }
+
+    /// [`MeshSource::stream_prepared`] that also gives `f` the face record of each triangle of
+    /// the batch (a face record holds one triangle, or none if it is degenerate), for an input
+    /// with [`MeshSource::fixed_face_count`]. The same triangles, counts and errors as
+    /// [`MeshSource::stream_prepared`], except that a face record found not to be a triangle
+    /// record of the fixed size stops the stream with [`IngestError::NotFixedRecords`] (the
+    /// caller then streams the general way).
+    pub fn stream_indexed_prepared<P: Send + 'static>(
+        &self,
+        prepare: &(dyn Fn(&mut [Triangle]) -> P + Sync),
+        f: &mut dyn FnMut(&[Triangle], &[u64], P) -> Result<(), IngestError>,
+        progress: &mut dyn FnMut(u64, u64),
+    ) -> Result<IngestStats, IngestError> {
+        let Reader::Ply(p) = &self.reader else {
+            panic!("triangles with their face records from fixed-size PLY face records only");
+        };
+        assert!(p.fixed_face_count().is_some(), "fixed-size face records");
+        let release = || p.release_pages();
+        let erased = |tris: &mut [Triangle]| -> batch::Prepared { Box::new(prepare(tris)) };
+        let mut g = |tris: &[Triangle], faces: &[u64], prep: batch::Prepared| {
+            assert_eq!(
+                faces.len(),
+                tris.len(),
+                "every triangle has its face record"
+            );
+            let prep = prep
+                .downcast::<P>()
+                .expect("the emitter hands on what prepare returned");
+            f(tris, faces, *prep)
+        };
+        let mut em = batch::Emitter::new(&erased, &mut g, progress, p.progress_total())
+            .with_release(Some(&release));
+        p.stream_indexed(&mut em)?;
+        em.finish()
+    }
+
+    /// Appends to `out` the triangle of each face record of `faces` (records
+    /// [`MeshSource::stream_indexed_prepared`] gave; an input with
+    /// [`MeshSource::fixed_face_count`]): bit for bit the triangle the stream gave for it, by
+    /// the same decode. A record that is no longer a non-degenerate triangle (the input
+    /// changed) is [`IngestError::FaceChanged`]. May be called from several threads at once.
+    pub fn triangles_at(&self, faces: &[u64], out: &mut Vec<Triangle>) -> Result<(), IngestError> {
+        match &self.reader {
+            Reader::Ply(p) => p.triangles_at(faces, out),
+            Reader::Obj(_) | Reader::Gltf(_) | Reader::Stl(_) => {
+                panic!("triangles by face record from fixed-size PLY face records only")
+            }
+        }
+    }
+
     /// A stream of every triangle, or of `part`'s.
     fn stream_some<P: Send + 'static>(
         &self,
@@ -420,7 +482,7 @@ impl MeshSource {
             Reader::Obj(_) | Reader::Gltf(_) => {}
         };
         let erased = |tris: &mut [Triangle]| -> batch::Prepared { Box::new(prepare(tris)) };
-        let mut g = |tris: &[Triangle], p: batch::Prepared| {
+        let mut g = |tris: &[Triangle], _: &[u64], p: batch::Prepared| {
             let p = p
                 .downcast::<P>()
                 .expect("the emitter hands on what prepare returned");

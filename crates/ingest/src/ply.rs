@@ -4,10 +4,13 @@
 //! in a second pass over the file.
 
 use crate::batch::Emitter;
+use crate::batch::LocalBatch;
 use crate::bounds::parallel_bounds;
 use crate::map_guard::MappedFile;
 use crate::ply_face_data::FaceRecords;
-use crate::ply_faces::{stream_faces, stream_triangles_parallel, triangle_record_bytes};
+use crate::ply_faces::{
+    plain_item, stream_faces, stream_triangles_parallel, triangle_record, triangle_record_bytes,
+};
 use crate::ply_header::{parse_header, Element, Encoding, Header, Scalar};
 use crate::ply_materials::material_table;
 use crate::ply_records::{
@@ -22,7 +25,7 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
-use voxlod_geom::{Bounds, TRI_HAS_COLORS, TRI_HAS_NORMALS, TRI_HAS_UV};
+use voxlod_geom::{Bounds, Triangle, TRI_HAS_COLORS, TRI_HAS_NORMALS, TRI_HAS_UV};
 
 pub(crate) struct PlySource {
     path: PathBuf,
@@ -37,6 +40,9 @@ pub(crate) struct PlySource {
     passes: u64,
     /// Flags from the material table (`TRI_HAS_UV`, the one texture's material).
     table_flags: u32,
+    /// Triangles decoded by [`PlySource::triangles_at`] since it last released the map's
+    /// pages (shared by the threads that call it).
+    since_release: std::sync::atomic::AtomicU64,
 }
 
 impl PlySource {
@@ -95,6 +101,7 @@ impl PlySource {
             offsets,
             passes,
             table_flags: 0,
+            since_release: Default::default(),
         };
         let mut header = src.header.clone();
         let table = material_table(path, scope, &mut header, &mut |h, ei, pi, ty| {
@@ -253,10 +260,127 @@ impl PlySource {
 
     pub fn stream(&self, em: &mut Emitter) -> Result<(), IngestError> {
         match (&self.map, self.header.encoding) {
-            (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, None, em),
-            (Some(m), _) => self.stream_mapped::<false>(m, None, em),
+            (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, None, false, em),
+            (Some(m), _) => self.stream_mapped::<false>(m, None, false, em),
             (None, _) => self.stream_sequential(em),
         }
+    }
+
+    /// Streams every triangle with its face record ([`PlySource::fixed_faces`] must hold).
+    pub fn stream_indexed(&self, em: &mut Emitter) -> Result<(), IngestError> {
+        assert!(self.fixed_faces().is_some(), "faces of fixed-size records");
+        match (&self.map, self.header.encoding) {
+            (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, None, true, em),
+            (Some(m), _) => self.stream_mapped::<false>(m, None, true, em),
+            (None, _) => unreachable!("fixed faces are mapped"),
+        }
+    }
+
+    /// The face element as fixed-size triangle records that can be found by index, if it is
+    /// one (the conditions of [`PlySource::face_parts`]): its element, index list property,
+    /// record bytes and byte offset.
+    fn fixed_faces(&self) -> Option<(usize, usize, usize, usize)> {
+        let data: &[u8] = self.map.as_ref()?;
+        let l = &self.header.layout;
+        self.header.elements[l.vertex].fixed_size()?;
+        let &[(ei, list, false)] = l.sources.as_slice() else {
+            return None;
+        };
+        let el = &self.header.elements[ei];
+        let size = triangle_record_bytes(el, list)?;
+        let off = self.offsets[ei]?;
+        let fills = ei + 1 == self.header.elements.len()
+            && el
+                .count
+                .checked_mul(size as u64)
+                .and_then(|b| b.checked_add(off as u64))
+                == Some(data.len() as u64);
+        fills.then_some((ei, list, size, off))
+    }
+
+    /// Face records, if they are fixed-size triangle records that can be found by index.
+    pub fn fixed_face_count(&self) -> Option<u64> {
+        self.fixed_faces()
+            .map(|(ei, ..)| self.header.elements[ei].count)
+    }
+
+    /// Appends the triangle of each face record of `faces` to `out`: the triangle the stream
+    /// gave for that record (bit for bit: the same decode), which must still be one (else
+    /// [`IngestError::FaceChanged`]). Releases the map's pages every
+    /// [`crate::batch::RELEASE_EVERY`] triangles, as the stream does.
+    pub fn triangles_at(&self, faces: &[u64], out: &mut Vec<Triangle>) -> Result<(), IngestError> {
+        let (Some(m), Some((ei, list, size, off))) = (&self.map, self.fixed_faces()) else {
+            panic!("triangles by face record from fixed-size triangle records only");
+        };
+        match self.header.encoding {
+            Encoding::BinaryBe => self.triangles_at_in::<true>(m, ei, list, size, off, faces, out),
+            _ => self.triangles_at_in::<false>(m, ei, list, size, off, faces, out),
+        }?;
+        use std::sync::atomic::Ordering;
+        let n = faces.len() as u64;
+        let before = self.since_release.fetch_add(n, Ordering::Relaxed);
+        if before + n >= crate::batch::RELEASE_EVERY as u64 {
+            self.since_release.store(0, Ordering::Relaxed);
+            self.release_pages();
+        }
+        Ok(())
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn triangles_at_in<const BE: bool>(
+        &self,
+        data: &[u8],
+        ei: usize,
+        list: usize,
+        size: usize,
+        off: usize,
+        faces: &[u64],
+        out: &mut Vec<Triangle>,
+    ) -> Result<(), IngestError> {
+        let l = &self.header.layout;
+        let vel = &self.header.elements[l.vertex];
+        let stride = vel.fixed_size().expect("fixed faces have fixed vertices");
+        let voff = self.offsets[l.vertex].expect("mapped vertices");
+        let verts =
+            MappedVertices::<BE>::new(&data[voff..voff + vel.count as usize * stride], vel, l);
+        let el = &self.header.elements[ei];
+        let records = FaceRecords {
+            path: &self.path,
+            el,
+            list,
+            verts: &verts,
+            flags: self.flags(),
+        };
+        let plain = plain_item(el, list);
+        let mut lb = LocalBatch {
+            tris: std::mem::take(out),
+            ..Default::default()
+        };
+        let mut r = Ok(());
+        for &f in faces {
+            let had = lb.tris.len();
+            let changed = || IngestError::FaceChanged {
+                path: self.path.clone(),
+                face: f,
+            };
+            if f >= el.count {
+                r = Err(changed());
+                break;
+            }
+            match triangle_record::<BE, _>(&records, data, off, size, plain, f, &mut lb) {
+                Ok(true) if lb.tris.len() == had + 1 => {}
+                Ok(_) => {
+                    r = Err(changed());
+                    break;
+                }
+                Err(e) => {
+                    r = Err(e);
+                    break;
+                }
+            }
+        }
+        *out = lb.tris;
+        r
     }
 
     /// The face records cut into `n` parts of consecutive records (fewer if there are fewer
@@ -265,21 +389,9 @@ impl PlySource {
     /// whose records are triangles of one size that fill the file to its end exactly (so no
     /// record is a polygon of another size). `None` otherwise.
     pub fn face_parts(&self, n: u64) -> Option<Vec<FacePart>> {
-        let data: &[u8] = self.map.as_ref()?;
-        let l = &self.header.layout;
-        self.header.elements[l.vertex].fixed_size()?;
-        let &[(ei, list, false)] = l.sources.as_slice() else {
-            return None;
-        };
+        let (ei, _, size, off) = self.fixed_faces()?;
         let el = &self.header.elements[ei];
-        let size = triangle_record_bytes(el, list)? as u64;
-        let off = self.offsets[ei]? as u64;
-        let fills = ei + 1 == self.header.elements.len()
-            && el.count.checked_mul(size).and_then(|b| b.checked_add(off))
-                == Some(data.len() as u64);
-        if !fills {
-            return None;
-        }
+        let (size, off) = (size as u64, off as u64);
         let n = n.clamp(1, el.count.max(1));
         Some(
             (0..n)
@@ -298,8 +410,8 @@ impl PlySource {
     pub fn stream_part(&self, part: &FacePart, em: &mut Emitter) -> Result<(), IngestError> {
         let range = part.records[0]..part.records[1];
         match (&self.map, self.header.encoding) {
-            (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, Some(range), em),
-            (Some(m), _) => self.stream_mapped::<false>(m, Some(range), em),
+            (Some(m), Encoding::BinaryBe) => self.stream_mapped::<true>(m, Some(range), false, em),
+            (Some(m), _) => self.stream_mapped::<false>(m, Some(range), false, em),
             (None, _) => panic!("a part of a PLY that is not memory-mapped"),
         }
     }
@@ -309,6 +421,7 @@ impl PlySource {
         &self,
         data: &[u8],
         part: Option<std::ops::Range<u64>>,
+        indexed: bool,
         em: &mut Emitter,
     ) -> Result<(), IngestError> {
         let l = &self.header.layout;
@@ -319,14 +432,17 @@ impl PlySource {
                 // element_offsets checked that the vertex records lie inside the file
                 let end = voff + vel.count as usize * stride;
                 let verts = MappedVertices::<BE>::new(&data[voff..end], vel, l);
-                self.faces_from_map::<BE, _>(data, &verts, part, em)
+                self.faces_from_map::<BE, _>(data, &verts, part, indexed, em)
             }
             None => {
-                assert!(part.is_none(), "parts need fixed-size vertex records");
+                assert!(
+                    part.is_none() && !indexed,
+                    "parts and indices need fixed-size vertex records"
+                );
                 let mut src = SliceRecords::<BE>::new(&self.path, data, voff);
                 let verts =
                     CompactVertices::load(&self.path, &mut src, vel, l, &mut |b| em.report(b))?;
-                self.faces_from_map::<BE, _>(data, &verts, None, em)
+                self.faces_from_map::<BE, _>(data, &verts, None, false, em)
             }
         }
     }
@@ -363,9 +479,11 @@ impl PlySource {
         data: &[u8],
         verts: &V,
         part: Option<std::ops::Range<u64>>,
+        indexed: bool,
         em: &mut Emitter,
     ) -> Result<(), IngestError> {
         debug_assert!(part.is_none() || self.header.layout.sources.len() == 1);
+        debug_assert!(!indexed || self.header.layout.sources.len() == 1);
         for &(ei, list, strips) in &self.header.layout.sources {
             let off = self.offsets[ei].unwrap_or(data.len());
             let el = &self.header.elements[ei];
@@ -381,7 +499,7 @@ impl PlySource {
                 stream_faces(&faces, strips, &mut src, em, 0..el.count, false)?;
             } else {
                 let records = part.clone().unwrap_or(0..el.count);
-                stream_triangles_parallel::<BE, V>(&faces, data, off, records, em)?;
+                stream_triangles_parallel::<BE, V>(&faces, data, off, records, indexed, em)?;
             }
         }
         Ok(())

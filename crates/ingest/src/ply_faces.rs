@@ -42,11 +42,18 @@ pub(crate) fn triangle_record_bytes(el: &Element, list: usize) -> Option<usize> 
 /// the sequential reader. At the first record that is not a triangle, the rest is read
 /// sequentially. Only the records `records` are read: all of them, or (for a part of the
 /// input) a range, which needs triangle records of one size.
+///
+/// With `indexed` (bins of face indices), each batch carries the face record of each of its
+/// triangles ([`LocalBatch::faces`]); that needs every record in `records` to be a triangle
+/// record at its fixed offset, so the rounds run on one thread too, and a record that is not
+/// a triangle stops the stream with [`IngestError::NotFixedRecords`] instead of a sequential
+/// read (whose triangles would carry no record).
 pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
     faces: &FaceRecords<V>,
     data: &[u8],
     off: usize,
     records: std::ops::Range<u64>,
+    indexed: bool,
     em: &mut Emitter,
 ) -> Result<(), IngestError> {
     use rayon::prelude::*;
@@ -59,29 +66,24 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
         stream_faces(faces, false, &mut src, em, first..records.end, false).map(drop)
     };
     let threads = rayon::current_num_threads() as u64;
+    let not_fixed = |rec: u64| IngestError::NotFixedRecords {
+        path: path.to_path_buf(),
+        face: rec,
+    };
     let Some(size) = triangle_record_bytes(el, list).map(|s| s as u64) else {
         assert!(
-            records.start == 0,
-            "a part of the faces needs triangle records of one size"
+            records.start == 0 && !indexed,
+            "a part of the faces or their indices need triangle records of one size"
         );
         return sequential(0, off, em);
     };
     let at = |rec: u64| off + (rec * size) as usize;
-    if threads <= 1 {
+    if threads <= 1 && !indexed {
         return sequential(records.start, at(records.start), em);
     }
     // `property list uchar int|uint vertex_indices` and nothing else: what nearly every writer
     // produces, decoded by `plain_triangles`
-    let plain = match (el.props.len(), el.props[list].kind) {
-        (
-            1,
-            Kind::List {
-                count: Scalar::U8 | Scalar::I8,
-                item: item @ (Scalar::I32 | Scalar::U32),
-            },
-        ) => Some(item),
-        _ => None,
-    };
+    let plain = plain_item(el, list);
     // records that fit in the file at the uniform size (the rest, if any, is read sequentially
     // and reports the truncation as the sequential reader does)
     let fit = ((data.len() - off) as u64 / size).min(records.end);
@@ -102,6 +104,8 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
             .map(|&(a, b)| {
                 let mut lb = LocalBatch {
                     tris: Vec::with_capacity((b - a) as usize),
+                    faces: indexed.then(|| Vec::with_capacity((b - a) as usize)),
+                    first: a,
                     ..Default::default()
                 };
                 // the usual record in its own loop; from the first record it cannot take on,
@@ -149,6 +153,7 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
                 match r {
                     Ok((lb, None)) => em.push_local(lb)?,
                     // a record that is not a triangle: the offsets from `a` on are unknown
+                    Ok((_, Some(r))) if indexed => return Err(not_fixed(r)),
                     Ok((_, Some(_))) => return Ok(Some(a)),
                     Err(e) => return Err(e),
                 }
@@ -163,9 +168,52 @@ pub(crate) fn stream_triangles_parallel<const BE: bool, V: VertexSource + Sync>(
         current = next;
     }
     if rec < records.end {
+        if indexed {
+            return Err(not_fixed(rec));
+        }
         return sequential(rec, at(rec), em);
     }
     Ok(())
+}
+
+/// Decodes face record `rec` (at its fixed offset `off + rec · size`, a triangle record)
+/// into `lb` exactly as [`stream_triangles_parallel`] does (the plain loop for plain records,
+/// else the general reader), so the triangle it gives is bit for bit the one the stream gave.
+/// Returns false if the record is not a triangle record; an error as the stream reports it.
+pub(crate) fn triangle_record<const BE: bool, V: VertexSource>(
+    faces: &FaceRecords<V>,
+    data: &[u8],
+    off: usize,
+    size: usize,
+    plain: Option<Scalar>,
+    rec: u64,
+    lb: &mut LocalBatch,
+) -> Result<bool, IngestError> {
+    let at = off + rec as usize * size;
+    if let Some(item) = plain {
+        let recs = &data[at..at + PLAIN_RECORD];
+        if plain_triangles::<BE, V>(recs, rec, item, faces.verts, faces.flags, lb) > rec {
+            return Ok(true);
+        }
+    }
+    let mut src = SliceRecords::<BE>::new(faces.path, data, at);
+    Ok(stream_faces(faces, false, &mut src, lb, rec..rec + 1, true)?.is_none())
+}
+
+/// The item type of a plain triangle record (`property list uchar int|uint vertex_indices`
+/// and nothing else: [`PLAIN_RECORD`] bytes, decoded by `plain_triangles`), if `el`'s records
+/// are that.
+pub(crate) fn plain_item(el: &Element, list: usize) -> Option<Scalar> {
+    match (el.props.len(), el.props[list].kind) {
+        (
+            1,
+            Kind::List {
+                count: Scalar::U8 | Scalar::I8,
+                item: item @ (Scalar::I32 | Scalar::U32),
+            },
+        ) => Some(item),
+        _ => None,
+    }
 }
 
 /// Bytes of a plain triangle record: the count 3 and three 32-bit indices.

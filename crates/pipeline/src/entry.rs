@@ -388,6 +388,7 @@ fn summarize(ctx: BuildContext, built: Built, resumed: bool, t0: Instant) -> Bui
         counted_during_ingest: ingested.counted_during_ingest,
         binned_during_ingest: ingested.binned_during_ingest,
         record_bytes: ingested.layout.bytes(),
+        bin_index_bytes: voxelized.marker.bin_index_bytes,
         source_geometry,
         resumed,
         stages: ctx.times,

@@ -105,6 +105,10 @@ pub struct BuildSummary {
     /// Bytes of one triangle record in the spool and in the bins' blocks before they are
     /// indexed (40–112: only the attributes the mesh has).
     pub record_bytes: usize,
+    /// 0 if the bins held blocks of triangle records; 4 (or 8 past 2³² faces) if they held
+    /// each triangle's face record instead, the voxelize stage reading the triangles from the
+    /// memory-mapped input by index (a binary PLY of fixed-size triangle records).
+    pub bin_index_bytes: usize,
     /// `--source-geometry`: the leaves' source triangles; `None` without it.
     pub source_geometry: Option<SourceSummary>,
     /// True if the build continued an interrupted one.

@@ -251,7 +251,7 @@ pub const SPANS: u32 = u32::MAX;
 /// a chunk's index (a grid has at most 2³⁰ chunks: `n³` with `n` a power of two below 2¹¹).
 pub const DROPPED: u32 = u32::MAX - 1;
 
-/// Calls `put(t, li)` for every chunk (linear index `li`) that keyed triangle `t` goes to
+/// Calls `put(i, t, li)` for every chunk (linear index `li`) that keyed triangle `t = tris[i]` goes to
 /// (`keys` from [`ChunkKeys::of_world`] on `grid`, `n` chunks per axis): its key's chunk, every
 /// chunk of its range for [`SPANS`], none for [`DROPPED`]; in order, stopping at an error.
 #[inline]
@@ -260,16 +260,16 @@ pub(crate) fn for_each_keyed_chunk(
     n: u32,
     tris: &[Triangle],
     keys: &[u32],
-    mut put: impl FnMut(&Triangle, usize) -> Result<(), TileError>,
+    mut put: impl FnMut(usize, &Triangle, usize) -> Result<(), TileError>,
 ) -> Result<(), TileError> {
     assert_eq!(tris.len(), keys.len(), "one key per triangle");
     let n = n as usize;
-    for (t, &k) in tris.iter().zip(keys) {
+    for (i, (t, &k)) in tris.iter().zip(keys).enumerate() {
         if k == DROPPED {
             continue;
         }
         if k != SPANS {
-            put(t, k as usize)?;
+            put(i, t, k as usize)?;
             continue;
         }
         let Some((lo, hi)) = grid.world_chunk_range(t) else {
@@ -278,7 +278,7 @@ pub(crate) fn for_each_keyed_chunk(
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 for x in lo[0]..=hi[0] {
-                    put(t, (z as usize * n + y as usize) * n + x as usize)?;
+                    put(i, t, (z as usize * n + y as usize) * n + x as usize)?;
                 }
             }
         }
@@ -426,7 +426,7 @@ impl<'g> Scatter<'g> {
     /// Bins a batch of world-space triangles given their [`ChunkKeys::of_world`].
     pub(crate) fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
         let (grid, n) = (self.grid, self.n);
-        for_each_keyed_chunk(grid, n, tris, keys, |t, li| self.put(t, li))
+        for_each_keyed_chunk(grid, n, tris, keys, |_, t, li| self.put(t, li))
     }
 
     /// Adds triangle `t` to the slice of the chunk of linear index `li`.
@@ -513,6 +513,7 @@ impl<'g> Scatter<'g> {
             file: self.file,
             chunks: self.chunks,
             layout: self.layout,
+            index_bytes: 0,
             pieces: self.pieces,
             bytes: self.end,
         })
@@ -548,16 +549,32 @@ pub fn scatter_bound(counts: &ChunkCounts, layout: RecordLayout, buffer_bytes: u
     layout.blocks_bound(counts.total(), pieces)
 }
 
+/// Where the triangles of bins of face indices come from: the input, which finds a triangle
+/// by its face record (the tile crate does not know the input's format).
+pub trait TriangleSource: Sync {
+    /// Appends to `out` the triangle of each face record of `faces`, in order: the triangle
+    /// the pass that binned it was given for that record, bit for bit.
+    fn triangles_at(&self, faces: &[u64], out: &mut Vec<Triangle>) -> Result<(), TileError>;
+}
+
 /// The finished bins file: non-empty leaf chunks in Morton order, each with its triangles
 /// (world coordinates, in input order) as [blocks](crate::block) of one [`RecordLayout`], in
 /// pieces: runs of consecutive blocks, `[byte offset, bytes, triangles]`, read one after
 /// another. [`scatter`] writes a piece per flush of a chunk's slice, [`crate::RunScatter`] a
 /// piece per chunk per run.
+///
+/// Bins of *face indices* ([`crate::RunScatter::create_indexed`], for an input whose triangles
+/// can be found again by their face record) hold, in the same chunks and pieces, each
+/// triangle's face record as a little-endian integer of [`Bins::index_bytes`] bytes instead of
+/// blocks; [`Bins::read_chunk_from`] rebuilds the triangles from the input through a
+/// [`TriangleSource`].
 pub struct Bins {
     path: PathBuf,
     file: File,
     chunks: Vec<ChunkBin>,
     layout: RecordLayout,
+    /// 0 for blocks of records; 4 or 8 for face indices of that width.
+    index_bytes: usize,
     /// Per chunk (same order as `chunks`): its pieces `[byte offset, bytes, triangles]`, in
     /// input order.
     pieces: Vec<Vec<[u64; 3]>>,
@@ -575,6 +592,23 @@ impl Bins {
         layout: RecordLayout,
         pieces: Vec<Vec<[u64; 3]>>,
     ) -> Result<Bins, TileError> {
+        Bins::open_pieces_of(path, chunks, layout, 0, pieces)
+    }
+
+    /// [`Bins::open_pieces`] for bins of blocks (`index_bytes` 0) or of face indices of
+    /// `index_bytes` (4 or 8) bytes each, whose pieces must then hold exactly their triangles'
+    /// indices.
+    pub fn open_pieces_of(
+        path: &Path,
+        chunks: Vec<ChunkBin>,
+        layout: RecordLayout,
+        index_bytes: usize,
+        pieces: Vec<Vec<[u64; 3]>>,
+    ) -> Result<Bins, TileError> {
+        assert!(
+            matches!(index_bytes, 0 | 4 | 8),
+            "blocks, u32 or u64 indices"
+        );
         let file = File::open(path).map_err(TileError::io("open", path))?;
         let len = file.metadata().map_err(TileError::io("stat", path))?.len();
         let fits = pieces.len() == chunks.len()
@@ -585,6 +619,10 @@ impl Bins {
                     && ps
                         .iter()
                         .all(|p| p[0].checked_add(p[1]).is_some_and(|e| e <= len))
+                    && (index_bytes == 0
+                        || ps
+                            .iter()
+                            .all(|p| Some(p[1]) == p[2].checked_mul(index_bytes as u64)))
             });
         let covered: u64 = pieces.iter().flatten().map(|p| p[1]).sum();
         if !fits || covered != len {
@@ -602,6 +640,7 @@ impl Bins {
             file,
             chunks,
             layout,
+            index_bytes,
             pieces,
             bytes: len,
         })
@@ -612,6 +651,7 @@ impl Bins {
         file: File,
         chunks: Vec<ChunkBin>,
         layout: RecordLayout,
+        index_bytes: usize,
         pieces: Vec<Vec<[u64; 3]>>,
         bytes: u64,
     ) -> Bins {
@@ -621,9 +661,15 @@ impl Bins {
             file,
             chunks,
             layout,
+            index_bytes,
             pieces,
             bytes,
         }
+    }
+
+    /// Bytes of one face index for bins of face indices; `None` for bins of blocks.
+    pub fn index_bytes(&self) -> Option<usize> {
+        (self.index_bytes > 0).then_some(self.index_bytes)
     }
 
     /// Each chunk's pieces `[byte offset, bytes, triangles]` (for a resume marker).
@@ -659,13 +705,35 @@ impl Bins {
     /// Hands chunk `i`'s triangles to `f` in input order, `batch` at a time (the last batch
     /// may be smaller), decoding one block at a time (memory is bounded whatever the chunk
     /// holds). A block that does not match its piece or the layout is a [`TileError::BadBins`].
+    /// Bins of face indices need their source: [`Bins::read_chunk_from`].
     pub fn read_chunk(
         &self,
         i: usize,
         batch: usize,
         f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
     ) -> Result<(), TileError> {
+        self.read_chunk_from(i, batch, None, f)
+    }
+
+    /// [`Bins::read_chunk`] for bins of either kind: bins of face indices rebuild each batch's
+    /// triangles from `source` (the input they index; the same batches as blocks would give).
+    pub fn read_chunk_from(
+        &self,
+        i: usize,
+        batch: usize,
+        source: Option<&dyn TriangleSource>,
+        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+    ) -> Result<(), TileError> {
         assert!(batch > 0);
+        if self.index_bytes > 0 {
+            let Some(src) = source else {
+                return Err(TileError::BadBins {
+                    path: self.path.clone(),
+                    problem: "bins of face indices read without the input they index".into(),
+                });
+            };
+            return self.read_indices(i, batch, src, f);
+        }
         let c = self.chunks[i];
         let cap = batch.min(c.count as usize).max(1);
         let mut tris: Vec<Triangle> = Vec::with_capacity(cap);
@@ -721,6 +789,59 @@ impl Bins {
         }
         if !tris.is_empty() {
             f(&tris)?;
+        }
+        Ok(())
+    }
+
+    /// Chunk `i`'s triangles from bins of face indices: the indices of up to `batch` triangles
+    /// at a time, their triangles from `src`.
+    fn read_indices(
+        &self,
+        i: usize,
+        batch: usize,
+        src: &dyn TriangleSource,
+        f: &mut dyn FnMut(&[Triangle]) -> Result<(), TileError>,
+    ) -> Result<(), TileError> {
+        let c = self.chunks[i];
+        let w = self.index_bytes;
+        let cap = batch.min(c.count as usize).max(1);
+        let (mut raw, mut faces) = (Vec::new(), Vec::with_capacity(cap));
+        let mut tris: Vec<Triangle> = Vec::with_capacity(cap);
+        let mut give = |faces: &mut Vec<u64>| -> Result<(), TileError> {
+            tris.clear();
+            src.triangles_at(faces, &mut tris)?;
+            assert_eq!(tris.len(), faces.len(), "one triangle per face record");
+            faces.clear();
+            f(&tris)
+        };
+        for &[start, bytes, count] in &self.pieces[i] {
+            debug_assert_eq!(bytes, count * w as u64, "checked when opened or written");
+            let (mut at, end) = (start, start + bytes);
+            while at < end {
+                let n = ((end - at) as usize / w).min(cap - faces.len());
+                raw.resize(n * w, 0);
+                self.file
+                    .read_exact_at(&mut raw, at)
+                    .map_err(TileError::io("read", &self.path))?;
+                if w == 4 {
+                    faces.extend(
+                        raw.chunks_exact(4)
+                            .map(|b| u32::from_le_bytes(b.try_into().expect("4 bytes")) as u64),
+                    );
+                } else {
+                    faces.extend(
+                        raw.chunks_exact(8)
+                            .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes"))),
+                    );
+                }
+                at += (n * w) as u64;
+                if faces.len() == cap {
+                    give(&mut faces)?;
+                }
+            }
+        }
+        if !faces.is_empty() {
+            give(&mut faces)?;
         }
         Ok(())
     }

@@ -19,7 +19,11 @@
 //! When the grid is known before the triangles are read, [`RunScatter`] bins them without
 //! the counts, in the same pass that reads them for their bounds: the buffer is written in
 //! runs, each sorted by chunk and encoded as blocks, and a chunk's bin is its pieces in the
-//! runs (same triangles, same order for [`Bins::read_chunk`]).
+//! runs (same triangles, same order for [`Bins::read_chunk`]). For an input whose triangles can
+//! be found again by their face record, the runs may hold those records instead of the
+//! triangles ([`RunScatter::create_indexed`]: bins of face indices, 4 or 8 bytes per binned
+//! triangle, no blocks), read back through the input as a [`TriangleSource`]
+//! ([`Bins::read_chunk_from`]).
 //!
 //! Per-triangle work that does not depend on the order (the chunk ranges as [`ChunkKeys`],
 //! of the triangles moved to the grid) runs in each pass's prepare step
@@ -59,7 +63,8 @@ mod run_scatter;
 mod spool;
 
 pub use bins::{
-    count, scatter, scatter_bound, Bins, ChunkBin, ChunkCounts, ChunkKeys, DROPPED, SPANS,
+    count, scatter, scatter_bound, Bins, ChunkBin, ChunkCounts, ChunkKeys, TriangleSource, DROPPED,
+    SPANS,
 };
 pub use record::RecordLayout;
 pub use run_scatter::{RunScatter, RUN_SCATTER_MAX_CHUNKS};

@@ -15,6 +15,13 @@
 //! (each distinct corner once, 16-bit indices) into a bounded output buffer appended to the
 //! file; a chunk's part of a run is one piece `[byte offset, bytes, triangles]`.
 //!
+//! Bins of face indices ([`RunScatter::create_indexed`]): for an input whose triangles can be
+//! found again by their face record (a memory-mapped PLY of fixed-size triangle records), a
+//! run holds each (triangle, chunk) pair's face record (4 or 8 bytes) instead of its record,
+//! sorted the same way and written as it is, without blocks: the same chunks, pieces and order,
+//! about a quarter of the bytes, and no encoding; the reader rebuilds the triangles from the
+//! input ([`crate::TriangleSource`]).
+//!
 //! Memory is bounded by design: the buffer (records, their keys and the sort's permutation)
 //! has a byte budget, the writer's output buffer is [`OUT_BYTES`] plus a chunk's blocks, and
 //! the pieces cost 24 bytes per chunk per run; the grid may have at most
@@ -51,6 +58,8 @@ pub struct RunScatter {
     grid: Grid,
     n: u32,
     layout: RecordLayout,
+    /// 0: records, written as blocks; 4 or 8: face indices of that width, written as they are.
+    index_bytes: usize,
     /// The run being filled, and the other buffer when the writer is not holding it.
     current: Run,
     spare: Option<Run>,
@@ -68,7 +77,10 @@ pub struct RunScatter {
 struct Writer {
     path: PathBuf,
     file: File,
+    /// Bytes of one item of a run: a record, or a face index.
     rec: usize,
+    /// True if the items are face indices (copied as they are, no blocks).
+    indexed: bool,
     /// Per Morton rank: its pieces so far, `[byte offset, bytes, triangles]`.
     pieces: Vec<Vec<[u64; 3]>>,
     /// Bytes written to the file.
@@ -90,6 +102,29 @@ impl RunScatter {
         grid: &Grid,
         path: &Path,
         layout: RecordLayout,
+        buffer_bytes: u64,
+    ) -> Result<RunScatter, TileError> {
+        Self::create_as(grid, path, layout, 0, buffer_bytes)
+    }
+
+    /// [`RunScatter::create`] for bins of face indices of `index_bytes` (4 or 8) bytes each
+    /// ([`RunScatter::push_indexed`]); `layout` is that of the triangles the indices stand for.
+    pub fn create_indexed(
+        grid: &Grid,
+        path: &Path,
+        layout: RecordLayout,
+        index_bytes: usize,
+        buffer_bytes: u64,
+    ) -> Result<RunScatter, TileError> {
+        assert!(matches!(index_bytes, 4 | 8), "u32 or u64 face indices");
+        Self::create_as(grid, path, layout, index_bytes, buffer_bytes)
+    }
+
+    fn create_as(
+        grid: &Grid,
+        path: &Path,
+        layout: RecordLayout,
+        index_bytes: usize,
         buffer_bytes: u64,
     ) -> Result<RunScatter, TileError> {
         let n = grid.chunks_per_axis();
@@ -114,13 +149,18 @@ impl RunScatter {
             .truncate(true)
             .open(path)
             .map_err(TileError::io("create", path))?;
-        let rec = layout.bytes();
+        let rec = if index_bytes > 0 {
+            index_bytes
+        } else {
+            layout.bytes()
+        };
         // per record of a run: its bytes and rank twice (two runs), its place in the permutation
         let cap = (buffer_bytes as usize / (2 * (rec + 4) + 4)).max(1024);
         let mut w = Writer {
             path: path.to_path_buf(),
             file,
             rec,
+            indexed: index_bytes > 0,
             pieces: vec![Vec::new(); total as usize],
             written: 0,
             slots: vec![0; total as usize + 1],
@@ -147,6 +187,7 @@ impl RunScatter {
             grid: *grid,
             n,
             layout,
+            index_bytes,
             current: Run::default(),
             spare: Some(Run::default()),
             cap,
@@ -166,24 +207,56 @@ impl RunScatter {
     /// of this grid): a one-chunk key goes to that chunk, [`crate::SPANS`] to every chunk of
     /// the triangle's range, [`crate::DROPPED`] nowhere.
     pub fn push_keyed(&mut self, tris: &[Triangle], keys: &[u32]) -> Result<(), TileError> {
+        assert_eq!(self.index_bytes, 0, "bins of records");
         let (grid, n) = (self.grid, self.n);
-        crate::bins::for_each_keyed_chunk(&grid, n, tris, keys, |t, li| self.put(t, li))
+        crate::bins::for_each_keyed_chunk(&grid, n, tris, keys, |_, t, li| {
+            self.reserve()?;
+            self.layout.encode(t, &mut self.current.recs)?;
+            self.current.ranks.push(self.rank_of[li]);
+            Ok(())
+        })
     }
 
-    /// Adds triangle `t` to the current run for the chunk of linear index `li`.
+    /// [`RunScatter::push_keyed`] for bins of face indices ([`RunScatter::create_indexed`]):
+    /// `faces[i]` is the face record of `tris[i]`, what the bins hold for it.
+    pub fn push_indexed(
+        &mut self,
+        tris: &[Triangle],
+        keys: &[u32],
+        faces: &[u64],
+    ) -> Result<(), TileError> {
+        assert!(self.index_bytes > 0, "bins of face indices");
+        assert_eq!(tris.len(), faces.len(), "one face record per triangle");
+        let (grid, n, w) = (self.grid, self.n, self.index_bytes);
+        assert!(
+            w == 8 || faces.iter().all(|&f| f <= u32::MAX as u64),
+            "face records fit the index width"
+        );
+        crate::bins::for_each_keyed_chunk(&grid, n, tris, keys, |i, _, li| {
+            self.reserve()?;
+            self.current
+                .recs
+                .extend_from_slice(&faces[i].to_le_bytes()[..w]);
+            self.current.ranks.push(self.rank_of[li]);
+            Ok(())
+        })
+    }
+
+    /// Makes room for one more item in the current run (sending it to the writer if full).
     #[inline]
-    fn put(&mut self, t: &Triangle, li: usize) -> Result<(), TileError> {
+    fn reserve(&mut self) -> Result<(), TileError> {
         if self.current.ranks.len() == self.cap {
             self.send_run()?;
         }
         if self.current.ranks.capacity() == 0 {
-            self.current
-                .recs
-                .reserve_exact(self.cap * self.layout.bytes());
+            let rec = if self.index_bytes > 0 {
+                self.index_bytes
+            } else {
+                self.layout.bytes()
+            };
+            self.current.recs.reserve_exact(self.cap * rec);
             self.current.ranks.reserve_exact(self.cap);
         }
-        self.layout.encode(t, &mut self.current.recs)?;
-        self.current.ranks.push(self.rank_of[li]);
         Ok(())
     }
 
@@ -257,6 +330,7 @@ impl RunScatter {
             w.file,
             chunks,
             self.layout,
+            self.index_bytes,
             pieces,
             w.written,
         ))
@@ -306,14 +380,22 @@ impl Writer {
             }
             let (recs, perm) = (&run.recs, &self.perm[first..end]);
             let at = self.out.len();
-            self.encoder.encode(
-                perm.len(),
-                |i| {
-                    let j = perm[i] as usize;
-                    &recs[j * rec..(j + 1) * rec]
-                },
-                &mut self.out,
-            );
+            if self.indexed {
+                // face indices as they are, in the chunk's input order
+                for &j in perm {
+                    let j = j as usize;
+                    self.out.extend_from_slice(&recs[j * rec..(j + 1) * rec]);
+                }
+            } else {
+                self.encoder.encode(
+                    perm.len(),
+                    |i| {
+                        let j = perm[i] as usize;
+                        &recs[j * rec..(j + 1) * rec]
+                    },
+                    &mut self.out,
+                );
+            }
             let bytes = (self.out.len() - at) as u64;
             self.pieces[r].push([self.written + at as u64, bytes, perm.len() as u64]);
             first = end;
@@ -455,6 +537,95 @@ mod tests {
             )
             .unwrap();
             assert_eq!(read_all(&again, 1000), read_all(&bins, 1000));
+        }
+    }
+
+    /// The triangles of a list, found by their index (the face records of a test input).
+    struct ByIndex<'a>(&'a [Triangle]);
+
+    impl crate::TriangleSource for ByIndex<'_> {
+        fn triangles_at(&self, faces: &[u64], out: &mut Vec<Triangle>) -> Result<(), TileError> {
+            out.extend(faces.iter().map(|&f| self.0[f as usize]));
+            Ok(())
+        }
+    }
+
+    /// Bins of face indices hold the same chunks, triangles (read back through the source),
+    /// order and batches as bins of records, for one run and many, u32 and u64 indices; each
+    /// piece is exactly its triangles' indices; they need their source to be read, and reopen
+    /// from their pieces only as indices of the same width.
+    #[test]
+    fn indexed_runs_give_the_bins_of_records() {
+        let dir = tempfile::tempdir().unwrap();
+        let tris = triangles(6000);
+        let layout = RecordLayout {
+            normals: false,
+            colors: true,
+            texcoords: false,
+        };
+        let mut bounds = Bounds::default();
+        tris.iter().for_each(|t| bounds.add_triangle(t));
+        let grid = Grid::fit(&bounds, 1024).unwrap();
+        let keys = ChunkCounts::new(&grid).unwrap().keys();
+        let path = dir.path().join("bins-records");
+        let mut rs = RunScatter::create(&grid, &path, layout, 0).unwrap();
+        // the face records of the input: every triangle's index, less the dropped ones, as
+        // the stream skips degenerate faces (so indices and batch positions differ)
+        let faces: Vec<u64> = (0..tris.len() as u64).filter(|f| f % 7 != 3).collect();
+        let kept: Vec<Triangle> = faces.iter().map(|&f| tris[f as usize]).collect();
+        for (b, f) in kept.chunks(333).zip(faces.chunks(333)) {
+            assert_eq!(b.len(), f.len());
+            rs.push_keyed(b, &keys.of_world(b)).unwrap();
+        }
+        let want = read_all(&rs.finish().unwrap(), 97);
+        let source = ByIndex(&tris);
+        for (buffer, width) in [(1u64 << 30, 4), (0, 4), (0, 8)] {
+            let path = dir.path().join(format!("bins-indices-{buffer}-{width}"));
+            let mut rs = RunScatter::create_indexed(&grid, &path, layout, width, buffer).unwrap();
+            for (b, f) in kept.chunks(333).zip(faces.chunks(333)) {
+                rs.push_indexed(b, &keys.of_world(b), f).unwrap();
+            }
+            let bins = rs.finish().unwrap();
+            assert_eq!(bins.index_bytes(), Some(width));
+            let binned: u64 = want.iter().map(|w| w.0.count).sum();
+            assert_eq!(bins.bytes(), binned * width as u64, "only the indices");
+            assert_eq!(std::fs::metadata(&path).unwrap().len(), bins.bytes());
+            let read = |bins: &Bins| -> Vec<(ChunkBin, Vec<Triangle>, Vec<usize>)> {
+                (0..bins.chunks().len())
+                    .map(|i| {
+                        let (mut got, mut sizes) = (Vec::new(), Vec::new());
+                        bins.read_chunk_from(i, 97, Some(&source), &mut |b| {
+                            got.extend_from_slice(b);
+                            sizes.push(b.len());
+                            Ok(())
+                        })
+                        .unwrap();
+                        (bins.chunks()[i], got, sizes)
+                    })
+                    .collect()
+            };
+            let got = read(&bins);
+            assert_eq!(got.len(), want.len());
+            for (g, w) in got.iter().zip(&want) {
+                assert_eq!((g.0.coord, g.0.count), (w.0.coord, w.0.count));
+                assert!(
+                    g.1 == w.1,
+                    "chunk {:?}: other triangles or order",
+                    w.0.coord
+                );
+                assert_eq!(g.2, w.2, "chunk {:?}: other batches", w.0.coord);
+            }
+            // without the source: an error naming the file, not blocks misread
+            let e = bins.read_chunk(0, 97, &mut |_| Ok(())).unwrap_err();
+            assert!(matches!(e, TileError::BadBins { .. }), "{e:?}");
+            let (chunks, pieces) = (bins.chunks().to_vec(), bins.pieces().to_vec());
+            let again =
+                Bins::open_pieces_of(&path, chunks.clone(), layout, width, pieces.clone()).unwrap();
+            assert!(read(&again) == got);
+            let other = 12 - width;
+            assert!(
+                Bins::open_pieces_of(&path, chunks.clone(), layout, other, pieces.clone()).is_err()
+            );
         }
     }
 

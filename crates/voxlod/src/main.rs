@@ -502,11 +502,19 @@ fn print_summary(s: &BuildSummary, input: &str) {
             "  gpu exact    {t} triangles decided on the CPU, in {u} chunks; {f} chunks re-voxelized on the CPU"
         );
     }
+    let binned = match s.bin_index_bytes {
+        0 => format!(
+            "{} triangle records of {} bytes",
+            s.binned_triangles, s.record_bytes
+        ),
+        w => format!(
+            "{} face indices of {w} bytes, triangles read from the input by index",
+            s.binned_triangles
+        ),
+    };
     println!(
-        "  chunk bins   {} ({} triangle records of {} bytes, tiled from the {}{})",
+        "  chunk bins   {} ({binned}, tiled from the {}{})",
         s.chunk_bins,
-        s.binned_triangles,
-        s.record_bytes,
         s.tile_source,
         if s.binned_during_ingest {
             ", binned during ingest"

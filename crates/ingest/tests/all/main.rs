@@ -4,6 +4,7 @@
 //! (`every_file_is_a_module` fails otherwise). Run one module with
 //! `cargo test -p voxlod-ingest --test all MODULE::`.
 
+mod by_index;
 mod common;
 mod cross_format;
 mod fuzz;

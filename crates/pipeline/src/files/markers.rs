@@ -45,6 +45,10 @@ pub(crate) struct BinsMarker {
     /// and are written again).
     #[serde(default)]
     world: bool,
+    /// 0: the pieces hold blocks of triangle records; 4 or 8: the face records of the
+    /// triangles as integers of that width (bins of face indices, read with the input).
+    #[serde(default)]
+    index_bytes: usize,
 }
 
 impl Marker for BinsMarker {
@@ -66,16 +70,26 @@ impl BinsMarker {
             chunks,
             pieces: bins.pieces().to_vec(),
             world: true,
+            index_bytes: bins.index_bytes().unwrap_or(0),
         }
     }
 
-    /// The bins this marker describes, opened (None if the file does not match it).
-    pub(crate) fn open(self, path: &std::path::Path, layout: RecordLayout) -> Option<Bins> {
-        if !self.world {
+    /// The bins this marker describes, opened (None if the file does not match it, or if it
+    /// holds face indices and the input's faces cannot be found by index: `indexable` false).
+    pub(crate) fn open(
+        self,
+        path: &std::path::Path,
+        layout: RecordLayout,
+        indexable: bool,
+    ) -> Option<Bins> {
+        if !self.world || !matches!(self.index_bytes, 0 | 4 | 8) {
+            return None;
+        }
+        if self.index_bytes > 0 && !indexable {
             return None;
         }
         let chunks = self.chunks()?;
-        Bins::open_pieces(path, chunks, layout, self.pieces).ok()
+        Bins::open_pieces_of(path, chunks, layout, self.index_bytes, self.pieces).ok()
     }
 
     /// The chunks of the layout (None if a coordinate is out of range: the marker is not ours).
@@ -108,6 +122,10 @@ pub(crate) struct LeavesMarker {
     pub skipped: u64,
     /// Triangle records in the bins.
     pub binned_triangles: u64,
+    /// 0 if the bins held blocks of triangle records; 4 or 8 if they held face indices of
+    /// that width (read with the input).
+    #[serde(default)]
+    pub bin_index_bytes: usize,
     /// Bytes of the leaves' payloads in the log (what the octree file holds of them).
     pub leaf_payload_bytes: u64,
 }

@@ -20,8 +20,10 @@ use crate::shard::plan_file::ShardScope;
 /// build with the material channel each leaf log record holds a second zstd frame (the
 /// materials). 4: leaf log records hold the leaf's half and its encoded node's fields (the
 /// LOD stage does not decode the leaves). 5: bins as blocks (`voxlod_tile::block`: a vertex
-/// table and 16-bit indices per block), in pieces `[byte offset, bytes, triangles]`.
-pub const WORK_FORMAT: u32 = 5;
+/// table and 16-bit indices per block), in pieces `[byte offset, bytes, triangles]`. 6: bins
+/// of face indices for a mapped PLY of fixed-size triangle records (`bins.json`'s
+/// `index_bytes`; an older build would read them as blocks).
+pub const WORK_FORMAT: u32 = 6;
 
 /// The files of a work folder: the one place that names them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

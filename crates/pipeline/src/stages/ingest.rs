@@ -100,7 +100,17 @@ pub(crate) fn run(ctx: &mut BuildContext, resume: &Resume) -> Result<Ingested, S
             (m, Early::None)
         }
         None => {
-            let (m, early) = read_input(ctx, layout, spooled, !later_done, temp_disk)?;
+            // bins of face indices where the faces can be found by index again (a mapped PLY
+            // of fixed-size triangle records); else, or if a record turns out not to be a
+            // triangle record after all, bins of blocks
+            let indexed = index_bins(ctx);
+            let r = read_input(ctx, layout, spooled, !later_done, temp_disk, indexed);
+            let (m, early) = match r {
+                Err(StageError::Ingest(IngestError::NotFixedRecords { .. })) if indexed => {
+                    read_input(ctx, layout, spooled, !later_done, temp_disk, false)?
+                }
+                r => r?,
+            };
             if m.spooled {
                 temp_written += m.count * layout.bytes() as u64;
             }
@@ -352,15 +362,27 @@ pub(crate) enum Early {
     Bins(Bins, Grid),
 }
 
+/// True if the ingest pass writes bins of face indices ([`RunScatter::create_indexed`]) rather
+/// than of blocks, if it bins at all: the input's faces are fixed-size triangle records of a
+/// mapped PLY ([`voxlod_ingest::MeshSource::fixed_face_count`]), which the voxelize stage
+/// reads again by index. `VOXLOD_BINS=blocks` in the environment turns them off (an internal
+/// switch, for tests that compare both kinds and for measurements).
+pub(crate) fn index_bins(ctx: &BuildContext) -> bool {
+    ctx.source.fixed_face_count().is_some()
+        && std::env::var_os("VOXLOD_BINS").is_none_or(|v| v != "blocks")
+}
+
 /// The pass over the input: bounds and count of the triangles, spooled or (for a mapped input,
 /// if `may_count`) binned in runs on the vertex list's grid (or, where that cannot be done,
-/// counted per chunk on it). `temp_disk` is the stage's upper bound of the temporary disk.
+/// counted per chunk on it); with `indexed`, the bins hold each triangle's face record
+/// ([`index_bins`]). `temp_disk` is the stage's upper bound of the temporary disk.
 fn read_input(
     ctx: &BuildContext,
     layout: RecordLayout,
     spooled: bool,
     may_count: bool,
     temp_disk: u64,
+    indexed: bool,
 ) -> Result<(IngestMarker, Early), StageError> {
     let input_len = std::fs::metadata(ctx.input).map(|m| m.len()).unwrap_or(0);
     let bar = Bar::bytes(ctx.progress, Stage::Ingest.name(), input_len);
@@ -373,9 +395,19 @@ fn read_input(
         .filter(|g| bins_during_ingest(ctx, g, temp_disk))
         .map(|g| {
             let path = ctx.work.file(WorkFile::Bins);
-            RunScatter::create(&g, &path, layout, ctx.memory.scatter_buffer)
+            let buffer = ctx.memory.scatter_buffer;
+            match ctx.source.fixed_face_count().filter(|_| indexed) {
+                // u32 face records where they fit, else u64
+                Some(faces) => {
+                    let width = if faces <= u32::MAX as u64 { 4 } else { 8 };
+                    RunScatter::create_indexed(&g, &path, layout, width, buffer)
+                }
+                None => RunScatter::create(&g, &path, layout, buffer),
+            }
         })
         .transpose()?;
+    // the face records only where the bins hold them
+    let indexed = indexed && runs.is_some();
     let mut early_counts = vgrid.and_then(|g| ChunkCounts::new(&g).ok());
     let keys = early_counts.as_ref().map(|c| c.keys());
     // binning in runs: the chunk keys are taken where the triangles are decoded, as in the
@@ -395,33 +427,40 @@ fn read_input(
         // the bins keep world coordinates (`ChunkVoxelizer::add_world` decides on them)
         (b, keys.map(|k| k.of_world(tris)))
     };
+    let mut take = |tris: &[Triangle], faces: &[u64], (b, k): (Bounds, Option<Vec<u32>>)| {
+        if let Err(e) = ctx.check_interrupt() {
+            return Err(IngestError::Callback(Box::new(e)));
+        }
+        if let Some(sp) = &mut spooler {
+            return sp
+                .push(tris)
+                .map_err(|e| IngestError::Callback(Box::new(e)));
+        }
+        count += tris.len() as u64;
+        bounds.merge(&b);
+        match (&mut runs, &mut early_counts, k) {
+            (Some(rs), _, Some(k)) if indexed => rs
+                .push_indexed(tris, &k, faces)
+                .map_err(|e| IngestError::Callback(Box::new(e)))?,
+            (Some(rs), _, Some(k)) => rs
+                .push_keyed(tris, &k)
+                .map_err(|e| IngestError::Callback(Box::new(e)))?,
+            (None, Some(c), Some(k)) => c.add_keyed(tris, &k),
+            _ => {}
+        }
+        Ok(())
+    };
     let stats = ctx
         .pool
         .install(|| {
-            ctx.source.stream_prepared(
-                &prepare,
-                &mut |tris, (b, k)| {
-                    if let Err(e) = ctx.check_interrupt() {
-                        return Err(IngestError::Callback(Box::new(e)));
-                    }
-                    if let Some(sp) = &mut spooler {
-                        return sp
-                            .push(tris)
-                            .map_err(|e| IngestError::Callback(Box::new(e)));
-                    }
-                    count += tris.len() as u64;
-                    bounds.merge(&b);
-                    match (&mut runs, &mut early_counts, k) {
-                        (Some(rs), _, Some(k)) => rs
-                            .push_keyed(tris, &k)
-                            .map_err(|e| IngestError::Callback(Box::new(e)))?,
-                        (None, Some(c), Some(k)) => c.add_keyed(tris, &k),
-                        _ => {}
-                    }
-                    Ok(())
-                },
-                &mut |done, total| bar.set(done, total),
-            )
+            let progress = &mut |done, total| bar.set(done, total);
+            if indexed {
+                ctx.source
+                    .stream_indexed_prepared(&prepare, &mut take, progress)
+            } else {
+                ctx.source
+                    .stream_prepared(&prepare, &mut |tris, p| take(tris, &[], p), progress)
+            }
         })
         .map_err(StageError::from)?;
     if let Some(sp) = spooler {

@@ -110,6 +110,7 @@ fn append_chunks(
     log: &mut LeafLog,
 ) -> Result<(), StageError> {
     let chunks = bins.chunks();
+    let input = crate::stages::tile::passes::InputTriangles(ctx.source);
     let start = log.records() as usize;
     let bar = Bar::items(ctx.progress, Stage::Source.name(), chunks.len() as u64);
     bar.set(start as u64, chunks.len() as u64);
@@ -117,7 +118,7 @@ fn append_chunks(
     type Built = (Vec<u8>, SourceCounts);
     let build_one = |i: usize| -> Result<Built, StageError> {
         let mut b = SourceBuilder::new(chunks[i].coord, attrs);
-        bins.read_chunk(i, READ_BATCH, &mut |tris| {
+        bins.read_chunk_from(i, READ_BATCH, Some(&input), &mut |tris| {
             // the bins hold world coordinates; the source geometry is in grid units
             tris.iter()
                 .for_each(|t| b.add(&voxlod_tile::to_grid(grid, t)));

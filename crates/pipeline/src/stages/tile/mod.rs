@@ -38,10 +38,10 @@ pub(crate) fn run(
 ) -> Result<Tiled, StageError> {
     let t = Instant::now();
     let bins_path = ctx.work.file(WorkFile::Bins);
-    let resumed = resume
-        .bins
-        .clone()
-        .and_then(|m| m.open(&bins_path, ingested.layout));
+    let resumed = resume.bins.clone().and_then(|m| {
+        let indexable = ctx.source.fixed_face_count().is_some();
+        m.open(&bins_path, ingested.layout, indexable)
+    });
     let bins = match resumed {
         Some(b) => {
             ctx.stage_done(Stage::Tile, t, true);

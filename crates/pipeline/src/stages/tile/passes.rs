@@ -5,7 +5,7 @@
 
 use voxlod_geom::Triangle;
 use voxlod_ingest::{IngestError, MeshSource};
-use voxlod_tile::{Passes, TileError};
+use voxlod_tile::{Passes, TileError, TriangleSource};
 
 use crate::context::BuildContext;
 use crate::error::StageError;
@@ -48,6 +48,19 @@ impl Passes for InputPasses<'_> {
 
     fn count(&self) -> u64 {
         self.count
+    }
+}
+
+/// The input as the source of the triangles of bins of face indices
+/// ([`MeshSource::triangles_at`]): a record that no longer holds its triangle is the input
+/// changed during the build ([`voxlod_ingest::IngestError::FaceChanged`], naming the file).
+pub(crate) struct InputTriangles<'a>(pub &'a MeshSource);
+
+impl TriangleSource for InputTriangles<'_> {
+    fn triangles_at(&self, faces: &[u64], out: &mut Vec<Triangle>) -> Result<(), TileError> {
+        self.0
+            .triangles_at(faces, out)
+            .map_err(|e| TileError::Callback(Box::new(e)))
     }
 }
 

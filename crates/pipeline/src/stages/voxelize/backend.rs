@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use voxlod_format::Voxel;
 use voxlod_geom::{Grid, Triangle};
 use voxlod_texture::TextureSet;
-use voxlod_tile::{Bins, TileError};
+use voxlod_tile::{Bins, TileError, TriangleSource};
 use voxlod_voxelize::ChunkVoxelizer;
 
 use crate::error::StageError;
@@ -41,6 +41,8 @@ pub(crate) trait ChunkSource {
 /// Chunk `index` of the tile stage's bins (world coordinates on `grid`).
 pub(crate) struct BinChunk<'a> {
     pub bins: &'a Bins,
+    /// The input, for bins of face indices (`Bins::read_chunk_from`).
+    pub input: Option<&'a dyn TriangleSource>,
     pub index: usize,
     pub grid: &'a Grid,
 }
@@ -72,12 +74,16 @@ impl ChunkSource for BinChunk<'_> {
     ) -> Result<(), StageError> {
         // the tile crate's callback can only stop a read with an error: a break is that
         // error carrying `ReadStopped`, recognised by its type
-        let r = self
-            .bins
-            .read_chunk(self.index, READ_BATCH, &mut |tris| match f(tris) {
-                ControlFlow::Break(()) => Err(TileError::Callback(Box::new(ReadStopped))),
-                ControlFlow::Continue(()) => Ok(()),
-            });
+        let r =
+            self.bins.read_chunk_from(
+                self.index,
+                READ_BATCH,
+                self.input,
+                &mut |tris| match f(tris) {
+                    ControlFlow::Break(()) => Err(TileError::Callback(Box::new(ReadStopped))),
+                    ControlFlow::Continue(()) => Ok(()),
+                },
+            );
         match r {
             Err(TileError::Callback(e)) if e.is::<ReadStopped>() => Ok(()),
             r => r.map_err(StageError::from),
@@ -254,14 +260,17 @@ pub(crate) struct GpuStats {
 pub(crate) const READ_BATCH: usize = 64 * 1024;
 
 /// The voxelizer of one build for `s.backend`, with a description for the summary.
-/// `cpu_workers` CPU voxelizers run on `threads` threads; `bins` is for the cutoff search.
+/// `cpu_workers` CPU voxelizers run on `threads` threads; `bins` (with `input`, for bins of
+/// face indices) is for the cutoff search.
 /// A textured mesh (`textures`) runs on the CPU whatever the backend: the GPU shaders do not
 /// sample textures; nor do they weigh materials (`materials`: the material channel).
+#[allow(clippy::too_many_arguments)] // the bins and their input travel together to the cutoff search
 pub(crate) fn select(
     s: &BuildSettings,
     cpu_workers: usize,
     threads: usize,
     bins: &Bins,
+    input: Option<&dyn TriangleSource>,
     grid: &Grid,
     textures: Option<Arc<TextureSet>>,
     materials: bool,
@@ -317,11 +326,11 @@ pub(crate) fn select(
     }
     #[cfg(feature = "gpu")]
     {
-        select_gpu(s, bins, grid, cpu)
+        select_gpu(s, bins, input, grid, cpu)
     }
     #[cfg(not(feature = "gpu"))]
     {
-        let _ = (bins, grid);
+        let _ = (bins, input, grid);
         match s.backend {
             Backend::Gpu => {
                 anyhow::bail!("--backend gpu: this voxlod was built without the `gpu` feature")
@@ -340,6 +349,7 @@ pub(crate) fn select(
 fn select_gpu(
     s: &BuildSettings,
     bins: &Bins,
+    input: Option<&dyn TriangleSource>,
     grid: &Grid,
     cpu: impl Fn() -> (Box<dyn Voxelize>, String),
 ) -> Result<(Box<dyn Voxelize>, String)> {
@@ -391,7 +401,7 @@ fn select_gpu(
     if method == voxlod_gpu::GpuMethod::Hybrid {
         let c = match s.cutoff {
             Cutoff::Fixed(c) => c,
-            Cutoff::Auto => search_cutoff(&mut gpu, bins, grid)?,
+            Cutoff::Auto => search_cutoff(&mut gpu, bins, input, grid)?,
         };
         gpu.set_method(method, c);
         desc += &format!(
@@ -450,7 +460,12 @@ fn voxelize_streamed(
 /// and returns the fastest (the paper's suggested future work). The voxels do not depend on
 /// the cutoff, so neither does the output file.
 #[cfg(feature = "gpu")]
-fn search_cutoff(gpu: &mut voxlod_gpu::GpuVoxelizer, bins: &Bins, grid: &Grid) -> Result<f32> {
+fn search_cutoff(
+    gpu: &mut voxlod_gpu::GpuVoxelizer,
+    bins: &Bins,
+    input: Option<&dyn TriangleSource>,
+    grid: &Grid,
+) -> Result<f32> {
     let Some(i) = (0..bins.chunks().len()).max_by_key(|&i| bins.chunks()[i].count) else {
         return Ok(DEFAULT_CUTOFF);
     };
@@ -461,6 +476,7 @@ fn search_cutoff(gpu: &mut voxlod_gpu::GpuVoxelizer, bins: &Bins, grid: &Grid) -
             gpu,
             &BinChunk {
                 bins,
+                input,
                 index: i,
                 grid,
             },

@@ -16,6 +16,8 @@ use voxlod_format::{encode_materials, encode_node, EncodedNode, Voxel};
 use voxlod_lod::MergeScratch;
 use voxlod_tile::Bins;
 
+use crate::stages::tile::passes::InputTriangles;
+
 use super::tile::Tiled;
 use crate::context::{BuildContext, Stage};
 use crate::error::StageError;
@@ -78,6 +80,7 @@ pub(crate) fn run(ctx: &mut BuildContext, tiled: Tiled) -> Result<Voxelized, Sta
         ctx.memory.voxelizers,
         threads,
         &tiled.bins,
+        Some(&InputTriangles(ctx.source)),
         &tiled.grid,
         textures,
         materials,
@@ -124,6 +127,7 @@ pub(crate) fn run_with(
         records: log.records(),
         skipped: log.skipped(),
         binned_triangles: tiled.bins.total(),
+        bin_index_bytes: tiled.bins.index_bytes().unwrap_or(0),
         leaf_payload_bytes: log.frame_bytes(),
     };
     log.finish()?;
@@ -157,6 +161,7 @@ fn append_chunks(
     log: &mut LeafLog,
 ) -> Result<(), StageError> {
     let chunks = bins.chunks();
+    let input = InputTriangles(ctx.source);
     let start = log.records() as usize;
     let bar = Bar::items(ctx.progress, Stage::Voxelize.name(), chunks.len() as u64);
     bar.set(start as u64, chunks.len() as u64);
@@ -166,6 +171,7 @@ fn append_chunks(
     let voxelize_one = |i: usize| -> Result<Encoded, StageError> {
         let r = vz.voxelize(&BinChunk {
             bins,
+            input: Some(&input),
             index: i,
             grid,
         })?;
