@@ -64,6 +64,12 @@ fn index_bins_build_the_bytes_of_block_bins() {
             "{what}: blocks are larger than indices"
         );
         assert!(index == blocks, "{what}: the index bins changed the output");
+        // the planned upper bound of the temporary disk counts 4-byte entries, not records
+        // (1.5 entries per estimated triangle, two estimated triangles per face)
+        let faces = si["triangles"].as_u64().unwrap() + si["degenerate_skipped"].as_u64().unwrap();
+        let record = sb["record_bytes"].as_u64().unwrap();
+        assert_eq!(si["temp_disk"], faces * 2 * 3 * 4 / 2, "{what}");
+        assert_eq!(sb["temp_disk"], faces * 2 * 3 * record / 2, "{what}");
     }
 }
 

@@ -83,7 +83,11 @@ pub(crate) fn run(ctx: &mut BuildContext, resume: &Resume) -> Result<Ingested, S
         ctx.stage_done(Stage::Ingest, t, false);
         return Ok(ingested);
     }
-    let temp_disk = check_temp_disk(ctx, layout, spooled)?;
+    // the bins' entry: a face index (4 or 8 bytes) where the faces can be found by index again,
+    // else a record (blocks are at most the records)
+    let indexed = index_bins(ctx);
+    let entry = bin_entry_bytes(ctx, layout, indexed);
+    let temp_disk = check_temp_disk(ctx, layout, entry, spooled)?;
     // a later stage's marker: the spool is not needed again, nor are counts
     let later_done = resume.past_ingest();
     let resumed = resume.ingest.clone().filter(|m| {
@@ -103,11 +107,12 @@ pub(crate) fn run(ctx: &mut BuildContext, resume: &Resume) -> Result<Ingested, S
             // bins of face indices where the faces can be found by index again (a mapped PLY
             // of fixed-size triangle records); else, or if a record turns out not to be a
             // triangle record after all, bins of blocks
-            let indexed = index_bins(ctx);
             let r = read_input(ctx, layout, spooled, !later_done, temp_disk, indexed);
             let (m, early) = match r {
                 Err(StageError::Ingest(IngestError::NotFixedRecords { .. })) if indexed => {
-                    read_input(ctx, layout, spooled, !later_done, temp_disk, false)?
+                    // blocks need the records' bound of the disk, not the indices'
+                    let blocks = temp_disk / entry * layout.bytes() as u64;
+                    read_input(ctx, layout, spooled, !later_done, blocks, false)?
                 }
                 r => r?,
             };
@@ -293,9 +298,22 @@ fn from_parts(
 /// is refused here only if even one record per face cannot fit, and the largest size of the
 /// bins is checked once the count pass knows it (before anything is written to them). Returns the
 /// upper bound.
+/// The bytes of one (triangle, chunk) entry of the bins at most: a face index with `indexed`
+/// (u32, or u64 past 2³² faces), else a record of `layout`.
+fn bin_entry_bytes(ctx: &BuildContext, layout: RecordLayout, indexed: bool) -> u64 {
+    match ctx.source.fixed_face_count().filter(|_| indexed) {
+        Some(faces) if faces <= u32::MAX as u64 => 4,
+        Some(_) => 8,
+        None => layout.bytes() as u64,
+    }
+}
+
+/// The stage's upper bound of the temporary disk (a spool of `layout` records if `spooled`, bins
+/// of `entry`-byte entries), refused when even the least it needs is not free.
 fn check_temp_disk(
     ctx: &mut BuildContext,
     layout: RecordLayout,
+    entry: u64,
     spooled: bool,
 ) -> Result<u64, StageError> {
     // `voxlod plan` writes no bins, only the spool if there is one
@@ -311,21 +329,27 @@ fn check_temp_disk(
     } else {
         (input_len / 12, input_len / 50)
     };
-    // halves: the spool is 2 of them, the bins (1.5x for straddles) 3
-    let halves = 2 * spooled as u64 + 3 * bins as u64;
-    let temp_disk = est_triangles * rec * halves / 2;
-    let min_disk = min_triangles * rec * (spooled as u64 + bins as u64);
+    // the spool: two estimates' records; the bins: 1.5 entries per estimate (straddles)
+    let spool = spooled as u64 * rec;
+    let entry = bins as u64 * entry;
+    let temp_disk = est_triangles * (2 * spool + 3 * entry) / 2;
+    let min_disk = min_triangles * (spool + entry);
     let work = ctx.work.path();
     let Some(free) = crate::system::free_disk(work) else {
         return Ok(temp_disk);
     };
     if ctx.progress {
         eprintln!(
-            "temporary disk: up to about {} in {} ({} free; {}-byte triangle records{})",
+            "temporary disk: up to about {} in {} ({} free; {}-byte {}{})",
             format_size(temp_disk),
             work.display(),
             format_size(free),
-            rec,
+            if spooled || entry == 0 { rec } else { entry },
+            if !spooled && entry > 0 && entry < rec {
+                "face indices"
+            } else {
+                "triangle records"
+            },
             match (spooled, bins) {
                 (true, true) => ", spool and bins",
                 (true, false) => ", the spool only: a plan writes no bins",
