@@ -1,8 +1,11 @@
 //! The per-triangle exact fallback of the GPU voxelizer (issue 13, part 1): the triangles the
 //! shaders could not certify are decided here, on the host, with the CPU's exact overlap test
 //! (`voxlod_voxelize::voxelize_triangle`: the f64 filter of Rauwendaal & Bailey's factored test
-//! with Shewchuk's adaptive predicates inside its bands), and their attribute contributions are
-//! computed as the shaders compute them (voxelize.wgsl `accumulate`).
+//! with Shewchuk's adaptive predicates inside its bands; `voxelize_world_triangle` for
+//! triangles fed in world coordinates, exact for those, issue 32 §1), and their attribute
+//! contributions are computed as the shaders compute them (voxelize.wgsl `accumulate`). The
+//! flags the shaders need per triangle are computed here too: the certificates of dyadic
+//! coordinates ([`exact_flags`]) and what the move to the grid rounded ([`world_flags`]).
 //!
 //! A triangle is *listed* by the shaders when one of its decisions lies inside its rounding
 //! band, or a normal component's sign is in doubt (voxelize.wgsl `note_uncertain`). Such a
