@@ -77,6 +77,8 @@ fn dilate(s: Setup, ti: u32) -> Deferred {
     let e01 = q[1] - q[0];
     let e02 = q[2] - q[0];
     let orient = select(-1.0, 1.0, e01.x * e02.y - e01.y * e02.x > 0.0);
+    // TRI_ROUNDED: the exact image's edges are within eta·sqrt(2) of these
+    let dilation = DILATION + f32(real(1.5) * s.eta);
     // outward unit normals of edges i -> i+1
     var m: array<vec2<f32>, 3>;
     for (var i = 0u; i < 3u; i++) {
@@ -89,7 +91,7 @@ fn dilate(s: Setup, ti: u32) -> Deferred {
         let b = m[i];
         let det = a.x * b.y - a.y * b.x;
         // solve a·y = l, b·y = l
-        let y = DILATION * vec2<f32>(b.y - a.y, a.x - b.x) / det;
+        let y = dilation * vec2<f32>(b.y - a.y, a.x - b.x) / det;
         r[i] = q[i] + y;
     }
     var d: Deferred;

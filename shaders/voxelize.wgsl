@@ -28,6 +28,19 @@
 // integer comparisons with c instead of the plane predicates: voxel z meets the plane iff
 // z <= c <= z + 1 (the box and the diamond alike). Ties count as inside, as the CPU's exact
 // predicates decide them (the closed box counts).
+//
+// World coordinates (issue 32 §1): the host feeds f32 grid coordinates `Grid::to_grid` of the
+// input's world positions and flags a triangle TRI_ROUNDED when some coordinate is not exactly
+// the image of its world value (crates/gpu/src/fallback.rs `world_flags`). The decisions must be
+// those of the exact image (crates/voxelize/src/world.rs), so for such a triangle every band is
+// widened by what the rounding can move its value (world.rs `Perturbation`: each coordinate
+// within eta = 2^-23 M of the exact one, M its largest magnitude; `perturbation` below), the
+// certificates are off (the host sets no TRI_EXACT_* flags), and the two discontinuous
+// decisions that a rounding onto an integer can flip are listed: a bounding box end on an
+// integer and an axis-plane face on an integer (to_grid is monotone and keeps integers, so a
+// coordinate off an integer is on the same side of every integer as its exact image). A zero
+// coordinate difference must be a zero of the world values (else TRI_TIES_BROKEN, listed): then
+// a normal component whose products are all 0 is 0 in the world too.
 const MODE_CONSERVATIVE: u32 = 0u;
 const MODE_THIN: u32 = 1u;
 const PHASE_MARK: u32 = 0u;
@@ -40,6 +53,10 @@ const UNCERTAIN_NORMAL: u32 = 2u;
 // Triangle flags set by the host (crates/gpu/src/fallback.rs `exact_flags`, f64 only)
 const TRI_EXACT_EDGES: u32 = 256u;
 const TRI_EXACT_DEPTH: u32 = 512u;
+// the grid coordinates are not all the exact images of the world ones / a zero difference of
+// them is not one of the world values (crates/gpu/src/fallback.rs `world_flags`)
+const TRI_ROUNDED: u32 = 1024u;
+const TRI_TIES_BROKEN: u32 = 2048u;
 // counter[4]: listed triangles (append attempts; more than LIST_CAP = overflow);
 // counter[LIST_FLAGS..]: one bit per triangle of the batch (listed); counter[LIST_AT..]: the
 // listed triangles' indices in the chunk's stream (params.tri_base + batch index).
@@ -124,6 +141,8 @@ struct Setup {
     // swizzled voxel range: closed bounding box clamped to the chunk
     lo: vec3<i32>,
     hi: vec3<i32>,
+    // TRI_ROUNDED: how far each grid coordinate may be from its exact image (else 0)
+    eta: real,
 };
 
 fn sgn(x: real) -> real {
@@ -238,14 +257,30 @@ fn max_abs(v: vec3<real>) -> real {
     return max(max(abs(v.x), abs(v.y)), abs(v.z));
 }
 
-// Bound of an edge function with inward normal nk (overlap.rs: 8u(|ne0|+|ne1|)(2M+1); 0 for a
-// projection of zero area, whose edge functions are exactly 0).
-fn edge_bound(nk: vec2<real>, big_m: real) -> real {
+// Bound of an edge function with inward normal nk (overlap.rs: 8u(|ne0|+|ne1|)(2M+1), plus
+// `de` of the perturbation; 0 for a projection of zero area, whose edge functions are exactly 0,
+// in the world values too when the ties hold).
+fn edge_bound(nk: vec2<real>, big_m: real, de: real) -> real {
     let w = abs(nk.x) + abs(nk.y);
     if w == real(0.0) {
         return real(0.0);
     }
-    return real(8.0) * UNIT * w * (real(2.0) * big_m + real(1.0)) + TINY;
+    return real(8.0) * UNIT * w * (real(2.0) * big_m + real(1.0)) + TINY + de;
+}
+
+// How far a TRI_ROUNDED triangle's decisions may move between its f32 grid coordinates and
+// their exact images (world.rs `Perturbation::of`, the same formulas and the same 1 % room,
+// which also covers their rounding here): (eta, dn, de, dp0) for a coordinate, a normal
+// component, an edge function, the depth predicates (without the 2.02 eta sum|n_k| part).
+fn perturbation(o0: vec3<real>, o1: vec3<real>, o2: vec3<real>) -> vec4<real> {
+    let m = max(max(max_abs(o0), max_abs(o1)), max_abs(o2));
+    let eta = m * real(1.1920928955078125e-7) + ETA_MIN;
+    let ext = max(max(o0, o1), o2) - min(min(o0, o1), o2);
+    let e = max(max(ext.x, ext.y), ext.z) + real(2.0) * eta;
+    let dn = real(8.0) * eta * (e + eta) * real(1.01);
+    let de = real(8.0) * eta * (e + real(1.0)) * real(1.01);
+    let dp0 = (real(3.0) * dn * (e + real(2.0)) + real(6.0) * eta * dn) * real(1.01);
+    return vec4<real>(eta, dn, de, dp0);
 }
 
 fn clamp_i32(x: real) -> i32 {
@@ -262,6 +297,18 @@ fn setup(ti: u32) -> Setup {
     let o0 = vertex(ti, 0u);
     let o1 = vertex(ti, 1u);
     let o2 = vertex(ti, 2u);
+    if (fl & TRI_TIES_BROKEN) != 0u {
+        // a zero difference of the grid coordinates is not one of the world values
+        note_uncertain(UNCERTAIN_NORMAL);
+        return s;
+    }
+    let rounded = (fl & TRI_ROUNDED) != 0u;
+    var pert = vec4<real>(real(0.0));
+    if rounded {
+        pert = perturbation(o0, o1, o2);
+        cur_level = 0;
+    }
+    s.eta = pert.x;
     let no = cross_r(o1 - o0, o2 - o0);
     // A_k, the magnitude of the two products of n_k; a component with |n_k| <= 5u A_k may have
     // the wrong sign (overlap.rs), which only the CPU's exact orient2d settles
@@ -272,7 +319,7 @@ fn setup(ti: u32) -> Setup {
         abs(ea.z * eb.x) + abs(ea.x * eb.z),
         abs(ea.x * eb.y) + abs(ea.y * eb.x));
     for (var k = 0u; k < 3u; k++) {
-        if mag[k] != real(0.0) && abs(no[k]) <= real(5.0) * UNIT * mag[k] && cur_level < 1 {
+        if mag[k] != real(0.0) && abs(no[k]) <= real(5.0) * UNIT * mag[k] + pert.y && cur_level < 1 {
             // the orientation is in doubt: the host decides the whole triangle
             note_uncertain(UNCERTAIN_NORMAL);
             return s;
@@ -319,19 +366,20 @@ fn setup(ti: u32) -> Setup {
     s.dzx = vec3<real>(edge_d(s.zx0, v0.zx, mode), edge_d(s.zx1, v1.zx, mode), edge_d(s.zx2, v2.zx, mode));
     // M: the largest coordinate magnitude the scan can reach (bounding box, plus the corners)
     let big_m = max(max(max_abs(v0), max_abs(v1)), max_abs(v2)) + real(2.0);
-    s.bxy = vec3<real>(edge_bound(s.xy0, big_m), edge_bound(s.xy1, big_m), edge_bound(s.xy2, big_m));
-    s.byz = vec3<real>(edge_bound(s.yz0, big_m), edge_bound(s.yz1, big_m), edge_bound(s.yz2, big_m));
-    s.bzx = vec3<real>(edge_bound(s.zx0, big_m), edge_bound(s.zx1, big_m), edge_bound(s.zx2, big_m));
+    s.bxy = vec3<real>(edge_bound(s.xy0, big_m, pert.z), edge_bound(s.xy1, big_m, pert.z), edge_bound(s.xy2, big_m, pert.z));
+    s.byz = vec3<real>(edge_bound(s.yz0, big_m, pert.z), edge_bound(s.yz1, big_m, pert.z), edge_bound(s.yz2, big_m, pert.z));
+    s.bzx = vec3<real>(edge_bound(s.zx0, big_m, pert.z), edge_bound(s.zx1, big_m, pert.z), edge_bound(s.zx2, big_m, pert.z));
     // a face in an axis plane: the two other normal components are exactly 0 (all their
     // products are, and no product of f32 differences underflows in f64)
     let axis_face = EXACT_TIES && ((mag.x == real(0.0) && mag.y == real(0.0))
         || (mag.y == real(0.0) && mag.z == real(0.0))
         || (mag.z == real(0.0) && mag.x == real(0.0)));
     s.axis_face = axis_face;
-    s.bp = real(16.0) * UNIT * (mag.x + mag.y + mag.z) * (real(2.0) * big_m + real(2.0)) + TINY;
     if n.z < real(0.0) {
         n = -n;
     }
+    s.bp = real(16.0) * UNIT * (mag.x + mag.y + mag.z) * (real(2.0) * big_m + real(2.0)) + TINY
+        + pert.w + real(2.02) * pert.x * (abs(n.x) + abs(n.y) + abs(n.z));
     s.n = n;
     s.plane_z = v0.z;
     s.area2d = real(0.5) * n.z;
@@ -352,6 +400,18 @@ fn setup(ti: u32) -> Setup {
     let chi = clo + vec3<i32>(CHUNK - 1);
     s.lo = max(bmin, clo);
     s.hi = min(bmax, chi);
+    if rounded && all(s.lo <= s.hi) {
+        // a box end the rounding put on an integer may be one voxel off for the exact image
+        // (voxel mn - 1 touches it at mn, voxel mx at mx), and so may an axis-plane face's
+        // depth range (z = c on an integer): listed when that voxel layer is in the chunk
+        let lo_on = (mn == floor(mn)) & (bmin >= clo);
+        let hi_on = (mx == floor(mx)) & (bmax <= chi);
+        let face_on = axis_face && s.plane_z == floor(s.plane_z);
+        if any(lo_on) || any(hi_on) || face_on {
+            note_uncertain(UNCERTAIN_DECISION);
+            return s;
+        }
+    }
     s.ok = all(s.lo <= s.hi);
     return s;
 }

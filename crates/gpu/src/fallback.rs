@@ -1,8 +1,11 @@
 //! The per-triangle exact fallback of the GPU voxelizer (issue 13, part 1): the triangles the
 //! shaders could not certify are decided here, on the host, with the CPU's exact overlap test
 //! (`voxlod_voxelize::voxelize_triangle`: the f64 filter of Rauwendaal & Bailey's factored test
-//! with Shewchuk's adaptive predicates inside its bands), and their attribute contributions are
-//! computed as the shaders compute them (voxelize.wgsl `accumulate`).
+//! with Shewchuk's adaptive predicates inside its bands; `voxelize_world_triangle` for
+//! triangles fed in world coordinates, exact for those, issue 32 §1), and their attribute
+//! contributions are computed as the shaders compute them (voxelize.wgsl `accumulate`). The
+//! flags the shaders need per triangle are computed here too: the certificates of dyadic
+//! coordinates ([`exact_flags`]) and what the move to the grid rounded ([`world_flags`]).
 //!
 //! A triangle is *listed* by the shaders when one of its decisions lies inside its rounding
 //! band, or a normal component's sign is in doubt (voxelize.wgsl `note_uncertain`). Such a
@@ -14,13 +17,67 @@
 //! 2. adds their contributions to the voxels' sums in the 2⁶⁴ fixed point of the GPU's sums
 //!    ([`Listed::add_to`]): integer additions, so the result does not depend on their order.
 
-use voxlod_geom::{Triangle, CHUNK, TRI_HAS_NORMALS};
-use voxlod_voxelize::{clipped_area, voxelize_triangle, Mode};
+use voxlod_geom::{Grid, Triangle, CHUNK, TRI_HAS_NORMALS};
+use voxlod_voxelize::{clipped_area, voxelize_triangle, voxelize_world_triangle, Mode};
 
 /// Flags of a triangle sent to f64 shaders (voxelize.wgsl): its edge functions and normal /
 /// also its depth predicates are computed without rounding ([`exact_flags`]).
 pub(crate) const TRI_EXACT_EDGES: u32 = 1 << 8;
 pub(crate) const TRI_EXACT_DEPTH: u32 = 1 << 9;
+/// Flags of a triangle fed in world coordinates ([`world_flags`]): some f32 grid coordinate is
+/// not the exact image of its world value / two grid coordinates are equal where the world
+/// values are not.
+pub(crate) const TRI_ROUNDED: u32 = 1 << 10;
+pub(crate) const TRI_TIES_BROKEN: u32 = 1 << 11;
+/// Every flag bit the host sets (cleared on the caller's triangles first).
+pub(crate) const HOST_FLAGS: u32 =
+    TRI_EXACT_EDGES | TRI_EXACT_DEPTH | TRI_ROUNDED | TRI_TIES_BROKEN;
+
+/// What voxelize.wgsl must know of a triangle fed in world coordinates `world` whose f32 grid
+/// coordinates on `grid` are `g` (`grid.to_grid` of each vertex), issue 32 §1:
+/// * [`TRI_ROUNDED`] unless every grid coordinate `c` is exactly the image of its world value
+///   `p`, `origin + c·voxel_size = p` (checked exactly: the product with a fused multiply-add,
+///   the sum with Knuth's two-sum, both error terms zero; a nonzero term counts as rounded,
+///   which only widens the bands). Without it the grid coordinates are the exact image, every
+///   decision on them is the world's (a translation and a positive scale), and the shaders
+///   decide as for grid input, certificates included.
+/// * [`TRI_TIES_BROKEN`] when two vertices share a grid coordinate but not the world value
+///   (the rounding made a difference zero; the shaders then list the triangle: a normal
+///   component whose products are all zero must be zero in the world too).
+pub(crate) fn world_flags(world: &[[f32; 3]; 3], g: &[[f32; 3]; 3], grid: &Grid) -> u32 {
+    let mut f = 0;
+    for k in 0..3 {
+        for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+            if g[i][k] == g[j][k] && world[i][k] != world[j][k] {
+                f |= TRI_TIES_BROKEN;
+            }
+        }
+        for i in 0..3 {
+            if !exact_image(
+                world[i][k] as f64,
+                g[i][k] as f64,
+                grid.origin[k],
+                grid.voxel_size,
+            ) {
+                f |= TRI_ROUNDED;
+            }
+        }
+    }
+    f
+}
+
+/// Whether `o + c·s = p` exactly (`false` may also mean "not provable in two f64 steps").
+#[inline]
+fn exact_image(p: f64, c: f64, o: f64, s: f64) -> bool {
+    let h = c * s;
+    if c.mul_add(s, -h) != 0.0 {
+        return false;
+    }
+    let w = o + h;
+    let bb = w - o;
+    let err = (o - (w - bb)) + (h - bb);
+    err == 0.0 && w == p
+}
 
 /// The certification of voxelize.wgsl (docs/VOXELIZE.md, "Certified on the GPU"): with every
 /// coordinate a multiple of 2⁻q (q ≥ 0, the finest fraction bit of the f32 values) and
@@ -60,6 +117,7 @@ const SLOT_WORDS: usize = 48;
 pub(crate) struct Listed {
     /// (local voxel index `x + 256 (y + 256 z)`, index into `tris`)
     pairs: Vec<(u32, u32)>,
+    /// in grid coordinates (the attributes are computed from them, as on the CPU)
     tris: Vec<Triangle>,
     /// per pair, after [`Listed::slots`]: the voxel's slot, weighted or not, the 8 values
     contrib: Vec<(u32, bool, [f64; 8])>,
@@ -67,17 +125,33 @@ pub(crate) struct Listed {
 
 impl Listed {
     /// The exact voxels of each triangle of `tris` in the chunk at `origin` (grid coordinates,
-    /// multiples of 256), under `mode`.
-    pub(crate) fn new(tris: Vec<Triangle>, origin: [u32; 3], mode: Mode) -> Listed {
+    /// multiples of 256), under `mode`. With `world`, `tris` came in world coordinates of that
+    /// grid: each is decided exactly for them (`voxlod_voxelize::voxelize_world_triangle`, the
+    /// set `ChunkVoxelizer::add_world` marks) and kept moved to the grid; without, `tris` are
+    /// grid coordinates and decided exactly for those (`voxelize_triangle`, as
+    /// `ChunkVoxelizer::add`).
+    pub(crate) fn new(
+        mut tris: Vec<Triangle>,
+        world: Option<&Grid>,
+        origin: [u32; 3],
+        mode: Mode,
+    ) -> Listed {
         let o = origin.map(|c| c as i32);
         let hi = o.map(|c| c + CHUNK as i32 - 1);
         let mut pairs = Vec::new();
-        for (i, t) in tris.iter().enumerate() {
-            voxelize_triangle(&t.v, o, hi, mode, &mut |p| {
+        for (i, t) in tris.iter_mut().enumerate() {
+            let mut add = |p: [i32; 3]| {
                 let l = [0, 1, 2].map(|k| (p[k] - o[k]) as u32);
                 debug_assert!(l.iter().all(|&c| c < CHUNK));
                 pairs.push((l[0] + CHUNK * (l[1] + CHUNK * l[2]), i as u32));
-            });
+            };
+            match world {
+                Some(grid) => {
+                    voxelize_world_triangle(grid, &t.v, o, hi, mode, &mut add);
+                    t.v = t.v.map(|p| grid.to_grid(p));
+                }
+                None => voxelize_triangle(&t.v, o, hi, mode, &mut add),
+            }
         }
         Listed {
             pairs,
@@ -242,6 +316,32 @@ mod tests {
     }
 
     #[test]
+    fn world_flags_tell_exact_images_and_broken_ties() {
+        let flags =
+            |grid: &Grid, w: [[f32; 3]; 3]| world_flags(&w, &w.map(|p| grid.to_grid(p)), grid);
+        let w = [[1.0, 2.0, 3.0], [4.0, 2.0, 5.5], [-1.25, 7.0, 3.0]];
+        // voxel size ½, origin on a quarter: every grid coordinate is the exact image
+        let dyadic = Grid::new([-3.0, 0.25, -8.0], 128.0, 256).unwrap();
+        assert_eq!(flags(&dyadic, w), 0);
+        // voxel size 0.3 (not a binary fraction): rounded
+        let odd = Grid::new([-3.0, 0.25, -8.0], 0.3 * 256.0, 256).unwrap();
+        assert_eq!(flags(&odd, w), TRI_ROUNDED);
+        // the grid's own corners are exact images even there: x = origin, 0 in grid units
+        let on = [[-3.0, 0.25, -8.0], [-3.0, 0.25, -8.0], [-3.0, 0.25, -8.0]];
+        assert_eq!(flags(&odd, on), 0);
+        // two world values one ulp apart that round to one grid value (the origin far away:
+        // the grid coordinates' ulp is coarser than the world values')
+        let x = 1.0f32;
+        let y = f32::from_bits(x.to_bits() + 1);
+        let big = Grid::new([-1000.0; 3], 256.0, 256).unwrap();
+        assert_eq!(big.to_grid([x, 0.0, 0.0])[0], big.to_grid([y, 0.0, 0.0])[0]);
+        let f = flags(&big, [[x, 0.0, 1.0], [y, 1.0, 0.0], [x, 2.0, 0.5]]);
+        assert_eq!(f & TRI_TIES_BROKEN, TRI_TIES_BROKEN);
+        assert!(exact_image(5.0, 2.0, 1.0, 2.0));
+        assert!(!exact_image(5.0, 2.0, 1.0, 2.0000000000000004));
+    }
+
+    #[test]
     fn fixed_point_adds_with_carries_and_sign() {
         let mut w = [u32::MAX, u32::MAX, 0];
         add_fixed(&mut w, 2.0f64.powi(-64));
@@ -257,7 +357,7 @@ mod tests {
     fn exact_pairs_of_a_grid_triangle() {
         // the triangle of the crate docs' example: columns (0,0) (1,0) (0,1) (1,1) (2,0) (0,2)
         let t = Triangle::new([[0.0, 0.0, 2.5], [2.0, 0.0, 2.5], [0.0, 2.0, 2.5]]);
-        let mut l = Listed::new(vec![t], [0; 3], Mode::Conservative);
+        let mut l = Listed::new(vec![t], None, [0; 3], Mode::Conservative);
         assert_eq!(l.tris.len(), 1);
         let mut occ = vec![0u32; (CHUNK * CHUNK * CHUNK / 32) as usize];
         assert!(l.mark(&mut occ));

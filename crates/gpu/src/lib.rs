@@ -54,15 +54,32 @@
 //! 2²⁹ times wider). Only a chunk with more listed triangles than the list holds is re-voxelized
 //! as a whole on the CPU (`voxlod_voxelize::ChunkVoxelizer`, same mode).
 //!
-//! "Exact" here means exact for the **f32 grid coordinates** the GPU is fed
-//! (`Grid::to_grid` of the input's positions), what `ChunkVoxelizer::add` decides. The CPU
-//! backend of a build decides on the input's own world coordinates instead
-//! (`ChunkVoxelizer::add_world`, docs/VOXELIZE.md "Exact in the input's own coordinates"); the
-//! two sets differ where a triangle comes within the f32 rounding of the grid coordinates
-//! (about 2⁻²³ of the largest coordinate) of a voxel's corner, edge or face. Widening the
-//! shaders' bands by that rounding and deciding the listed triangles on world coordinates is
-//! not done.
-//!
+//! **Exact for the input's own coordinates** (issue 32 §1).
+//! [`GpuVoxelizer::voxelize_chunk_world`] and [`GpuVoxelizer::voxelize_chunk_streamed_world`]
+//! (what a build uses: its bins hold the input's world positions) take triangles in world
+//! coordinates of a [`voxlod_geom::Grid`] and give the set `ChunkVoxelizer::add_world` gives:
+//! every decision exact for the world f32 positions and the grid's f64 origin and voxel size as
+//! stated, not for their f32 grid coordinates `g̃ = Grid::to_grid(p)`, which the shaders still
+//! compute on. The host moves each triangle to the grid and flags what the rounding did
+//! (`fallback.rs` `world_flags`): if every `g̃` is exactly the image `(p − origin)/voxel_size`
+//! (checked exactly: an FMA and a two-sum), every decision on `g̃` is the world's (a
+//! translation and a positive scale) and the shaders decide as above, certificates included;
+//! otherwise (`TRI_ROUNDED`) each `g̃` is within `η = 2⁻²³·M + 2⁻¹⁴⁰` of its exact image (`M`
+//! the triangle's largest grid coordinate), and the shaders widen every band by what `η` can
+//! move that value (`voxlod_voxelize::world::Perturbation`, the CPU's derivation: `dn` for a
+//! normal component, `de` for an edge function, `dp` for a depth predicate), take no
+//! certificate, dilate the fragment pass's triangle by `1.5η` more, and list the triangle where
+//! the rounding can flip a decision that is not continuous in the coordinates: a bounding box
+//! end or an axis-plane face that `g̃` puts exactly on an integer (`to_grid` is monotone and keeps
+//! integers, so a coordinate off an integer is on the same side of every integer as its exact
+//! image). Two vertices that share a `g̃` coordinate but not the world value (`TRI_TIES_BROKEN`)
+//! list the triangle too: a normal component whose products are all zero must be zero in the
+//! world as well. The host decides listed triangles on world coordinates
+//! (`voxlod_voxelize::voxelize_world_triangle`, the set `add_world` marks), a chunk whose list
+//! overflows with `ChunkVoxelizer::add_world`; the attributes come from `g̃`, as on the CPU.
+//! [`GpuVoxelizer::voxelize_chunk`] and [`GpuVoxelizer::voxelize_chunk_streamed`] take grid
+//! coordinates and are exact for those (what `ChunkVoxelizer::add` decides).
+
 //! [`GpuVoxelizer::last_uncertain`], [`GpuVoxelizer::last_fallback_triangles`] and
 //! [`GpuVoxelizer::last_fell_back`] report them per chunk.
 //!
@@ -107,6 +124,15 @@
 //!     .unwrap();
 //! assert_eq!(streamed, voxels);
 //! assert_eq!(gpu.last_split(), (1, 0)); // small: voxelized in the classification pass
+//! // world coordinates of a grid (what a build feeds from its bins): add_world's set
+//! let grid = voxlod_geom::Grid::new([0.1, -0.3, 2.0], 25.6, 256).unwrap(); // voxel size 0.1
+//! // grid coordinates (2.5, 0.7, 2.5), (4.5, 0.7, 2.5), (2.5, 2.7, 2.5), up to rounding
+//! let w = Triangle::new([[0.35, -0.23, 2.25], [0.55, -0.23, 2.25], [0.35, -0.03, 2.25]]);
+//! let got = gpu.voxelize_chunk_world(&grid, [0, 0, 0], &[w]).unwrap();
+//! cpu.begin([0, 0, 0]);
+//! cpu.add_world(&grid, &[w]);
+//! assert_eq!(pos(&got), pos(&cpu.finish()));
+//! assert_eq!(got.len(), 8); // columns x 2..=4, y 0..=2 with x + y ≤ 5, at z = 2
 //! ```
 
 pub mod bindings;

@@ -8,7 +8,9 @@
 //! denormals flushed to zero: at most 2⁻¹²⁶ per operation), and `EXACT_TIES`, whether faces in
 //! an axis plane get the exact integer depth test (f64 only: recognizing them relies on
 //! products of f32 differences never underflowing to 0, true in f64; see the top of
-//! `voxelize.wgsl`). The host's certification flags are likewise set for f64 shaders only.
+//! `voxelize.wgsl`), and `ETA_MIN`, the absolute part of the bound on a grid coordinate's
+//! distance from its world value's exact image (2⁻¹⁴⁰ for a subnormal f32 in
+//! `voxlod_voxelize::world::Perturbation`; in f32 shaders 10⁻³⁰, as denormals may flush). The host's certification flags are likewise set for f64 shaders only.
 
 /// Classification and compaction compute entry points (`classify`, `compact`).
 pub const CLASSIFY_WGSL: &str = include_str!("../shaders/classify.wgsl");
@@ -40,11 +42,11 @@ pub fn raster_source(p: Precision) -> String {
 fn assemble(entry: &str, p: Precision) -> String {
     // abstract-float literals, converted to `real` exactly (both are powers of two or far
     // above the bounds' own rounding)
-    let (ty, unit, tiny, ties) = match p {
-        Precision::F64 => ("f64", "1.1102230246251565e-16", "1e-300", true),
-        Precision::F32 => ("f32", "5.9604644775390625e-8", "1e-30", false),
+    let (ty, unit, tiny, ties, eta_min) = match p {
+        Precision::F64 => ("f64", "1.1102230246251565e-16", "1e-300", true, "1e-42"),
+        Precision::F32 => ("f32", "5.9604644775390625e-8", "1e-30", false, "1e-30"),
     };
     format!(
-        "alias real = {ty};\nconst UNIT: real = {unit};\nconst TINY: real = {tiny};\nconst EXACT_TIES: bool = {ties};\n{entry}\n{VOXELIZE_WGSL}"
+        "alias real = {ty};\nconst UNIT: real = {unit};\nconst TINY: real = {tiny};\nconst EXACT_TIES: bool = {ties};\nconst ETA_MIN: real = {eta_min};\n{entry}\n{VOXELIZE_WGSL}"
     )
 }

@@ -4,13 +4,13 @@
 
 use bytemuck::{Pod, Zeroable};
 use voxlod_format::Voxel;
-use voxlod_geom::{Triangle, CHUNK};
+use voxlod_geom::{Grid, Triangle, CHUNK};
 use voxlod_voxelize::{ChunkVoxelizer, Mode};
 
 use crate::bindings::{ACCUM, BASE, COUNTER, DEFERRED, DRAW_ARGS, OCC, PARAMS, TRIS};
 use crate::device::{open, Gpu};
 use crate::encode::{decode, SLOT_BYTES};
-use crate::fallback::{exact_flags, Listed, TRI_EXACT_DEPTH, TRI_EXACT_EDGES};
+use crate::fallback::{exact_flags, world_flags, Listed, HOST_FLAGS, TRI_ROUNDED};
 use crate::shaders::{classify_source, raster_source, Precision};
 use crate::{GpuError, GpuMethod};
 
@@ -109,6 +109,9 @@ pub struct GpuVoxelizer {
     listed: Vec<u32>,
     /// how many triangles the last chunk listed (more than `LIST_CAP` on overflow)
     fallback_tris: u64,
+    /// the grid of the chunk being voxelized when its triangles come in world coordinates
+    /// ([`GpuVoxelizer::voxelize_chunk_streamed_world`])
+    world: Option<Grid>,
 }
 
 /// (compute, raster, sweep) bind groups.
@@ -400,6 +403,7 @@ impl GpuVoxelizer {
             fell_back: false,
             listed: Vec::new(),
             fallback_tris: 0,
+            world: None,
         })
     }
 
@@ -611,6 +615,39 @@ impl GpuVoxelizer {
         })
     }
 
+    /// [`GpuVoxelizer::voxelize_chunk`] of triangles in **world** coordinates of `grid`: the
+    /// voxels `ChunkVoxelizer::add_world` gives (every overlap decision exact for the world
+    /// coordinates and the grid's origin and voxel size as stated, not for their f32 grid
+    /// coordinates; see the crate docs, "Exactness"). The attributes are computed from the
+    /// triangles moved to the grid (`grid.to_grid`), as on the CPU.
+    pub fn voxelize_chunk_world(
+        &mut self,
+        grid: &Grid,
+        origin: [u32; 3],
+        tris: &[Triangle],
+    ) -> Result<Vec<Voxel>, GpuError> {
+        self.voxelize_chunk_streamed_world(grid, origin, &mut |feed: &mut Feed<'_>| {
+            feed(tris);
+            Ok::<(), GpuError>(())
+        })
+    }
+
+    /// [`GpuVoxelizer::voxelize_chunk_streamed`] of triangles in world coordinates of `grid`
+    /// (see [`GpuVoxelizer::voxelize_chunk_world`]): the replay feeds them as the input has them
+    /// (the bins of a build); the voxelizer moves each batch to the grid itself and keeps what
+    /// the shaders need to know of the rounding in the triangles' flags.
+    pub fn voxelize_chunk_streamed_world<E: From<GpuError>>(
+        &mut self,
+        grid: &Grid,
+        origin: [u32; 3],
+        replay: &mut dyn FnMut(&mut Feed<'_>) -> Result<(), E>,
+    ) -> Result<Vec<Voxel>, E> {
+        self.world = Some(*grid);
+        let r = self.run(origin, replay);
+        self.world = None;
+        r
+    }
+
     /// [`GpuVoxelizer::voxelize_chunk`] with bounded host memory: `replay(feed)` must pass all
     /// of the chunk's triangles to `feed`, in batches of any size, and in the same order every
     /// time it is called. It is called once for marking and, when the chunk needs more than one
@@ -625,6 +662,17 @@ impl GpuVoxelizer {
     /// that yields a different number of triangles than the first is an error
     /// ([`GpuError::Replay`]).
     pub fn voxelize_chunk_streamed<E: From<GpuError>>(
+        &mut self,
+        origin: [u32; 3],
+        replay: &mut dyn FnMut(&mut Feed<'_>) -> Result<(), E>,
+    ) -> Result<Vec<Voxel>, E> {
+        self.world = None;
+        self.run(origin, replay)
+    }
+
+    /// The chunk's passes; the replay's triangles are in world coordinates of `self.world`
+    /// if set, else in grid coordinates.
+    fn run<E: From<GpuError>>(
         &mut self,
         origin: [u32; 3],
         replay: &mut dyn FnMut(&mut Feed<'_>) -> Result<(), E>,
@@ -691,8 +739,9 @@ impl GpuVoxelizer {
             let mut tris = Vec::with_capacity(self.listed.len());
             let (mut i, mut next) = (0u64, 0usize);
             let wanted = &self.listed;
+            let world = self.world;
             replay(&mut |b: &[Triangle]| {
-                for t in b.iter().filter(|t| t.is_finite()) {
+                for t in b.iter().filter(|t| fed(t, world.as_ref())) {
                     if next < wanted.len() && wanted[next] as u64 == i {
                         tris.push(*t);
                         next += 1;
@@ -707,7 +756,7 @@ impl GpuVoxelizer {
                 }
                 .into());
             }
-            let pairs = Listed::new(tris, origin, self.mode);
+            let pairs = Listed::new(tris, self.world.as_ref(), origin, self.mode);
             let mut occ: Vec<u32> = bytemuck::pod_collect_to_vec(&self.gpu.read(
                 &self.buffers.occ,
                 &self.buffers.staging,
@@ -734,9 +783,13 @@ impl GpuVoxelizer {
             }
             cpu.begin(origin);
             let mut again = 0u64;
+            let world = self.world;
             replay(&mut |b: &[Triangle]| {
-                again += b.iter().filter(|t| t.is_finite()).count() as u64;
-                cpu.add(b)
+                again += b.iter().filter(|t| fed(t, world.as_ref())).count() as u64;
+                match &world {
+                    Some(grid) => cpu.add_world(grid, b),
+                    None => cpu.add(b),
+                }
             })?;
             let voxels = cpu.finish();
             if again != marked_tris {
@@ -845,38 +898,59 @@ impl GpuVoxelizer {
             let room = self.batch - self.pending.len();
             let (head, rest) = tris.split_at(room.min(tris.len()));
             tris = rest;
-            // f64 shaders: every triangle gets its certification flags, so it is copied
+            // f64 shaders: every triangle gets its certification flags, so it is copied;
+            // world coordinates are moved to the grid and get the flags of their rounding
             let certify = self.precision == Precision::F64;
             let r = if !certify
+                && self.world.is_none()
                 && self.pending.is_empty()
                 && head.len() == self.batch
                 && head.iter().all(Triangle::is_finite)
             {
                 self.submit(st, head)
+            } else if let Some(grid) = &self.world {
+                for t in head {
+                    let mut m = *t;
+                    m.v = t.v.map(|p| grid.to_grid(p));
+                    if !m.is_finite() {
+                        continue;
+                    }
+                    m.flags &= !HOST_FLAGS;
+                    m.flags |= world_flags(&t.v, &m.v, grid);
+                    if certify && m.flags & TRI_ROUNDED == 0 {
+                        m.flags |= exact_flags(&m);
+                    }
+                    self.pending.push(m);
+                }
+                self.submit_full(st)
             } else {
                 let at = self.pending.len();
                 self.pending
                     .extend(head.iter().filter(|t| t.is_finite()).copied());
                 for t in &mut self.pending[at..] {
-                    t.flags &= !(TRI_EXACT_EDGES | TRI_EXACT_DEPTH);
+                    t.flags &= !HOST_FLAGS;
                     if certify {
                         t.flags |= exact_flags(t);
                     }
                 }
-                if self.pending.len() == self.batch {
-                    let full = std::mem::take(&mut self.pending);
-                    let r = self.submit(st, &full);
-                    self.pending = full;
-                    self.pending.clear();
-                    r
-                } else {
-                    Ok(())
-                }
+                self.submit_full(st)
             };
             if let Err(e) = r {
                 st.error = Some(e);
             }
         }
+    }
+
+    /// Submits the pending batch if it is full.
+    fn submit_full(&mut self, st: &mut Stream) -> Result<(), GpuError> {
+        if self.pending.len() < self.batch {
+            return Ok(());
+        }
+        let full = std::mem::take(&mut self.pending);
+        let r = self.submit(st, &full);
+        self.pending = full;
+        self.pending.clear();
+        r
     }
 
     /// Submits the last, partial batch of a replay; returns the first error of the replay.
@@ -1122,6 +1196,18 @@ fn certainly_inline(t: &Triangle, cutoff: f64) -> bool {
         hi.floor() - lo.ceil() + 2.0
     });
     w[0] * w[1] <= INLINE_COLUMNS && w[1] * w[2] <= INLINE_COLUMNS && w[0] * w[2] <= INLINE_COLUMNS
+}
+
+/// Whether the voxelizer takes triangle `t` of a replay (and counts it in the chunk's stream):
+/// finite coordinates, on the grid when `world` is set (its f32 grid coordinates).
+fn fed(t: &Triangle, world: Option<&Grid>) -> bool {
+    match world {
+        Some(g) => {
+            t.v.iter()
+                .all(|&p| g.to_grid(p).iter().all(|c| c.is_finite()))
+        }
+        None => t.is_finite(),
+    }
 }
 
 /// What [`GpuVoxelizer::voxelize_chunk_streamed`]'s replay callback passes the chunk's

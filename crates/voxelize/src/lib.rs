@@ -161,7 +161,7 @@ pub use chunk::{ChunkVoxelizer, VoxelSums};
 pub use clip::clipped_area;
 pub use column::voxel_areas;
 pub use grid::{voxelize_grid, GridVoxels};
-pub use overlap::{voxelize_triangle, TriSetup};
+pub use overlap::{voxelize_triangle, voxelize_world_triangle, TriSetup};
 pub use scanline::voxelize_triangle_with;
 
 use std::fmt;

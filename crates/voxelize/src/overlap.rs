@@ -845,3 +845,40 @@ pub fn voxelize_triangle(
         emit(s.unswizzle(p))
     });
 }
+
+/// [`voxelize_triangle`] of a triangle in **world** coordinates of `grid`, decided exactly for
+/// those coordinates and the grid as stated ([`TriSetup::with_world`]): the voxels in
+/// `[bmin, bmax]` (grid coordinates, inclusive) that [`crate::ChunkVoxelizer::add_world`]
+/// marks for it when `[bmin, bmax]` is its chunk, in the same order of decisions: a conservative
+/// triangle whose f32 grid coordinates (`grid.to_grid`) lie inside one voxel's open interior
+/// (the same voxel for the exact image: `to_grid` keeps every strict comparison with an
+/// integer) marks that voxel if its grid normal is nonzero, any other the scan's set. The GPU
+/// voxelizer's host fallback decides its listed triangles with it.
+pub fn voxelize_world_triangle(
+    grid: &Grid,
+    world: &[[f32; 3]; 3],
+    bmin: [i32; 3],
+    bmax: [i32; 3],
+    mode: Mode,
+    emit: &mut impl FnMut([i32; 3]),
+) {
+    let v = world.map(|p| grid.to_grid(p));
+    if mode == Mode::Conservative {
+        if let Some(p) = interior_voxel(&v) {
+            // `chunk::face`: the normal ChunkVoxelizer's interior path needs
+            let n = cross_f64(&to_f64(&v));
+            let nn = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+            let inside = (0..3).all(|k| p[k] >= bmin[k] && p[k] <= bmax[k]);
+            if inside && nn > 0.0 && nn.is_finite() {
+                emit(p);
+                return;
+            }
+        }
+    }
+    let Some(s) = TriSetup::with_world(&v, Some((world, grid)), mode) else {
+        return;
+    };
+    s.scan(s.swizzle(bmin), s.swizzle(bmax), |p, _| {
+        emit(s.unswizzle(p))
+    });
+}

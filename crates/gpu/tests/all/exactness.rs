@@ -13,7 +13,7 @@
 //! These tests need an adapter (lavapipe is enough): without one they FAIL.
 
 #[path = "../../../voxelize/tests/all/common/mod.rs"]
-mod vcommon;
+pub(crate) mod vcommon;
 
 use std::collections::BTreeSet;
 

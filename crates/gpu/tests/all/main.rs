@@ -11,6 +11,7 @@ mod gpu_vs_cpu;
 mod probe;
 mod shaders;
 mod streaming;
+mod world;
 
 /// Every file of this folder is compiled as a module of this binary.
 #[test]

@@ -327,7 +327,7 @@ mod tests {
         fn voxelize(&self, chunk: &dyn ChunkSource) -> Result<ChunkVoxels, StageError> {
             assert!(chunk.index() != self.0, "test panic on chunk {}", self.0);
             let mut n = 0;
-            chunk.replay(&mut |t| {
+            chunk.replay_world(&mut |t| {
                 n += t.len();
                 ControlFlow::Continue(())
             })?;

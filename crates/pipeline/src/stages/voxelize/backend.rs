@@ -26,12 +26,11 @@ pub(crate) trait ChunkSource {
     fn origin(&self) -> [u32; 3] {
         self.coord().map(|c| c * voxlod_geom::CHUNK)
     }
-    /// Feeds the triangles to `f` in batches, from the first, until `f` breaks.
-    fn replay(&self, f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>) -> Result<(), StageError>;
     /// The grid of the chunk's triangles.
     fn grid(&self) -> &Grid;
-    /// [`ChunkSource::replay`] with the triangles in world coordinates (as the bins hold them),
-    /// for a voxelizer that decides on the input's own coordinates (`ChunkVoxelizer::add_world`).
+    /// Feeds the triangles to `f` in batches, from the first, until `f` breaks; in world
+    /// coordinates (as the bins hold them), for voxelizers that decide on the input's own
+    /// coordinates (`ChunkVoxelizer::add_world`, `GpuVoxelizer::voxelize_chunk_streamed_world`).
     fn replay_world(
         &self,
         f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>,
@@ -56,14 +55,6 @@ impl ChunkSource for BinChunk<'_> {
     }
     fn origin(&self) -> [u32; 3] {
         self.bins.chunks()[self.index].origin()
-    }
-    fn replay(&self, f: &mut dyn FnMut(&[Triangle]) -> ControlFlow<()>) -> Result<(), StageError> {
-        let mut moved = Vec::new();
-        self.replay_world(&mut |tris| {
-            moved.clear();
-            moved.extend(tris.iter().map(|t| voxlod_tile::to_grid(self.grid, t)));
-            f(&moved)
-        })
     }
     fn grid(&self) -> &Grid {
         self.grid
@@ -430,17 +421,21 @@ fn select_gpu(
 
 /// Voxelizes the first `limit` triangles of `chunk` on the GPU, streaming them from the bins
 /// file (replayed once per GPU phase), so that only bounded batches are in memory whatever
-/// the chunk's size.
+/// the chunk's size. The bins' world coordinates go to the GPU voxelizer as they are: its sets
+/// are exact for them, as the CPU backend's (`add_world`).
 #[cfg(feature = "gpu")]
 fn voxelize_streamed(
     gpu: &mut voxlod_gpu::GpuVoxelizer,
     chunk: &dyn ChunkSource,
     limit: u64,
 ) -> Result<Vec<Voxel>> {
-    gpu.voxelize_chunk_streamed(chunk.origin(), &mut |feed: &mut voxlod_gpu::Feed<'_>| {
+    let grid = *chunk.grid();
+    gpu.voxelize_chunk_streamed_world(&grid, chunk.origin(), &mut |feed: &mut voxlod_gpu::Feed<
+        '_,
+    >| {
         let mut left = limit;
         chunk
-            .replay(&mut |tris| {
+            .replay_world(&mut |tris| {
                 let n = (tris.len() as u64).min(left) as usize;
                 feed(&tris[..n]);
                 left -= n as u64;

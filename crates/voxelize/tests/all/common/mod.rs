@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 pub mod adversarial;
+pub mod world_ref;
 
 use voxlod_geom::{Triangle, TRI_HAS_COLORS, TRI_HAS_NORMALS};
 #[allow(unused_imports)] // each test binary uses a different part
