@@ -107,6 +107,18 @@ pub struct OutputGuard {
     lock: File,
 }
 
+/// The unique staged name of output `name` in `dir`: `.voxlod-part-NAME-PID-TIME` (TIME in
+/// hexadecimal nanoseconds), what [`find_output_leftovers`] recognises.
+fn staged_name(dir: &Path, name: &str) -> PathBuf {
+    dir.join(format!(
+        ".voxlod-part-{name}-{}-{:x}",
+        std::process::id(),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64)
+    ))
+}
+
 /// The output's folder (`.` for a bare file name).
 pub fn output_dir(output: &Path) -> &Path {
     output
@@ -148,13 +160,7 @@ impl OutputGuard {
         // from here on the guard owns the lock: an error below drops it, removing the lock file
         let guard = OutputGuard {
             output: output.to_path_buf(),
-            staged: dir.join(format!(
-                ".voxlod-part-{name}-{}-{:x}",
-                std::process::id(),
-                std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0, |d| d.as_nanos() as u64)
-            )),
+            staged: staged_name(dir, &name),
             lock_path,
             lock,
         };
@@ -186,13 +192,7 @@ impl OutputGuard {
         let lock = lock_file(&lock_path, folder, dir)?;
         let guard = OutputGuard {
             output: folder.to_path_buf(),
-            staged: dir.join(format!(
-                ".voxlod-part-{name}-{}-{:x}",
-                std::process::id(),
-                std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map_or(0, |d| d.as_nanos() as u64)
-            )),
+            staged: staged_name(dir, &name),
             lock_path,
             lock,
         };
