@@ -467,10 +467,8 @@ impl PlySource {
         let verts = MappedVertices::<BE>::new(&data[voff..end], vel, l);
         // in rounds of 32 MiB of records, the pages read released after each
         let round = (32u64 << 20) / stride as u64;
-        parallel_bounds(vel.count, round, &|| self.release_pages(), &|i, b| {
-            let p = verts.position(i as usize);
-            b.add_point(p);
-            p.iter().all(|c| c.is_finite())
+        parallel_bounds(vel.count, round, &|| self.release_pages(), &|r, b| {
+            verts.add_positions(r, b)
         })
     }
 

@@ -3,6 +3,7 @@
 //! (nothing is copied), [`CompactVertices`] holds only position, normal and colour of each
 //! vertex for inputs that can only be read front to back (ASCII, gzip) — O(vertices) memory.
 
+use crate::bounds::PointBounds;
 use crate::ply_header::{Element, Kind, Layout, Role, Scalar};
 use crate::ply_records::{decode_f32, decode_f64, Records};
 use crate::{IngestError, Location};
@@ -233,6 +234,23 @@ impl<const BE: bool> MappedVertices<'_, BE> {
             None => 0.0,
         };
         [f(0), f(1), f(2)]
+    }
+}
+
+impl<const BE: bool> MappedVertices<'_, BE> {
+    /// Adds the positions of the vertices in `r` (within `0..count`) to `b`: in the packed
+    /// layout straight from the records, without the per-vertex layout test.
+    pub(crate) fn add_positions(&self, r: std::ops::Range<u64>, b: &mut PointBounds) {
+        let (a, e) = (r.start as usize, r.end as usize);
+        match self.packed {
+            Some(pk) => {
+                let recs = &self.data[a * self.stride..e * self.stride];
+                for rec in recs.chunks_exact(self.stride) {
+                    b.add(packed_f32s::<BE>(rec, pk.p));
+                }
+            }
+            None => (a..e).for_each(|i| b.add(self.position(i))),
+        }
     }
 }
 

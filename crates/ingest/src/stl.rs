@@ -158,10 +158,12 @@ impl StlSource {
     pub fn vertex_bounds(&self) -> Option<Bounds> {
         let (map, n) = self.binary.as_ref()?;
         let data: &[u8] = map;
-        parallel_bounds(*n, (32 << 20) / 50, &|| self.release_pages(), &|i, b| {
-            let v = facet_corners(data, i as usize);
-            v.iter().for_each(|&p| b.add_point(p));
-            v.iter().flatten().all(|c| c.is_finite())
+        parallel_bounds(*n, (32 << 20) / 50, &|| self.release_pages(), &|r, b| {
+            for i in r {
+                for p in facet_corners(data, i as usize) {
+                    b.add(p);
+                }
+            }
         })
     }
 
