@@ -83,9 +83,17 @@ fn sharded(input: &Path, dir: &Path, n: u32, settings: &[&str]) -> (Vec<u8>, ser
 
 /// Every shard count gives the single build's bytes; the split levels met are returned.
 fn check_identical(input: &Path, settings: &[&str], counts: &[u32]) -> Vec<u32> {
+    check_identical_ranges(input, settings, counts).0
+}
+
+/// As [`check_identical`], also returning the most ranges any shard of those plans held (more
+/// than one: the split gave a shard subtrees that are not neighbours in Morton order, so the
+/// merge interleaved shards).
+fn check_identical_ranges(input: &Path, settings: &[&str], counts: &[u32]) -> (Vec<u32>, usize) {
     let dir = tempfile::tempdir().unwrap();
     let want = single(input, dir.path(), settings);
     let mut levels = Vec::new();
+    let mut most = 0;
     for &n in counts {
         let (got, v) = sharded(input, dir.path(), n, settings);
         assert!(
@@ -95,8 +103,11 @@ fn check_identical(input: &Path, settings: &[&str], counts: &[u32]) -> Vec<u32> 
             input.display()
         );
         levels.push(v["split_level"].as_u64().unwrap() as u32);
+        for r in v["shards"].as_array().unwrap() {
+            most = most.max(r["ranges"].as_array().unwrap().len());
+        }
     }
-    levels
+    (levels, most)
 }
 
 fn npm_bunny(test: &str) -> Option<PathBuf> {
@@ -143,11 +154,14 @@ fn merge_equals_single_build_on_a_gen_mesh_and_with_source_geometry() {
     let dir = tempfile::tempdir().unwrap();
     let gen = gen_mesh(dir.path(), "3000");
     for mode in ["conservative", "thin"] {
-        check_identical(
+        let (_, most) = check_identical_ranges(
             &gen,
             &["-r", "1024", "-m", mode, "--backend", "cpu"],
             &[1, 2, 7],
         );
+        // the 7-shard plan gives shards several ranges (longest processing time first): the
+        // merge's interleaving of shards is what is compared here
+        assert!(most > 1, "{mode}: no shard held more than one range");
     }
     check_identical(
         &gen,
@@ -156,18 +170,31 @@ fn merge_equals_single_build_on_a_gen_mesh_and_with_source_geometry() {
     );
 }
 
-/// The shards' ranges cover the split level's Morton codes in order, and their triangles add
-/// up to the binned triangles that a build reports (an independent count).
+/// The shards' ranges (increasing within each shard) together cover the split level's Morton
+/// codes once each, and their triangles add up to the binned triangles that a build reports
+/// (an independent count).
 fn check_plan(v: &serde_json::Value, n: u32) -> (f64, u64) {
     let shards = v["shards"].as_array().unwrap();
     assert_eq!(shards.len() as u32, n);
     let levels = v["levels"].as_u64().unwrap();
     let split = v["split_level"].as_u64().unwrap();
-    let mut at = 0;
+    let mut all = Vec::new();
     for (i, r) in shards.iter().enumerate() {
         assert_eq!(r["index"].as_u64().unwrap(), i as u64);
-        assert_eq!(r["morton_start"].as_u64().unwrap(), at);
-        at = r["morton_end"].as_u64().unwrap();
+        let ranges: Vec<(u64, u64)> = r["ranges"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| (m[0].as_u64().unwrap(), m[1].as_u64().unwrap()))
+            .collect();
+        assert!(ranges.windows(2).all(|w| w[0].1 < w[1].0), "{ranges:?}");
+        all.extend(ranges);
+    }
+    all.sort();
+    let mut at = 0;
+    for (a, b) in all {
+        assert!(a == at && b > a, "ranges do not tile the codes at {at}");
+        at = b;
     }
     assert_eq!(at, 1u64 << (3 * (levels - 1 - split)));
     let tri: Vec<u64> = shards

@@ -202,10 +202,14 @@ pub fn plan(
     })
 }
 
-/// Windows of face records the plan with parts decodes for its per-chunk weights.
-const SAMPLE_WINDOWS: u64 = 256;
+/// Windows of face records the plan with parts decodes for its per-chunk weights. A scan's
+/// consecutive faces lie close together, so a window weighs one small region: many short
+/// windows estimate the subtrees' weights better than a few long ones (gen 1e8 at 2048³, 16
+/// shards: the largest shard 1.09× the mean with 4096 windows, 1.14× with 256; 1.07× from the
+/// exact counts).
+const SAMPLE_WINDOWS: u64 = 4096;
 /// The sample is about 1/`SAMPLE_FRACTION` of the face records.
-const SAMPLE_FRACTION: u64 = 64;
+const SAMPLE_FRACTION: u64 = 128;
 
 /// A plan with parts: the grid from the vertex list's bounds `vb`, the per-chunk weights from
 /// a sample of [`SAMPLE_WINDOWS`] evenly spaced windows of face records (scaled to the whole),

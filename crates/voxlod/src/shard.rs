@@ -130,9 +130,21 @@ pub(crate) fn run_plan(a: PlanArgs) -> Result<()> {
         );
     }
     for r in &p.shards {
+        let ranges: Vec<String> = r
+            .ranges
+            .iter()
+            .map(|m| format!("{}..{}", m[0], m[1]))
+            .collect();
         println!(
-            "  shard {:4}: Morton {}..{}, {} subtrees, {} binned triangles",
-            r.index, r.morton_start, r.morton_end, r.subtrees, r.triangles
+            "  shard {:4}: Morton {}, {} subtrees, {} binned triangles",
+            r.index,
+            if ranges.is_empty() {
+                "none".to_string()
+            } else {
+                ranges.join(" ")
+            },
+            r.subtrees,
+            r.triangles
         );
     }
     Ok(())

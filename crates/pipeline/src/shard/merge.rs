@@ -2,14 +2,16 @@
 //! byte the file a one-machine build writes (Entwine's `merge` step, on the octree of Chajdas
 //! et al.).
 //!
-//! The file is in post-order, so each shard's subtrees are one contiguous run of it, in the
-//! shards' order. The merge checks every shard's header and index first (missing, corrupt,
-//! from another plan, wrong index), then copies each subtree's nodes below its root into the
-//! file as stored (payload checksums checked, nothing decoded), decodes only the subtree
-//! roots, and builds the levels above the split level by the same sort-and-compact writer as
-//! a build (`octree_writer.rs`). Memory: the shards' index records, one payload at a time,
-//! and the writer's pending parents above the split level (at most eight decoded children per
-//! level, plus its bounded queue).
+//! The file is in post-order, so each subtree is one contiguous run of it, in Morton order of
+//! the subtree roots; a shard's file holds its subtrees in that order, and the merge takes the
+//! plan's ranges in Morton order, each from the shard that holds it (a cursor per shard). The
+//! merge checks every shard's header and index first (missing, corrupt, from another plan,
+//! wrong index), then copies each subtree's nodes below its root into the file as stored
+//! (payload checksums checked, nothing decoded), decodes only the subtree roots, and builds
+//! the levels above the split level by the same sort-and-compact writer as a build
+//! (`octree_writer.rs`). Memory: the shards' index records, one payload at a time, and the
+//! writer's pending parents above the split level (at most eight decoded children per level,
+//! plus its bounded queue).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -149,8 +151,23 @@ pub fn merge(
         copied: 0,
         roots: 0,
     };
-    for (shard, range) in shards.iter().zip(&p.shards) {
-        m.shard(shard, range.morton_start..range.morton_end)?;
+    // every range in Morton order, from its shard, each shard's nodes read once in order
+    let owners = super::plan_file::range_owners(p).expect("a loaded plan's ranges tile its codes");
+    let mut cursor = vec![0usize; shards.len()];
+    for (start, end, k) in owners {
+        let k = k as usize;
+        m.range(&shards[k], &mut cursor[k], start..end)?;
+    }
+    for (shard, &at) in shards.iter().zip(&cursor) {
+        if let Some(node) = shard.nodes.get(at) {
+            let e = &node.entry;
+            bail!(
+                "{}: node level {} {:?} lies outside the shard's ranges, or out of Morton order",
+                shard.path().display(),
+                e.level,
+                e.pos()
+            );
+        }
     }
     let (copied, roots) = (m.copied, m.roots);
     let (bytes, levels) = octree.finish(|levels| {
@@ -186,20 +203,31 @@ struct Merger<'a, 'p> {
 }
 
 impl Merger<'_, '_> {
-    /// Copies one shard's subtrees (their roots in `range` of level-split Morton codes).
-    fn shard(&mut self, shard: &ShardReader, range: std::ops::Range<u64>) -> Result<()> {
+    /// Copies the subtrees of `shard` whose roots lie in `range` (level-split Morton codes):
+    /// its nodes from `*at` on while they do, `*at` left at the first node that does not.
+    fn range(
+        &mut self,
+        shard: &ShardReader,
+        at: &mut usize,
+        range: std::ops::Range<u64>,
+    ) -> Result<()> {
         let mut open = false;
-        for node in &shard.nodes {
+        while let Some(node) = shard.nodes.get(*at) {
             let e = &node.entry;
             let shift = self.split - e.level;
             let root = e.pos().map(|c| c >> shift);
+            let inside = range.contains(&morton3(root[0], root[1], root[2]));
             ensure!(
-                range.contains(&morton3(root[0], root[1], root[2])),
-                "{}: node level {} {:?} lies outside the shard's range",
+                inside || !open,
+                "{}: node level {} {:?} lies outside the subtree before it (a damaged shard)",
                 shard.path().display(),
                 e.level,
                 e.pos()
             );
+            if !inside {
+                break;
+            }
+            *at += 1;
             if !open {
                 self.octree.begin_subtree(self.split, root)?;
                 open = true;

@@ -3,9 +3,10 @@
 //!
 //! The octree file is written in post-order, so the nodes of a whole subtree form one
 //! contiguous run of it, and a node's payload depends only on its subtree. A plan picks a
-//! *split level* S and gives each shard a contiguous Morton range of the level-S nodes: the
-//! shard bins, voxelizes and builds the LOD of those subtrees only (`build --plan --shard`),
-//! and `merge` copies their payloads and builds the levels above S. The plan holds everything
+//! *split level* S and gives each shard Morton ranges of the level-S nodes (together they cover
+//! every code once): the shard bins, voxelizes and builds the LOD of those subtrees only
+//! (`build --plan --shard`), and `merge` copies their payloads in Morton order and builds the
+//! levels above S. The plan holds everything
 //! the merge needs to write the one-machine build's bytes (settings, grid, manifest fields).
 //!
 //! The split level and the ranges are chosen in `split.rs`.
@@ -25,8 +26,9 @@ pub const PLAN_FORMAT: &str = "voxlod-plan";
 /// Version of the plan file. 2: the input's content checksum (`input.content_xxh3`), the
 /// ingest pass's findings (`ingest`) and the per-chunk counts (`chunks`), so that a shard reads
 /// the input once. 3: `parts` (the map tasks' face records), with which the plan reads no
-/// faces (no `ingest`, no `content_xxh3`; `chunks` estimated from a sample).
-pub const PLAN_VERSION: u32 = 3;
+/// faces (no `ingest`, no `content_xxh3`; `chunks` estimated from a sample). 4: a shard holds a
+/// list of Morton `ranges` (the split's LPT assignment), not one range.
+pub const PLAN_VERSION: u32 = 4;
 /// Bytes hashed at each end of the input for its fingerprint.
 const FINGERPRINT_SPAN: u64 = 1 << 20;
 
@@ -156,17 +158,16 @@ impl PlanPart {
     }
 }
 
-/// One shard: a contiguous range of level-`split_level` Morton codes.
+/// One shard: ranges of level-`split_level` Morton codes.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ShardRange {
     /// 0-based shard index.
     pub index: u32,
-    /// First Morton code of the range (level-`split_level` chunk coordinates).
-    pub morton_start: u64,
-    /// End of the range, exclusive.
-    pub morton_end: u64,
-    /// Non-empty subtrees in the range.
+    /// `[start, end)` ranges of Morton codes (level-`split_level` chunk coordinates), in
+    /// increasing order, non-empty, not touching; none for an empty shard.
+    pub ranges: Vec<[u64; 2]>,
+    /// Non-empty subtrees in its ranges.
     pub subtrees: u64,
     /// Binned triangles of its leaf chunks (a triangle counts once per chunk).
     pub triangles: u64,
@@ -309,22 +310,15 @@ impl LoadedPlan {
                 plan.split_level
             );
         }
-        let covered = plan
+        if !plan
             .shards
             .iter()
             .enumerate()
             .all(|(i, s)| s.index == i as u32)
-            && plan
-                .shards
-                .windows(2)
-                .all(|w| w[0].morton_end == w[1].morton_start)
-            && plan.shards.first().is_some_and(|s| s.morton_start == 0)
-            && plan.shards.last().is_some_and(|s| {
-                s.morton_end == 1u64 << (3 * (plan.levels - 1 - plan.split_level))
-            });
-        if !covered {
+            || range_owners(&plan).is_none()
+        {
             bail!(
-                "{}: the shard ranges do not cover the level-{} chunks in order (edited by hand?)",
+                "{}: the shards' ranges do not cover the level-{} chunks once each, in order within each shard (edited by hand?)",
                 path.display(),
                 plan.split_level
             );
@@ -380,13 +374,21 @@ impl LoadedPlan {
                 n - 1
             );
         };
+        let scope_ranges = r.ranges.clone();
+        let inside = |code: u64| in_ranges(&scope_ranges, code);
+        let chunks = self
+            .plan
+            .chunks
+            .iter()
+            .filter(|c| inside(self.subtree_of(c[0])))
+            .copied()
+            .collect();
         Ok(ShardScope {
             index,
             count: n as u32,
             split_level: self.plan.split_level,
             levels: self.plan.levels,
-            morton_start: r.morton_start,
-            morton_end: r.morton_end,
+            ranges: r.ranges.clone(),
             plan_sha256: self.sha256,
             grid: self.plan.grid.into(),
             channels: self.plan.channels.clone(),
@@ -395,15 +397,38 @@ impl LoadedPlan {
             parts: self.plan.parts.clone(),
             plan_sha256_hex: voxlod_io::hex(&self.sha256),
             ingest: self.plan.ingest.clone(),
-            chunks: self
-                .plan
-                .chunks
-                .iter()
-                .filter(|c| (r.morton_start..r.morton_end).contains(&self.subtree_of(c[0])))
-                .copied()
-                .collect(),
+            chunks,
         })
     }
+}
+
+/// True if `code` lies in one of `ranges` (sorted, disjoint).
+fn in_ranges(ranges: &[[u64; 2]], code: u64) -> bool {
+    let i = ranges.partition_point(|r| r[1] <= code);
+    ranges.get(i).is_some_and(|r| r[0] <= code)
+}
+
+/// Every shard range of `plan` as `(start, end, shard)` in Morton order, if each shard's
+/// ranges are non-empty and increasing and all of them tile the level-`split_level` codes
+/// `0..8^(levels − 1 − split_level)` without gap or overlap; `None` otherwise.
+pub(crate) fn range_owners(plan: &ShardPlan) -> Option<Vec<(u64, u64, u32)>> {
+    let full = 1u64.checked_shl(3 * (plan.levels - 1 - plan.split_level))?;
+    let mut all = Vec::new();
+    for s in &plan.shards {
+        if !s.ranges.windows(2).all(|w| w[0][1] < w[1][0]) {
+            return None;
+        }
+        all.extend(s.ranges.iter().map(|r| (r[0], r[1], s.index)));
+    }
+    all.sort_unstable();
+    let mut at = 0;
+    for &(a, b, _) in &all {
+        if a != at || b <= a {
+            return None;
+        }
+        at = b;
+    }
+    (at == full).then_some(all)
 }
 
 /// The plan's chunk list is in strictly increasing Morton order inside the grid, without
@@ -417,11 +442,12 @@ fn check_chunks(plan: &ShardPlan) -> Result<()> {
             "the chunk list is not in increasing Morton order of non-empty chunks inside the grid"
         );
     }
+    let owners = range_owners(plan).context("the shards' ranges do not cover the chunks")?;
     let mut sums = vec![0u64; plan.shards.len()];
     for c in &plan.chunks {
         let code = c[0] >> (3 * plan.split_level);
-        let i = plan.shards.partition_point(|r| r.morton_end <= code);
-        if let Some(s) = sums.get_mut(i) {
+        let i = owners.partition_point(|r| r.1 <= code);
+        if let Some(s) = owners.get(i).and_then(|r| sums.get_mut(r.2 as usize)) {
             *s = s.saturating_add(c[1]);
         }
     }
@@ -448,10 +474,8 @@ pub struct ShardScope {
     pub split_level: u32,
     /// Levels of the octree.
     pub levels: u32,
-    /// The shard's level-`split_level` Morton codes, `[start, end)`.
-    pub morton_start: u64,
-    /// 〃 end.
-    pub morton_end: u64,
+    /// The shard's level-`split_level` Morton codes: `[start, end)` ranges, sorted, disjoint.
+    pub ranges: Vec<[u64; 2]>,
     /// SHA-256 of the plan file.
     pub plan_sha256: [u8; 32],
     /// The grid the plan found.
@@ -475,8 +499,10 @@ pub struct ShardScope {
 impl ShardScope {
     /// True if leaf chunk `c` lies in one of the shard's subtrees.
     pub fn contains_chunk(&self, c: [u32; 3]) -> bool {
-        let m = morton3(c[0], c[1], c[2]) >> (3 * self.split_level);
-        (self.morton_start..self.morton_end).contains(&m)
+        in_ranges(
+            &self.ranges,
+            morton3(c[0], c[1], c[2]) >> (3 * self.split_level),
+        )
     }
 }
 
