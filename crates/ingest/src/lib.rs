@@ -385,6 +385,17 @@ impl MeshSource {
         }
     }
 
+    /// Drops this process's resident pages of a memory-mapped input (they stay in the page
+    /// cache): for a caller that reads many small parts, between which the streams' own
+    /// release (every few thousand triangles) never comes. Nothing for other inputs.
+    pub fn release_pages(&self) {
+        match &self.reader {
+            Reader::Ply(p) => p.release_pages(),
+            Reader::Stl(s) => s.release_pages(),
+            Reader::Obj(_) | Reader::Gltf(_) => {}
+        }
+    }
+
     /// [`MeshSource::stream_prepared`] over the triangles of one part of
     /// [`MeshSource::face_parts`] only: the same triangles, in the same order, as those records
     /// give in a whole stream. Only that part's records and the vertices they use are read.
@@ -476,11 +487,7 @@ impl MeshSource {
             Reader::Ply(p) => p.progress_total(),
             _ => self.file_len,
         };
-        let release = || match &self.reader {
-            Reader::Ply(p) => p.release_pages(),
-            Reader::Stl(s) => s.release_pages(),
-            Reader::Obj(_) | Reader::Gltf(_) => {}
-        };
+        let release = || self.release_pages();
         let erased = |tris: &mut [Triangle]| -> batch::Prepared { Box::new(prepare(tris)) };
         let mut g = |tris: &[Triangle], _: &[u64], p: batch::Prepared| {
             let p = p
