@@ -231,12 +231,7 @@ mod tests {
     #[test]
     fn partition_is_optimal_and_uses_every_shard() {
         let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rng = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = move || voxlod_io::splitmix64(&mut seed);
         for _ in 0..3000 {
             let len = (rng() % 9) as usize + 1;
             let n = (rng() % 6) as usize + 1;
@@ -312,12 +307,7 @@ mod tests {
     #[test]
     fn shards_are_lpt_or_contiguous_whichever_is_smaller() {
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rng = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = move || voxlod_io::splitmix64(&mut seed);
         let mut lpt_won = 0;
         for _ in 0..1500 {
             let len = (rng() % 8) as usize + 1;
