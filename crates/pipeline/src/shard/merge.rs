@@ -152,9 +152,8 @@ pub fn merge(
         roots: 0,
     };
     // every range in Morton order, from its shard, each shard's nodes read once in order
-    let owners = super::plan_file::range_owners(p).expect("a loaded plan's ranges tile its codes");
     let mut cursor = vec![0usize; shards.len()];
-    for (start, end, k) in owners {
+    for &(start, end, k) in &plan.owners {
         let k = k as usize;
         m.range(&shards[k], &mut cursor[k], start..end)?;
     }

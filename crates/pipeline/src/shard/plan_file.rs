@@ -273,6 +273,8 @@ pub struct LoadedPlan {
     pub sha256: [u8; 32],
     /// The plan file's path.
     pub path: PathBuf,
+    /// Every shard range as `(start, end, shard)` in Morton order ([`range_owners`]).
+    pub owners: Vec<(u64, u64, u32)>,
 }
 
 /// The largest plan file read (a plan is a few kilobytes of JSON).
@@ -310,20 +312,21 @@ impl LoadedPlan {
                 plan.split_level
             );
         }
-        if !plan
+        let indexed = plan
             .shards
             .iter()
             .enumerate()
-            .all(|(i, s)| s.index == i as u32)
-            || range_owners(&plan).is_none()
-        {
+            .all(|(i, s)| s.index == i as u32);
+        let owners = range_owners(&plan.shards, plan.levels - 1 - plan.split_level);
+        let (true, Some(owners)) = (indexed, owners) else {
             bail!(
                 "{}: the shards' ranges do not cover the level-{} chunks once each, in order within each shard (edited by hand?)",
                 path.display(),
                 plan.split_level
             );
-        }
-        check_chunks(&plan).with_context(|| format!("{}: edited by hand?", path.display()))?;
+        };
+        check_chunks(&plan, &owners)
+            .with_context(|| format!("{}: edited by hand?", path.display()))?;
         let parts_ok = plan.parts.iter().enumerate().all(|(i, p)| {
             p.index == i as u32 && p.records[0] <= p.records[1] && p.bytes[0] <= p.bytes[1]
         }) && plan
@@ -340,6 +343,7 @@ impl LoadedPlan {
             sha256: Sha256::digest(&bytes).into(),
             plan,
             path: path.to_path_buf(),
+            owners,
         })
     }
 
@@ -374,13 +378,11 @@ impl LoadedPlan {
                 n - 1
             );
         };
-        let scope_ranges = r.ranges.clone();
-        let inside = |code: u64| in_ranges(&scope_ranges, code);
         let chunks = self
             .plan
             .chunks
             .iter()
-            .filter(|c| inside(self.subtree_of(c[0])))
+            .filter(|c| in_ranges(&r.ranges, self.subtree_of(c[0])))
             .copied()
             .collect();
         Ok(ShardScope {
@@ -408,13 +410,13 @@ fn in_ranges(ranges: &[[u64; 2]], code: u64) -> bool {
     ranges.get(i).is_some_and(|r| r[0] <= code)
 }
 
-/// Every shard range of `plan` as `(start, end, shard)` in Morton order, if each shard's
-/// ranges are non-empty and increasing and all of them tile the level-`split_level` codes
-/// `0..8^(levels − 1 − split_level)` without gap or overlap; `None` otherwise.
-pub(crate) fn range_owners(plan: &ShardPlan) -> Option<Vec<(u64, u64, u32)>> {
-    let full = 1u64.checked_shl(3 * (plan.levels - 1 - plan.split_level))?;
+/// Every range of `shards` as `(start, end, shard)` in Morton order, if each shard's ranges
+/// are non-empty and increasing and all of them tile the codes of a level `up` levels below
+/// the root, `0..8^up`, without gap or overlap; `None` otherwise.
+pub(crate) fn range_owners(shards: &[ShardRange], up: u32) -> Option<Vec<(u64, u64, u32)>> {
+    let full = 1u64.checked_shl(3 * up)?;
     let mut all = Vec::new();
-    for s in &plan.shards {
+    for s in shards {
         if !s.ranges.windows(2).all(|w| w[0][1] < w[1][0]) {
             return None;
         }
@@ -433,7 +435,7 @@ pub(crate) fn range_owners(plan: &ShardPlan) -> Option<Vec<(u64, u64, u32)>> {
 
 /// The plan's chunk list is in strictly increasing Morton order inside the grid, without
 /// empty chunks, and each shard's chunks add up to its `triangles`.
-fn check_chunks(plan: &ShardPlan) -> Result<()> {
+fn check_chunks(plan: &ShardPlan, owners: &[(u64, u64, u32)]) -> Result<()> {
     let leaves = 1u64 << (3 * (plan.levels - 1));
     if !plan.chunks.windows(2).all(|w| w[0][0] < w[1][0])
         || plan.chunks.iter().any(|c| c[0] >= leaves || c[1] == 0)
@@ -442,7 +444,6 @@ fn check_chunks(plan: &ShardPlan) -> Result<()> {
             "the chunk list is not in increasing Morton order of non-empty chunks inside the grid"
         );
     }
-    let owners = range_owners(plan).context("the shards' ranges do not cover the chunks")?;
     let mut sums = vec![0u64; plan.shards.len()];
     for c in &plan.chunks {
         let code = c[0] >> (3 * plan.split_level);
