@@ -498,8 +498,10 @@ fn map(plan: &Path, i: u32) -> Output {
 /// on a generated scan (copies of the Stanford dragon from the shared meshes) and on a small
 /// made-up one, with more parts than shards and fewer; the plan read no face outside its
 /// sample, and each part's bins hold exactly the triangles binned to the chunks a one-machine
-/// build counts (the manifest's triangle count is the parts' sum). An input that cannot be
-/// cut (gzip) is planned without parts, with a warning, and still merges to the same bytes.
+/// build counts (the manifest's triangle count is the parts' sum); the shards read the parts'
+/// bins in place (no temporary bytes written, the parts' bins still there for the others). An
+/// input that cannot be cut (gzip) is planned without parts, with a warning, and still merges
+/// to the same bytes.
 #[test]
 fn map_phase_merges_to_the_single_build() {
     let test = "map_phase_merges_to_the_single_build";
@@ -547,9 +549,25 @@ fn map_phase_merges_to_the_single_build() {
             ok(&o);
             let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
             assert_eq!(j["already_done"], true, "{j}");
+            // the shards read the map outputs' pieces in place: nothing written to temporary
+            // files, and the map outputs left as they were for the other shards
+            let sizes = |p: &Path| -> Vec<u64> {
+                (0..parts)
+                    .map(|i| {
+                        let b = p.with_file_name(format!("part-{i:04}.bins"));
+                        std::fs::metadata(b).unwrap().len()
+                    })
+                    .collect()
+            };
+            let before = sizes(&p);
             for i in 0..shards {
-                ok(&build_shard(&p, i, &[]));
+                let o = build_shard(&p, i, &["--json"]);
+                ok(&o);
+                let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+                assert_eq!(j["temp_bytes_written"], 0, "{j}");
+                assert!(j["binned_triangles"].as_u64().unwrap() > 0, "{j}");
             }
+            assert_eq!(sizes(&p), before);
             let out = p.with_file_name("merged.voxlod");
             ok(&merge(&p, &out));
             assert!(

@@ -508,15 +508,15 @@ impl<'g> Scatter<'g> {
         for (c, ps) in self.chunks.iter_mut().zip(&self.pieces) {
             c.start = ps[0][0];
         }
-        Ok(Bins {
-            path: self.path,
-            file: self.file,
-            chunks: self.chunks,
-            layout: self.layout,
-            index_bytes: 0,
-            pieces: self.pieces,
-            bytes: self.end,
-        })
+        Ok(Bins::from_runs(
+            self.path,
+            self.file,
+            self.chunks,
+            self.layout,
+            0,
+            self.pieces,
+            self.end,
+        ))
     }
 }
 
@@ -568,9 +568,17 @@ pub trait TriangleSource: Sync {
 /// triangle's face record as a little-endian integer of [`Bins::index_bytes`] bytes instead of
 /// blocks; [`Bins::read_chunk_from`] rebuilds the triangles from the input through a
 /// [`TriangleSource`].
+///
+/// Bins *read in place* ([`Bins::open_in_place`]) are pieces of other bins files (a sharded
+/// build's map outputs), read where they lie instead of copied into a file of their own.
 pub struct Bins {
-    path: PathBuf,
-    file: File,
+    /// The files the pieces lie in, in order: a piece's byte offset counts in their
+    /// concatenation (file k starts at the sum of the lengths of the files before it). One
+    /// file except for bins read in place.
+    files: Vec<BinFile>,
+    /// True if the single file is these bins' own (written for them; [`Bins::remove`] deletes
+    /// it); false for bins read in place.
+    owned: bool,
     chunks: Vec<ChunkBin>,
     layout: RecordLayout,
     /// 0 for blocks of records; 4 or 8 for face indices of that width.
@@ -578,8 +586,16 @@ pub struct Bins {
     /// Per chunk (same order as `chunks`): its pieces `[byte offset, bytes, triangles]`, in
     /// input order.
     pieces: Vec<Vec<[u64; 3]>>,
-    /// Length of the file.
+    /// Length of the file; for bins read in place, the bytes of their pieces.
     bytes: u64,
+}
+
+/// One file of a [`Bins`]: its bytes are `base..base + len` of the pieces' offsets.
+struct BinFile {
+    path: PathBuf,
+    file: File,
+    base: u64,
+    len: u64,
 }
 
 impl Bins {
@@ -635,14 +651,88 @@ impl Bins {
                 ),
             });
         }
-        Ok(Bins {
-            path: path.to_path_buf(),
+        Ok(Bins::from_runs(
+            path.to_path_buf(),
             file,
             chunks,
             layout,
             index_bytes,
             pieces,
-            bytes: len,
+            len,
+        ))
+    }
+
+    /// Bins of blocks read in place from `files` (other writers' finished bins files, e.g. a
+    /// sharded build's map outputs; each read here only where a piece lies): `pieces` per
+    /// chunk, their byte offsets counted in the files' concatenation, so that the pieces of
+    /// file k start at the sum of the lengths of the files before it. Each piece must lie inside
+    /// one file and the pieces must add up to each chunk's count. [`Bins::remove`] leaves the
+    /// files alone.
+    pub fn open_in_place(
+        files: &[PathBuf],
+        chunks: Vec<ChunkBin>,
+        layout: RecordLayout,
+        pieces: Vec<Vec<[u64; 3]>>,
+    ) -> Result<Bins, TileError> {
+        assert!(
+            !files.is_empty(),
+            "bins read in place from at least one file"
+        );
+        let mut opened = Vec::with_capacity(files.len());
+        let mut base = 0u64;
+        for path in files {
+            let file = File::open(path).map_err(TileError::io("open", path))?;
+            let len = file.metadata().map_err(TileError::io("stat", path))?.len();
+            opened.push(BinFile {
+                path: path.clone(),
+                file,
+                base,
+                len,
+            });
+            base += len;
+        }
+        let bad = |problem: String| TileError::BadBins {
+            path: files[0].clone(),
+            problem,
+        };
+        if pieces.len() != chunks.len() {
+            return Err(bad(format!(
+                "{} chunks but {} piece lists",
+                chunks.len(),
+                pieces.len()
+            )));
+        }
+        let inside = |p: &[u64; 3]| {
+            let k = opened.partition_point(|f| f.base + f.len <= p[0]);
+            opened.get(k).is_some_and(|f| {
+                p[0].checked_add(p[1])
+                    .is_some_and(|e| f.base <= p[0] && e <= f.base + f.len)
+            })
+        };
+        let mut bytes = 0u64;
+        for (c, ps) in chunks.iter().zip(&pieces) {
+            if ps.is_empty()
+                || c.start != ps[0][0]
+                || ps.iter().map(|p| p[2]).sum::<u64>() != c.count
+                || !ps.iter().all(inside)
+            {
+                return Err(bad(format!(
+                    "chunk {:?}: its pieces do not lie inside the {} files or do not add up to its {} triangles",
+                    c.coord,
+                    files.len(),
+                    c.count
+                )));
+            }
+            bytes += ps.iter().map(|p| p[1]).sum::<u64>();
+        }
+        Ok(Bins {
+            files: opened,
+            owned: false,
+            chunks,
+            layout,
+            index_bytes: 0,
+            pieces,
+            bytes,
         })
     }
 
@@ -657,8 +747,13 @@ impl Bins {
     ) -> Bins {
         debug_assert_eq!(chunks.len(), pieces.len());
         Bins {
-            path,
-            file,
+            files: vec![BinFile {
+                path,
+                file,
+                base: 0,
+                len: bytes,
+            }],
+            owned: true,
             chunks,
             layout,
             index_bytes,
@@ -687,14 +782,35 @@ impl Bins {
         &self.chunks
     }
 
-    /// The bins file.
+    /// The bins file (the first file for bins read in place).
     pub fn path(&self) -> &Path {
-        &self.path
+        &self.files[0].path
     }
 
-    /// Bytes of the bins file (what was written to it).
+    /// True if the bins are their own file (not read in place from others').
+    pub fn owned(&self) -> bool {
+        self.owned
+    }
+
+    /// Bytes of the bins file (what was written to it); for bins read in place, the bytes of
+    /// their pieces (what reading them all reads).
     pub fn bytes(&self) -> u64 {
         self.bytes
+    }
+
+    /// The file that byte `at` of the pieces' offsets lies in.
+    fn file_at(&self, at: u64) -> &BinFile {
+        let k = self.files.partition_point(|f| f.base + f.len <= at);
+        &self.files[k.min(self.files.len() - 1)]
+    }
+
+    /// Reads `buf.len()` bytes at `at` (in the pieces' offsets; never across two files, as
+    /// every piece lies inside one).
+    fn read_at(&self, buf: &mut [u8], at: u64) -> Result<(), TileError> {
+        let f = self.file_at(at);
+        f.file
+            .read_exact_at(buf, at - f.base)
+            .map_err(TileError::io("read", &f.path))
     }
 
     /// Total triangle records in the file.
@@ -728,7 +844,7 @@ impl Bins {
         if self.index_bytes > 0 {
             let Some(src) = source else {
                 return Err(TileError::BadBins {
-                    path: self.path.clone(),
+                    path: self.path().to_path_buf(),
                     problem: "bins of face indices read without the input they index".into(),
                 });
             };
@@ -738,18 +854,19 @@ impl Bins {
         let cap = batch.min(c.count as usize).max(1);
         let mut tris: Vec<Triangle> = Vec::with_capacity(cap);
         let mut body = Vec::new();
-        let bad = |at: u64, problem: String| TileError::BadBins {
-            path: self.path.clone(),
-            problem: format!("chunk {:?}, byte {at}: {problem}", c.coord),
+        let bad = |at: u64, problem: String| {
+            let f = self.file_at(at);
+            TileError::BadBins {
+                path: f.path.clone(),
+                problem: format!("chunk {:?}, byte {}: {problem}", c.coord, at - f.base),
+            }
         };
         let mut done = 0u64;
         for &[start, bytes, count] in &self.pieces[i] {
             let (mut at, end, mut got) = (start, start + bytes, 0u64);
             while at < end {
                 let mut h = [0u8; BLOCK_HEADER];
-                self.file
-                    .read_exact_at(&mut h, at)
-                    .map_err(TileError::io("read", &self.path))?;
+                self.read_at(&mut h, at)?;
                 let head = BlockHeader::parse(&h).map_err(|e| bad(at, e))?;
                 let n = head.body_bytes(self.layout);
                 let next = at + (BLOCK_HEADER + n) as u64;
@@ -760,9 +877,7 @@ impl Bins {
                     ));
                 }
                 body.resize(n, 0);
-                self.file
-                    .read_exact_at(&mut body, at + BLOCK_HEADER as u64)
-                    .map_err(TileError::io("read", &self.path))?;
+                self.read_at(&mut body, at + BLOCK_HEADER as u64)?;
                 head.decode(self.layout, &body, &mut tris)
                     .map_err(|e| bad(at, e))?;
                 got += head.triangles as u64;
@@ -820,9 +935,7 @@ impl Bins {
             while at < end {
                 let n = ((end - at) as usize / w).min(cap - faces.len());
                 raw.resize(n * w, 0);
-                self.file
-                    .read_exact_at(&mut raw, at)
-                    .map_err(TileError::io("read", &self.path))?;
+                self.read_at(&mut raw, at)?;
                 if w == 4 {
                     faces.extend(
                         raw.chunks_exact(4)
@@ -846,9 +959,13 @@ impl Bins {
         Ok(())
     }
 
-    /// Removes the bins file.
+    /// Removes the bins file; bins read in place leave their files alone.
     pub fn remove(self) -> Result<(), TileError> {
-        std::fs::remove_file(&self.path).map_err(TileError::io("remove", &self.path))
+        if !self.owned {
+            return Ok(());
+        }
+        let path = &self.files[0].path;
+        std::fs::remove_file(path).map_err(TileError::io("remove", path))
     }
 }
 
@@ -995,6 +1112,93 @@ mod tests {
         let spool = sp.finish().unwrap();
         let grid = Grid::fit(&spool.bounds, r).unwrap();
         (spool, grid, layout)
+    }
+
+    /// Bins read in place from two files (each half of the input scattered on its own, as two
+    /// map tasks do) give every chunk the triangles of one scatter of the whole input, in
+    /// order; they report the bytes of their pieces, leave the files when removed, and refuse a
+    /// piece that runs across two files or past the last.
+    #[test]
+    fn bins_read_in_place_from_several_files_read_as_one_scatter() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut s = 5u64;
+        let mut tris = Vec::new();
+        for i in 0..4000 {
+            let c = [lcg(&mut s) * 10.0, lcg(&mut s) * 10.0, lcg(&mut s) * 10.0];
+            let r = if i % 40 == 0 { 4.0 } else { 0.2 };
+            let d = lcg(&mut s);
+            tris.push(Triangle::new([
+                c,
+                [c[0] + r, c[1], c[2] + r * d],
+                [c[0], c[1] + r, c[2]],
+            ]));
+        }
+        let read = |bins: &Bins, i: usize| {
+            let mut got = Vec::new();
+            bins.read_chunk(i, 64, &mut |b| {
+                got.extend_from_slice(b);
+                Ok(())
+            })
+            .unwrap();
+            got
+        };
+        let (spool, grid, layout) = positions_spool(dir.path(), &tris, 1024);
+        let whole = |src: &crate::Spool, name: &str| {
+            let counts = count(src, &grid, &mut |_, _| {}).unwrap();
+            let path = dir.path().join(name);
+            scatter(src, &grid, &counts, &path, layout, 40 * 300, &mut |_, _| {}).unwrap()
+        };
+        let full = whole(&spool, "full");
+        let mut halves = Vec::new();
+        for (k, half) in tris.chunks(2000).enumerate() {
+            let d = dir.path().join(format!("h{k}"));
+            std::fs::create_dir_all(&d).unwrap();
+            let (sp, _, _) = positions_spool(&d, half, 1024);
+            halves.push(whole(&sp, &format!("h{k}/bins")));
+        }
+        let files: Vec<PathBuf> = halves.iter().map(|h| h.path().to_path_buf()).collect();
+        let base = [0, halves[0].bytes()];
+        let (mut chunks, mut pieces) = (Vec::new(), Vec::new());
+        for c in full.chunks() {
+            let mut ps: Vec<[u64; 3]> = Vec::new();
+            for (k, h) in halves.iter().enumerate() {
+                if let Some(j) = h.chunks().iter().position(|d| d.morton == c.morton) {
+                    ps.extend(h.pieces()[j].iter().map(|p| [base[k] + p[0], p[1], p[2]]));
+                }
+            }
+            chunks.push(ChunkBin {
+                start: ps[0][0],
+                ..*c
+            });
+            pieces.push(ps);
+        }
+        // some chunks take triangles from both files
+        assert!(
+            pieces
+                .iter()
+                .filter(|ps| ps[0][0] < base[1] && ps.last().unwrap()[0] >= base[1])
+                .count()
+                > 5
+        );
+        let in_place = Bins::open_in_place(&files, chunks.clone(), layout, pieces.clone()).unwrap();
+        assert!(!in_place.owned() && full.owned());
+        assert_eq!(in_place.bytes(), halves[0].bytes() + halves[1].bytes());
+        for i in 0..full.chunks().len() {
+            assert_eq!(read(&in_place, i), read(&full, i), "chunk {i}");
+        }
+        in_place.remove().unwrap();
+        assert!(files.iter().all(|f| f.is_file()));
+        // a piece across the two files, and one past the end of the last
+        let end = base[1] + halves[1].bytes();
+        for bad in [[base[1] - 4, 8, 1], [end - 4, 8, 1]] {
+            let mut ps = pieces.clone();
+            ps[0] = vec![bad];
+            let mut cs = chunks.clone();
+            cs[0].start = bad[0];
+            cs[0].count = 1;
+            let e = Bins::open_in_place(&files, cs, layout, ps).err().unwrap();
+            assert!(matches!(e, TileError::BadBins { .. }), "{e:?}");
+        }
     }
 
     /// A scatter that keeps some chunks only (a sharded build's) writes exactly the kept

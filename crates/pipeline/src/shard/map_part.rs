@@ -14,9 +14,6 @@
 //! ([`gather`]), part after part, so each chunk holds its triangles in input order: the same
 //! bins as a one-machine build, hence the same bytes after the merge.
 
-use std::fs::File;
-use std::io::Write;
-use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -370,75 +367,74 @@ pub(crate) fn totals(markers: &[MapMarker]) -> (u64, u64, Option<Bounds>) {
     )
 }
 
-/// The bins of `scope`'s chunks from every map output (`markers`, in part order), copied
-/// piece by piece into `path`: per chunk in Morton order, its pieces part after part, so the
-/// chunk's triangles are in input order. Reads only those pieces. Returns the open bins and
-/// the bytes read (= written).
+/// The bins of `scope`'s chunks read in place from every map output (`markers`, in part
+/// order): per chunk in Morton order, its pieces part after part, so the chunk's triangles are
+/// in input order, each where the map task wrote it (nothing is copied; the shard reads only
+/// these pieces). The files are the ones `load_markers` checked; one that changed size since
+/// is refused.
 pub(crate) fn gather(
     scope: &ShardScope,
     markers: &[MapMarker],
-    path: &Path,
     layout: RecordLayout,
 ) -> Result<Bins> {
     let dir = crate::files::output::output_dir(&scope.plan_path);
-    let files: Vec<(PathBuf, File)> = markers
+    let files: Vec<PathBuf> = markers
         .iter()
-        .map(|m| {
-            let p = dir.join(bins_name(m.part.index));
-            let f = voxlod_io::open_regular(&p)
-                .with_context(|| format!("{}: cannot open", p.display()))?;
-            Ok((p, f))
-        })
-        .collect::<Result<_>>()?;
+        .map(|m| dir.join(bins_name(m.part.index)))
+        .collect();
+    // part pi's pieces start at the sum of the earlier parts' bins lengths (Bins::open_in_place)
+    let mut base = Vec::with_capacity(markers.len());
+    let mut at = 0u64;
+    for m in markers {
+        base.push(at);
+        at += m.bins_bytes;
+    }
     // every (chunk, part, chunk index in that part) of the shard's chunks, by Morton code
     let mut wanted: Vec<(u64, usize, usize)> = Vec::new();
     for (pi, m) in markers.iter().enumerate() {
         for (ci, c) in m.chunks.iter().enumerate() {
-            let coord = demorton3(c[0]);
-            if scope.contains_chunk(coord) {
+            if scope.contains_chunk(demorton3(c[0])) {
                 wanted.push((c[0], pi, ci));
             }
         }
     }
     wanted.sort_unstable();
-    let mut out = std::io::BufWriter::with_capacity(
-        4 << 20,
-        File::create(path).with_context(|| format!("{}: cannot create", path.display()))?,
-    );
     let mut chunks: Vec<ChunkBin> = Vec::new();
     let mut pieces: Vec<Vec<[u64; 3]>> = Vec::new();
-    let mut at = 0u64;
-    let mut buf = Vec::new();
     for &(morton, pi, ci) in &wanted {
-        let m = &markers[pi];
+        let ps = &markers[pi].pieces[ci];
         if chunks.last().is_none_or(|c| c.morton != morton) {
             chunks.push(ChunkBin {
                 coord: demorton3(morton),
                 morton,
-                start: at,
+                start: ps.first().map_or(0, |p| base[pi] + p[0]),
                 count: 0,
             });
             pieces.push(Vec::new());
         }
-        let (fp, f) = &files[pi];
         let c = chunks.last_mut().expect("pushed above");
-        for &[off, bytes, count] in &m.pieces[ci] {
-            buf.resize(bytes as usize, 0);
-            f.read_exact_at(&mut buf, off)
-                .with_context(|| format!("{}: reading {bytes} bytes at {off}", fp.display()))?;
-            out.write_all(&buf)
-                .with_context(|| format!("{}: cannot write", path.display()))?;
-            pieces
-                .last_mut()
-                .expect("pushed above")
-                .push([at, bytes, count]);
+        let into = pieces.last_mut().expect("pushed above");
+        for &[off, bytes, count] in ps {
+            if off
+                .checked_add(bytes)
+                .is_none_or(|e| e > markers[pi].bins_bytes)
+            {
+                bail!(
+                    "{}: a piece of {bytes} bytes at {off} past the end of its {} bytes (damaged marker): run `voxlod map {} --part {}` again",
+                    dir.join(marker_name(markers[pi].part.index)).display(),
+                    markers[pi].bins_bytes,
+                    scope.plan_path.display(),
+                    markers[pi].part.index
+                );
+            }
+            into.push([base[pi] + off, bytes, count]);
             c.count += count;
-            at += bytes;
         }
     }
-    out.into_inner()
-        .map_err(|e| e.into_error())
-        .and_then(|f| f.sync_all())
-        .with_context(|| format!("{}: cannot write", path.display()))?;
-    Ok(Bins::open_pieces(path, chunks, layout, pieces)?)
+    Bins::open_in_place(&files, chunks, layout, pieces).with_context(|| {
+        format!(
+            "the map outputs in {} (changed since they were checked?)",
+            dir.display()
+        )
+    })
 }

@@ -73,7 +73,7 @@ pub(crate) fn run(ctx: &mut BuildContext, resume: &Resume) -> Result<Ingested, S
     let t = Instant::now();
     if let Some(scope) = ctx.scope.shard() {
         if !scope.parts.is_empty() {
-            let ingested = from_parts(ctx, scope, layout, resume)?;
+            let ingested = from_parts(ctx, scope, layout)?;
             ctx.stage_done(Stage::Ingest, t, false);
             return Ok(ingested);
         }
@@ -226,14 +226,13 @@ fn from_plan(
 }
 
 /// A sharded build's ingest stage when the plan has parts: the map outputs' counts and bounds,
-/// and the bins of the shard's chunks gathered from them (the tile stage takes them); the
+/// and the bins of the shard's chunks: the map outputs' pieces, read in place (the tile stage takes them); the
 /// input is not read. Refuses map outputs that are missing or not this plan's, and a grid
 /// (fitted by the plan to the vertex list's bounds) that is not the triangles' grid.
 fn from_parts(
     ctx: &mut BuildContext,
     scope: &ShardScope,
     layout: RecordLayout,
-    resume: &Resume,
 ) -> Result<Ingested, StageError> {
     use crate::shard::map_part;
     let markers = map_part::load_markers(&scope.plan_path, &scope.plan_sha256_hex, &scope.parts)?;
@@ -271,24 +270,19 @@ fn from_parts(
         degenerate_skipped: degenerate,
         warnings,
     };
-    // a resumed shard has its bins (or more) in the work folder already
-    let bins = if resume.past_ingest() {
-        None
-    } else {
-        let path = ctx.work.file(WorkFile::Bins);
-        Some(map_part::gather(scope, &markers, &path, layout)?)
-    };
-    let written = bins.as_ref().map_or(0, Bins::bytes);
+    // the shard's bins are the map outputs' pieces of its chunks, read in place (no copy, no
+    // temporary disk); nothing to resume from but the voxelize stage's leaves
+    let bins = map_part::gather(scope, &markers, layout)?;
     Ok(Ingested {
         marker,
         layout,
         grid,
         early_counts: None,
-        binned_during_ingest: bins.is_some(),
-        counted_during_ingest: bins.is_some(),
-        early_bins: bins,
-        temp_disk: written,
-        temp_written: written,
+        binned_during_ingest: true,
+        counted_during_ingest: true,
+        early_bins: Some(bins),
+        temp_disk: 0,
+        temp_written: 0,
     })
 }
 

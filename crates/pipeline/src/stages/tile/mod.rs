@@ -58,7 +58,11 @@ pub(crate) fn run(
                     bins
                 }
             };
-            ctx.work.set_marker(&BinsMarker::of(&bins))?;
+            // the marker describes the work folder's bins file; bins read in place (a shard's
+            // map outputs) are found again from their own markers
+            if bins.owned() {
+                ctx.work.set_marker(&BinsMarker::of(&bins))?;
+            }
             ctx.stage_done(Stage::Tile, t, false);
             bins
         }
