@@ -39,6 +39,47 @@ impl PointBounds {
         }
     }
 
+    /// Adds points `p(0)`, …, `p(n - 1)`: the bits [`PointBounds::add`] in that order gives, in
+    /// four interleaved lanes (four independent dependency chains instead of one) merged by
+    /// value. Equal values of different bits can only be ±0, so where the new minimum (or
+    /// maximum) is a zero its sign is the first zero's in order, found by a scan of the points
+    /// (only where an extreme is exactly 0).
+    #[inline(always)]
+    pub(crate) fn add_many(&mut self, n: usize, p: impl Fn(usize) -> [f32; 3]) {
+        const LANES: usize = 4;
+        let mut lanes = [PointBounds::default(); LANES];
+        let full = n / LANES * LANES;
+        for i in (0..full).step_by(LANES) {
+            for (k, lane) in lanes.iter_mut().enumerate() {
+                lane.add(p(i + k));
+            }
+        }
+        for i in full..n {
+            lanes[0].add(p(i));
+        }
+        let first_zero = |a: usize| {
+            (0..n)
+                .map(|i| p(i)[a])
+                .find(|&v| v == 0.0)
+                .expect("an extreme of 0 is one of the points")
+        };
+        for a in 0..3 {
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for l in &lanes {
+                lo = if l.lo[a] < lo { l.lo[a] } else { lo };
+                hi = if l.hi[a] > hi { l.hi[a] } else { hi };
+            }
+            // strict, as `add`: an earlier equal value (the box's) is kept
+            if lo < self.lo[a] {
+                self.lo[a] = if lo == 0.0 { first_zero(a) } else { lo };
+            }
+            if hi > self.hi[a] {
+                self.hi[a] = if hi == 0.0 { first_zero(a) } else { hi };
+            }
+        }
+        self.finite &= lanes.iter().all(|l| l.finite);
+    }
+
     /// The box, or `None` if a coordinate was not finite.
     fn bounds(&self) -> Option<Bounds> {
         self.finite.then(|| Bounds {
@@ -137,7 +178,7 @@ mod tests {
         ];
         let mut state = 7u64;
         for _ in 0..2000 {
-            let n = 1 + (state % 9) as usize;
+            let n = 1 + (state % 19) as usize;
             let mut points = Vec::new();
             for _ in 0..n {
                 let mut p = [0.0f32; 3];
@@ -157,6 +198,14 @@ mod tests {
             let f = fast.bounds().expect("all finite");
             let bits = |b: &Bounds| (b.min.map(f64::to_bits), b.max.map(f64::to_bits));
             assert_eq!(bits(&f), bits(&slow), "{points:?}");
+            // in lanes, after a box that already holds some points (its equal values kept)
+            let cut = n / 3;
+            let mut lanes = PointBounds::default();
+            points[..cut].iter().for_each(|&p| lanes.add(p));
+            let rest = &points[cut..];
+            lanes.add_many(rest.len(), |i| rest[i]);
+            let l = lanes.bounds().expect("all finite");
+            assert_eq!(bits(&l), bits(&slow), "lanes: {points:?}");
             fast.add([1.0, f32::INFINITY, 0.0]);
             assert!(fast.bounds().is_none());
         }

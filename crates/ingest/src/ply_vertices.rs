@@ -244,10 +244,8 @@ impl<const BE: bool> MappedVertices<'_, BE> {
         let (a, e) = (r.start as usize, r.end as usize);
         match self.packed {
             Some(pk) => {
-                let recs = &self.data[a * self.stride..e * self.stride];
-                for rec in recs.chunks_exact(self.stride) {
-                    b.add(packed_f32s::<BE>(rec, pk.p));
-                }
+                let (recs, s) = (&self.data[a * self.stride..e * self.stride], self.stride);
+                b.add_many(e - a, |i| packed_f32s::<BE>(&recs[i * s..], pk.p));
             }
             None => (a..e).for_each(|i| b.add(self.position(i))),
         }
