@@ -236,7 +236,7 @@ fn bin_part(
     memory: MemoryPlan,
     bar: &Bar,
 ) -> Result<(Bins, voxlod_ingest::IngestStats, Bounds)> {
-    let mut runs = RunScatter::create(grid, path, layout, memory.scatter_buffer)?;
+    let mut runs = RunScatter::create(grid, path, layout, memory.run_buffer())?;
     let keys = ChunkCounts::new(grid)?.keys();
     // on the decoding threads: bounds and chunk keys, as the one-machine build's ingest pass
     // takes them; the records keep world coordinates (`ChunkVoxelizer::add_world` decides on them)

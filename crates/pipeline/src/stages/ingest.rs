@@ -413,7 +413,7 @@ fn read_input(
         .filter(|g| bins_during_ingest(ctx, g, temp_disk))
         .map(|g| {
             let path = ctx.work.file(WorkFile::Bins);
-            let buffer = ctx.memory.scatter_buffer;
+            let buffer = ctx.memory.run_buffer();
             match ctx.source.fixed_face_count().filter(|_| indexed) {
                 // u32 face records where they fit, else u64
                 Some(faces) => {
