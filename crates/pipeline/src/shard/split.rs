@@ -11,8 +11,9 @@
 //! ([`partition`], optimal among contiguous cuts), and longest-processing-time-first
 //! ([`lpt`]: heaviest subtree to the least loaded shard; Graham, "Bounds on multiprocessing
 //! timing anomalies", 1969, within 4/3 of the best assignment of any shape). With a few
-//! subtrees per shard the contiguous cut is coarse (the 1e8 scan at 2048³ in 16 shards:
-//! 63 subtrees, the largest shard 1.18× the mean; LPT 1.07×), so a shard may hold several
+//! subtrees per shard the contiguous cut is coarse (the 1e8 scan at 2048³ in 16 shards: 61
+//! non-empty subtrees in the plan's sample, the best contiguous cut's largest shard 1.18× the
+//! mean, LPT's 1.07×), so a shard may hold several
 //! ranges; the merge takes subtrees in Morton order from whichever shard holds them.
 
 use super::plan_file::{Balance, ShardRange};
