@@ -662,69 +662,81 @@ impl Bins {
         ))
     }
 
-    /// Bins of blocks read in place from `files` (other writers' finished bins files, e.g. a
-    /// sharded build's map outputs; each read here only where a piece lies): `pieces` per
-    /// chunk, their byte offsets counted in the files' concatenation, so that the pieces of
-    /// file k start at the sum of the lengths of the files before it. Each piece must lie inside
-    /// one file and the pieces must add up to each chunk's count. [`Bins::remove`] leaves the
+    /// Bins of blocks read in place from `files` (other writers' finished bins files, opened by
+    /// the caller, e.g. a sharded build's map outputs; each read here only where a piece lies):
+    /// per chunk its pieces as `(file index, [byte offset in that file, bytes, triangles])`, in
+    /// input order. Each piece must lie inside its file and the pieces must add up to each
+    /// chunk's count; a chunk's `start` is set to its first piece. [`Bins::remove`] leaves the
     /// files alone.
     pub fn open_in_place(
-        files: &[PathBuf],
-        chunks: Vec<ChunkBin>,
+        files: Vec<(PathBuf, File)>,
+        mut chunks: Vec<ChunkBin>,
         layout: RecordLayout,
-        pieces: Vec<Vec<[u64; 3]>>,
+        pieces: Vec<Vec<(usize, [u64; 3])>>,
     ) -> Result<Bins, TileError> {
         assert!(
             !files.is_empty(),
             "bins read in place from at least one file"
         );
+        // one offset space: file k's bytes follow those of the files before it
         let mut opened = Vec::with_capacity(files.len());
         let mut base = 0u64;
-        for path in files {
-            let file = File::open(path).map_err(TileError::io("open", path))?;
-            let len = file.metadata().map_err(TileError::io("stat", path))?.len();
+        for (path, file) in files {
+            let len = file.metadata().map_err(TileError::io("stat", &path))?.len();
             opened.push(BinFile {
-                path: path.clone(),
+                path,
                 file,
                 base,
                 len,
             });
             base += len;
         }
-        let bad = |problem: String| TileError::BadBins {
-            path: files[0].clone(),
-            problem,
-        };
         if pieces.len() != chunks.len() {
-            return Err(bad(format!(
-                "{} chunks but {} piece lists",
-                chunks.len(),
-                pieces.len()
-            )));
+            return Err(TileError::BadBins {
+                path: opened[0].path.clone(),
+                problem: format!("{} chunks but {} piece lists", chunks.len(), pieces.len()),
+            });
         }
-        let inside = |p: &[u64; 3]| {
-            let k = opened.partition_point(|f| f.base + f.len <= p[0]);
-            opened.get(k).is_some_and(|f| {
-                p[0].checked_add(p[1])
-                    .is_some_and(|e| f.base <= p[0] && e <= f.base + f.len)
-            })
-        };
+        let mut flat = Vec::with_capacity(pieces.len());
         let mut bytes = 0u64;
-        for (c, ps) in chunks.iter().zip(&pieces) {
-            if ps.is_empty()
-                || c.start != ps[0][0]
-                || ps.iter().map(|p| p[2]).sum::<u64>() != c.count
-                || !ps.iter().all(inside)
-            {
-                return Err(bad(format!(
-                    "chunk {:?}: its pieces do not lie inside the {} files or do not add up to its {} triangles",
-                    c.coord,
-                    files.len(),
-                    c.count
-                )));
+        for (c, ps) in chunks.iter_mut().zip(pieces) {
+            let mut out = Vec::with_capacity(ps.len());
+            for (k, [off, n, count]) in ps {
+                let Some(f) = opened.get(k) else {
+                    return Err(TileError::BadBins {
+                        path: opened[0].path.clone(),
+                        problem: format!(
+                            "chunk {:?}: a piece of file {k} of {}",
+                            c.coord,
+                            opened.len()
+                        ),
+                    });
+                };
+                if off.checked_add(n).is_none_or(|e| e > f.len) {
+                    return Err(TileError::BadBins {
+                        path: f.path.clone(),
+                        problem: format!(
+                            "chunk {:?}: a piece of {n} bytes at {off} past the end of its {} bytes",
+                            c.coord, f.len
+                        ),
+                    });
+                }
+                out.push([f.base + off, n, count]);
+                bytes += n;
             }
-            bytes += ps.iter().map(|p| p[1]).sum::<u64>();
+            if out.is_empty() || out.iter().map(|p| p[2]).sum::<u64>() != c.count {
+                return Err(TileError::BadBins {
+                    path: opened[0].path.clone(),
+                    problem: format!(
+                        "chunk {:?}: its pieces do not add up to its {} triangles",
+                        c.coord, c.count
+                    ),
+                });
+            }
+            c.start = out[0][0];
+            flat.push(out);
         }
+        let pieces = flat;
         Ok(Bins {
             files: opened,
             owned: false,
@@ -982,6 +994,30 @@ mod tests {
         ((*s >> 40) as f32) / (1u64 << 24) as f32
     }
 
+    /// 4000 small triangles at random in a 10-unit cube, every 40th twenty times larger.
+    fn scattered_triangles(seed: u64) -> Vec<Triangle> {
+        let mut s = seed;
+        (0..4000)
+            .map(|i| {
+                let c = [lcg(&mut s) * 10.0, lcg(&mut s) * 10.0, lcg(&mut s) * 10.0];
+                let r = if i % 40 == 0 { 4.0 } else { 0.2 };
+                let d = lcg(&mut s);
+                Triangle::new([c, [c[0] + r, c[1], c[2] + r * d], [c[0], c[1] + r, c[2]]])
+            })
+            .collect()
+    }
+
+    /// Every triangle of chunk `i` of `bins`, in order.
+    fn chunk_triangles(bins: &Bins, i: usize) -> Vec<Triangle> {
+        let mut got = Vec::new();
+        bins.read_chunk(i, 64, &mut |b| {
+            got.extend_from_slice(b);
+            Ok(())
+        })
+        .unwrap();
+        got
+    }
+
     /// Brute force: a chunk must hold exactly the triangles whose chunk range contains it, in
     /// input order, for any scatter budget (several flushes vs one).
     #[test]
@@ -1117,31 +1153,12 @@ mod tests {
     /// Bins read in place from two files (each half of the input scattered on its own, as two
     /// map tasks do) give every chunk the triangles of one scatter of the whole input, in
     /// order; they report the bytes of their pieces, leave the files when removed, and refuse a
-    /// piece that runs across two files or past the last.
+    /// piece past the end of its file or of a file they were not given.
     #[test]
     fn bins_read_in_place_from_several_files_read_as_one_scatter() {
         let dir = tempfile::tempdir().unwrap();
-        let mut s = 5u64;
-        let mut tris = Vec::new();
-        for i in 0..4000 {
-            let c = [lcg(&mut s) * 10.0, lcg(&mut s) * 10.0, lcg(&mut s) * 10.0];
-            let r = if i % 40 == 0 { 4.0 } else { 0.2 };
-            let d = lcg(&mut s);
-            tris.push(Triangle::new([
-                c,
-                [c[0] + r, c[1], c[2] + r * d],
-                [c[0], c[1] + r, c[2]],
-            ]));
-        }
-        let read = |bins: &Bins, i: usize| {
-            let mut got = Vec::new();
-            bins.read_chunk(i, 64, &mut |b| {
-                got.extend_from_slice(b);
-                Ok(())
-            })
-            .unwrap();
-            got
-        };
+        let tris = scattered_triangles(5);
+        let read = chunk_triangles;
         let (spool, grid, layout) = positions_spool(dir.path(), &tris, 1024);
         let whole = |src: &crate::Spool, name: &str| {
             let counts = count(src, &grid, &mut |_, _| {}).unwrap();
@@ -1156,47 +1173,49 @@ mod tests {
             let (sp, _, _) = positions_spool(&d, half, 1024);
             halves.push(whole(&sp, &format!("h{k}/bins")));
         }
-        let files: Vec<PathBuf> = halves.iter().map(|h| h.path().to_path_buf()).collect();
-        let base = [0, halves[0].bytes()];
+        let paths: Vec<PathBuf> = halves.iter().map(|h| h.path().to_path_buf()).collect();
+        let open = || -> Vec<(PathBuf, File)> {
+            paths
+                .iter()
+                .map(|p| (p.clone(), File::open(p).unwrap()))
+                .collect()
+        };
         let (mut chunks, mut pieces) = (Vec::new(), Vec::new());
         for c in full.chunks() {
-            let mut ps: Vec<[u64; 3]> = Vec::new();
+            let mut ps: Vec<(usize, [u64; 3])> = Vec::new();
             for (k, h) in halves.iter().enumerate() {
                 if let Some(j) = h.chunks().iter().position(|d| d.morton == c.morton) {
-                    ps.extend(h.pieces()[j].iter().map(|p| [base[k] + p[0], p[1], p[2]]));
+                    ps.extend(h.pieces()[j].iter().map(|&p| (k, p)));
                 }
             }
-            chunks.push(ChunkBin {
-                start: ps[0][0],
-                ..*c
-            });
+            // `start` is set from the first piece
+            chunks.push(ChunkBin { start: 7, ..*c });
             pieces.push(ps);
         }
         // some chunks take triangles from both files
         assert!(
             pieces
                 .iter()
-                .filter(|ps| ps[0][0] < base[1] && ps.last().unwrap()[0] >= base[1])
+                .filter(|ps| ps[0].0 == 0 && ps.last().unwrap().0 == 1)
                 .count()
                 > 5
         );
-        let in_place = Bins::open_in_place(&files, chunks.clone(), layout, pieces.clone()).unwrap();
+        let in_place = Bins::open_in_place(open(), chunks.clone(), layout, pieces.clone()).unwrap();
         assert!(!in_place.owned() && full.owned());
         assert_eq!(in_place.bytes(), halves[0].bytes() + halves[1].bytes());
         for i in 0..full.chunks().len() {
             assert_eq!(read(&in_place, i), read(&full, i), "chunk {i}");
         }
         in_place.remove().unwrap();
-        assert!(files.iter().all(|f| f.is_file()));
-        // a piece across the two files, and one past the end of the last
-        let end = base[1] + halves[1].bytes();
-        for bad in [[base[1] - 4, 8, 1], [end - 4, 8, 1]] {
+        assert!(paths.iter().all(|f| f.is_file()));
+        // a piece past the end of its file (the first, and the last), and one of a third file
+        let (len0, len1) = (halves[0].bytes(), halves[1].bytes());
+        for bad in [(0, [len0 - 4, 8, 1]), (1, [len1 - 4, 8, 1]), (2, [0, 8, 1])] {
             let mut ps = pieces.clone();
             ps[0] = vec![bad];
             let mut cs = chunks.clone();
-            cs[0].start = bad[0];
             cs[0].count = 1;
-            let e = Bins::open_in_place(&files, cs, layout, ps).err().unwrap();
+            let e = Bins::open_in_place(open(), cs, layout, ps).err().unwrap();
             assert!(matches!(e, TileError::BadBins { .. }), "{e:?}");
         }
     }
@@ -1208,28 +1227,9 @@ mod tests {
     #[test]
     fn a_scatter_keeping_some_chunks_writes_their_bins_of_the_full_scatter() {
         let dir = tempfile::tempdir().unwrap();
-        let mut s = 11u64;
-        let mut tris = Vec::new();
-        for i in 0..4000 {
-            let c = [lcg(&mut s) * 10.0, lcg(&mut s) * 10.0, lcg(&mut s) * 10.0];
-            let r = if i % 40 == 0 { 4.0 } else { 0.2 };
-            let t = [
-                c,
-                [c[0] + r, c[1], c[2] + r * lcg(&mut s)],
-                [c[0], c[1] + r, c[2]],
-            ];
-            tris.push(Triangle::new(t));
-        }
+        let tris = scattered_triangles(11);
         let (spool, grid, layout) = positions_spool(dir.path(), &tris, 1024);
-        let read = |bins: &Bins, i: usize| {
-            let mut got = Vec::new();
-            bins.read_chunk(i, 64, &mut |b| {
-                got.extend_from_slice(b);
-                Ok(())
-            })
-            .unwrap();
-            got
-        };
+        let read = chunk_triangles;
         let full_counts = count(&spool, &grid, &mut |_, _| {}).unwrap();
         let full = scatter(
             &spool,

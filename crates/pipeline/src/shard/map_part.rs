@@ -370,25 +370,22 @@ pub(crate) fn totals(markers: &[MapMarker]) -> (u64, u64, Option<Bounds>) {
 /// The bins of `scope`'s chunks read in place from every map output (`markers`, in part
 /// order): per chunk in Morton order, its pieces part after part, so the chunk's triangles are
 /// in input order, each where the map task wrote it (nothing is copied; the shard reads only
-/// these pieces). The files are the ones `load_markers` checked; one that changed size since
-/// is refused.
+/// these pieces). A piece outside its bins file (a damaged marker) is refused.
 pub(crate) fn gather(
     scope: &ShardScope,
     markers: &[MapMarker],
     layout: RecordLayout,
 ) -> Result<Bins> {
     let dir = crate::files::output::output_dir(&scope.plan_path);
-    let files: Vec<PathBuf> = markers
+    let files: Vec<(PathBuf, std::fs::File)> = markers
         .iter()
-        .map(|m| dir.join(bins_name(m.part.index)))
-        .collect();
-    // part pi's pieces start at the sum of the earlier parts' bins lengths (Bins::open_in_place)
-    let mut base = Vec::with_capacity(markers.len());
-    let mut at = 0u64;
-    for m in markers {
-        base.push(at);
-        at += m.bins_bytes;
-    }
+        .map(|m| {
+            let p = dir.join(bins_name(m.part.index));
+            let f = voxlod_io::open_regular(&p)
+                .with_context(|| format!("{}: cannot open", p.display()))?;
+            Ok((p, f))
+        })
+        .collect::<Result<_>>()?;
     // every (chunk, part, chunk index in that part) of the shard's chunks, by Morton code
     let mut wanted: Vec<(u64, usize, usize)> = Vec::new();
     for (pi, m) in markers.iter().enumerate() {
@@ -400,41 +397,29 @@ pub(crate) fn gather(
     }
     wanted.sort_unstable();
     let mut chunks: Vec<ChunkBin> = Vec::new();
-    let mut pieces: Vec<Vec<[u64; 3]>> = Vec::new();
+    let mut pieces: Vec<Vec<(usize, [u64; 3])>> = Vec::new();
     for &(morton, pi, ci) in &wanted {
-        let ps = &markers[pi].pieces[ci];
         if chunks.last().is_none_or(|c| c.morton != morton) {
             chunks.push(ChunkBin {
                 coord: demorton3(morton),
                 morton,
-                start: ps.first().map_or(0, |p| base[pi] + p[0]),
+                start: 0,
                 count: 0,
             });
             pieces.push(Vec::new());
         }
-        let c = chunks.last_mut().expect("pushed above");
-        let into = pieces.last_mut().expect("pushed above");
-        for &[off, bytes, count] in ps {
-            if off
-                .checked_add(bytes)
-                .is_none_or(|e| e > markers[pi].bins_bytes)
-            {
-                bail!(
-                    "{}: a piece of {bytes} bytes at {off} past the end of its {} bytes (damaged marker): run `voxlod map {} --part {}` again",
-                    dir.join(marker_name(markers[pi].part.index)).display(),
-                    markers[pi].bins_bytes,
-                    scope.plan_path.display(),
-                    markers[pi].part.index
-                );
-            }
-            into.push([base[pi] + off, bytes, count]);
-            c.count += count;
-        }
+        let ps = &markers[pi].pieces[ci];
+        chunks.last_mut().expect("pushed above").count += ps.iter().map(|p| p[2]).sum::<u64>();
+        pieces
+            .last_mut()
+            .expect("pushed above")
+            .extend(ps.iter().map(|&p| (pi, p)));
     }
-    Bins::open_in_place(&files, chunks, layout, pieces).with_context(|| {
+    Bins::open_in_place(files, chunks, layout, pieces).with_context(|| {
         format!(
-            "the map outputs in {} (changed since they were checked?)",
-            dir.display()
+            "the map outputs in {} do not match their markers (damaged?): run their `voxlod map {} --part I` again",
+            dir.display(),
+            scope.plan_path.display()
         )
     })
 }
