@@ -1,6 +1,7 @@
 //! glTF 2.0 (Khronos, "glTF 2.0 Specification", 2021): `.gltf` with external or data-URI
-//! buffers and images, and `.glb` with its binary chunk, read by the `gltf` crate (its JSON
-//! and accessor readers); buffers and images are loaded here.
+//! buffers and images, and `.glb` with its binary chunk: the JSON read and validated by the
+//! `gltf` crate; buffers and images loaded here, accessors decoded by `gltf_data` (with
+//! `KHR_mesh_quantization`'s component types and `EXT_meshopt_compression`'s views).
 //!
 //! Every mesh primitive of the default scene (else the first scene) is streamed in world
 //! coordinates: node transforms (matrix or TRS, nested) composed in f64; a transform whose
@@ -33,6 +34,8 @@ pub(crate) struct GltfSource {
     path: PathBuf,
     doc: gltf::Document,
     buffers: Vec<Vec<u8>>,
+    /// Per buffer view: its bytes decoded, if it is compressed (`gltf_data`).
+    decoded: Vec<Option<Vec<u8>>>,
     /// Per glTF material: the texture coordinate set of its base colour texture and its
     /// `KHR_texture_transform`, if the texture is usable.
     uv_set: Vec<Option<(u32, Option<UvTransform>)>>,
@@ -82,10 +85,20 @@ fn unescape(uri: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-fn load_buffers(path: &Path, g: &gltf::Gltf, scope: &Scope) -> Result<Vec<Vec<u8>>, IngestError> {
+fn load_buffers(
+    path: &Path,
+    g: &gltf::Gltf,
+    scope: &Scope,
+    fallback: &[bool],
+) -> Result<Vec<Vec<u8>>, IngestError> {
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
     for b in g.document.buffers() {
+        if fallback.get(b.index()).copied().unwrap_or(false) {
+            // EXT_meshopt_compression's fallback: read only through the decoded views
+            out.push(Vec::new());
+            continue;
+        }
         let data = match b.source() {
             gltf::buffer::Source::Bin => g.blob.clone().ok_or_else(|| {
                 bad(
@@ -261,7 +274,12 @@ fn mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
 }
 
 /// The extensions voxlod reads.
-const READ_EXTENSIONS: [&str; 1] = ["KHR_texture_transform"];
+const READ_EXTENSIONS: [&str; 4] = [
+    "KHR_texture_transform",
+    "KHR_mesh_quantization",
+    crate::gltf_data::MESHOPT[0],
+    crate::gltf_data::MESHOPT[1],
+];
 
 /// A panic of the `gltf` crate (which the checks should leave none of) as an error naming the
 /// file, so that no input ends the process.
@@ -287,19 +305,31 @@ impl GltfSource {
         })?;
         let c = crate::gltf_check::container(&bytes).map_err(|m| bad(path, m))?;
         crate::gltf_check::document(c.json, c.bin).map_err(|m| bad(path, m))?;
-        let g = gltf::Gltf::from_slice(&bytes)
+        let meshopt = crate::gltf_data::Meshopt::parse(c.json).map_err(|m| bad(path, m))?;
+        let mut root = gltf::json::Root::from_str(c.json)
             .map_err(|e| bad(path, format!("not a valid glTF 2.0 file: {e}")))?;
-        if let Some(ext) = g
-            .document
-            .extensions_required()
-            .find(|e| !READ_EXTENSIONS.contains(e))
+        if let Some(ext) = root
+            .extensions_required
+            .iter()
+            .find(|e| !READ_EXTENSIONS.contains(&e.as_str()))
         {
             return Err(bad(
                 path,
                 format!("the file requires the extension {ext:?}, which voxlod does not read"),
             ));
         }
-        let buffers = load_buffers(path, &g, scope)?;
+        // every required extension is read here: the gltf crate's check of them (it knows
+        // none of KHR_mesh_quantization and meshopt's) is not needed
+        root.extensions_required.clear();
+        let g = gltf::Gltf {
+            document: gltf::Document::from_json(root)
+                .map_err(|e| bad(path, format!("not a valid glTF 2.0 file: {e}")))?,
+            blob: c.bin.map(<[u8]>::to_vec),
+        };
+        let buffers = load_buffers(path, &g, scope, &meshopt.fallback)?;
+        let decoded = meshopt
+            .decode(&g.document, &buffers)
+            .map_err(|m| bad(path, m))?;
         let mut warnings = Vec::new();
         let mut materials = vec![Material::default()];
         let mut uv_set = Vec::new();
@@ -312,6 +342,7 @@ impl GltfSource {
             path: path.to_path_buf(),
             doc: g.document,
             buffers,
+            decoded,
             uv_set,
             keep_materials: true,
         };
@@ -458,18 +489,24 @@ impl GltfSource {
             return Ok(()); // warned at open
         }
         let err = |m: String| bad(&self.path, format!("mesh primitive {}: {m}", p.index()));
-        let r = p.reader(|b| self.buffers.get(b.index()).map(|v| &v[..]));
+        let data = crate::gltf_data::Data {
+            buffers: &self.buffers,
+            decoded: &self.decoded,
+        };
         let (lin, cof, det) = linear_parts(world);
         let apply = |m: &[[f64; 3]; 3], v: [f32; 3], t: [f64; 3]| -> [f32; 3] {
             [0, 1, 2]
                 .map(|row| ((0..3).map(|c| m[c][row] * v[c] as f64).sum::<f64>() + t[row]) as f32)
         };
         let origin = [world[3][0], world[3][1], world[3][2]];
-        let pos: Vec<[f32; 3]> = r
-            .read_positions()
-            .ok_or_else(|| {
-                err("no POSITION attribute, or its accessor lies outside its buffer".into())
-            })?
+        let attribute = |sem: gltf::Semantic| p.get(&sem);
+        let pos: Vec<[f32; 3]> = data
+            .floats::<3>(
+                &attribute(gltf::Semantic::Positions)
+                    .ok_or_else(|| err("no POSITION attribute".into()))?,
+            )
+            .map_err(err)?
+            .into_iter()
             .map(|v| apply(&lin, v, origin))
             .collect();
         if let Some((i, _)) = pos
@@ -479,45 +516,38 @@ impl GltfSource {
         {
             return Err(err(format!("vertex {i} has a position that is not finite")));
         }
-        let nrm: Option<Vec<[f32; 3]>> = r
-            .read_normals()
-            .map(|n| n.map(|v| apply(&cof, v, [0.0; 3])).collect());
+        let nrm: Option<Vec<[f32; 3]>> = attribute(gltf::Semantic::Normals)
+            .map(|a| data.floats::<3>(&a))
+            .transpose()
+            .map_err(err)?
+            .map(|n| n.into_iter().map(|v| apply(&cof, v, [0.0; 3])).collect());
         let factor = p.material().pbr_metallic_roughness().base_color_factor();
         let colored = p.material().index().is_some() || p.get(&gltf::Semantic::Colors(0)).is_some();
-        let col: Option<Vec<[f32; 4]>> = r.read_colors(0).map(|c| c.into_rgba_f32().collect());
+        let col: Option<Vec<[f32; 4]>> = attribute(gltf::Semantic::Colors(0))
+            .map(|a| data.floats::<4>(&a))
+            .transpose()
+            .map_err(err)?;
         let uv_set = self.uv_of(p);
         // glTF's v runs down the image, voxlod's (OBJ's) up: v becomes 1 − v, after the
         // material's KHR_texture_transform
-        let uv: Option<Vec<[f32; 2]>> = uv_set
-            .and_then(|(s, t)| Some((r.read_tex_coords(s)?, t)))
-            .map(|(c, t)| {
-                c.into_f32()
-                    .map(|uv| t.map_or(uv, |t| t.apply(uv)))
-                    .map(|[u, v]| [u, 1.0 - v])
-                    .collect()
-            });
-        let n = pos.len();
-        let idx: Vec<u32> = match (r.read_indices(), p.indices()) {
-            (Some(i), _) => i.into_u32().collect(),
-            (None, None) => (0..n as u32).collect(),
-            (None, Some(_)) => {
-                return Err(err("the indices' accessor lies outside its buffer".into()))
-            }
+        let uv: Option<Vec<[f32; 2]>> = match uv_set {
+            Some((s, t)) => attribute(gltf::Semantic::TexCoords(s))
+                .map(|a| data.floats::<2>(&a))
+                .transpose()
+                .map_err(err)?
+                .map(|c| {
+                    c.into_iter()
+                        .map(|uv| t.map_or(uv, |t| t.apply(uv)))
+                        .map(|[u, v]| [u, 1.0 - v])
+                        .collect()
+                }),
+            None => None,
         };
-        // an attribute that is declared but cannot be read (its accessor outside its buffer)
-        for (sem, ok) in [
-            (gltf::Semantic::Normals, nrm.is_some()),
-            (gltf::Semantic::Colors(0), col.is_some()),
-        ] {
-            if p.get(&sem).is_some() && !ok {
-                return Err(err(format!("the {sem:?} accessor lies outside its buffer")));
-            }
-        }
-        if uv_set.is_some() && uv.is_none() {
-            return Err(err(
-                "the texture coordinates' accessor lies outside its buffer".into(),
-            ));
-        }
+        let n = pos.len();
+        let idx: Vec<u32> = match p.indices() {
+            Some(a) => data.indices(&a).map_err(err)?,
+            None => (0..n as u32).collect(),
+        };
         if let Some(i) = idx.iter().find(|&&i| i as usize >= n) {
             return Err(err(format!("index {i} is out of range ({n} vertices)")));
         }

@@ -244,7 +244,8 @@ pub(crate) fn document(json: &str, bin: Option<&[u8]>) -> Result<(), String> {
         ));
     }
     let optional = compressed(&used);
-    rules(&root, bin).map_err(|rule| match optional {
+    let quantized = used.iter().any(|e| e == "KHR_mesh_quantization");
+    rules(&root, bin, quantized).map_err(|rule| match optional {
         Some(ext) => format!(
             "the file uses {ext} (compressed geometry, which voxlod does not decode) and its \
              uncompressed fallback is broken; decompress the file first (for example with \
@@ -254,16 +255,26 @@ pub(crate) fn document(json: &str, bin: Option<&[u8]>) -> Result<(), String> {
     })
 }
 
-/// Geometry compression extensions (name, what they are): a file requiring one holds its
-/// vertices only in the compressed form.
-const COMPRESSION: [(&str, &str); 3] = [
-    ("KHR_draco_mesh_compression", "Draco"),
-    ("EXT_meshopt_compression", "meshoptimizer"),
-    ("KHR_meshopt_compression", "meshoptimizer"),
-];
+/// Geometry compression extensions voxlod does not decode (name, what they are): a file
+/// requiring one holds its vertices only in the compressed form. (meshoptimizer's,
+/// `EXT_meshopt_compression` and `KHR_meshopt_compression`, are decoded: `gltf_data`.)
+const COMPRESSION: [(&str, &str); 1] = [("KHR_draco_mesh_compression", "Draco")];
 
-/// The rules of [`document`] after the compression check.
-fn rules(root: &Value, bin: Option<&[u8]>) -> Result<(), String> {
+/// Whether buffer `b` is a fallback buffer of meshopt compression (no data of its own: its
+/// views are decoded from another buffer).
+fn meshopt_fallback(b: &Value) -> bool {
+    crate::gltf_data::MESHOPT.iter().any(|ext| {
+        b.get("extensions")
+            .and_then(|e| e.get(ext))
+            .and_then(|e| e.get("fallback"))
+            .and_then(Value::as_bool)
+            == Some(true)
+    })
+}
+
+/// The rules of [`document`] after the compression check; `quantized`: the file uses
+/// `KHR_mesh_quantization`, which widens the attribute table.
+fn rules(root: &Value, bin: Option<&[u8]>, quantized: bool) -> Result<(), String> {
     let d = Doc { v: root };
     let mut buffer_len = Vec::new();
     for (i, b) in d.list("buffers").iter().enumerate() {
@@ -273,7 +284,7 @@ fn rules(root: &Value, bin: Option<&[u8]>) -> Result<(), String> {
         if len == 0 {
             return Err(format!("{what}: byteLength must be at least 1"));
         }
-        if b.get("uri").is_none() {
+        if b.get("uri").is_none() && !meshopt_fallback(b) {
             // 4.4.3.3: only the first buffer may be the GLB's binary chunk, which may be up to
             // 3 bytes longer (padding)
             match bin {
@@ -353,7 +364,7 @@ fn rules(root: &Value, bin: Option<&[u8]>) -> Result<(), String> {
                             format!("{what}: attribute {name} names no accessor ({x})")
                         })? as usize;
                     let a = &accs[ai];
-                    attribute(name, a).map_err(|rule| {
+                    attribute(name, a, quantized).map_err(|rule| {
                         format!("{what}: attribute {name} (accessor {ai}): {rule}")
                     })?;
                     match count {
@@ -504,18 +515,31 @@ fn accessor(a: &Value, i: usize, views: &[(u64, Option<u64>)]) -> Result<Acc, St
     })
 }
 
-/// The attribute table of 3.7.2.1: `Err` says what `name` allows.
-fn attribute(name: &str, a: &Acc) -> Result<(), String> {
+/// The attribute table of 3.7.2.1, widened by `KHR_mesh_quantization`'s table when the file
+/// uses it (`quantized`): `Err` says what `name` allows.
+fn attribute(name: &str, a: &Acc, quantized: bool) -> Result<(), String> {
     let base = name.split('_').next().unwrap_or(name);
     let set = name.strip_prefix(base).and_then(|s| s.strip_prefix('_'));
-    // (types, float allowed, normalized u8/u16 allowed, plain u8/u16 allowed)
-    let (types, float, norm, plain): (&[&str], bool, bool, bool) = match (base, set) {
-        ("POSITION" | "NORMAL", None) => (&["VEC3"], true, false, false),
-        ("TANGENT", None) => (&["VEC4"], true, false, false),
-        ("TEXCOORD", Some(_)) => (&["VEC2"], true, true, false),
-        ("COLOR", Some(_)) => (&["VEC3", "VEC4"], true, true, false),
-        ("JOINTS", Some(_)) => (&["VEC4"], false, false, true),
-        ("WEIGHTS", Some(_)) => (&["VEC4"], true, true, false),
+    // types, and the integer components allowed: (normalized, not normalized)
+    const U8_16: &[u64] = &[UNSIGNED_BYTE, UNSIGNED_SHORT];
+    const ALL: &[u64] = &[BYTE, UNSIGNED_BYTE, SHORT, UNSIGNED_SHORT];
+    const SIGNED: &[u64] = &[BYTE, SHORT];
+    let q = quantized;
+    let (types, float, norm, plain): (&[&str], bool, &[u64], &[u64]) = match (base, set) {
+        ("POSITION", None) if q => (&["VEC3"], true, ALL, ALL),
+        ("POSITION", None) => (&["VEC3"], true, &[], &[]),
+        ("NORMAL", None) => (&["VEC3"], true, if q { SIGNED } else { &[] }, &[]),
+        ("TANGENT", None) => (&["VEC4"], true, if q { SIGNED } else { &[] }, &[]),
+        ("TEXCOORD", Some(_)) if q => (
+            &["VEC2"],
+            true,
+            ALL,
+            &[BYTE, UNSIGNED_BYTE, SHORT, UNSIGNED_SHORT],
+        ),
+        ("TEXCOORD", Some(_)) => (&["VEC2"], true, U8_16, &[]),
+        ("COLOR", Some(_)) => (&["VEC3", "VEC4"], true, U8_16, &[]),
+        ("JOINTS", Some(_)) => (&["VEC4"], false, &[], U8_16),
+        ("WEIGHTS", Some(_)) => (&["VEC4"], true, U8_16, &[]),
         // application-specific (`_NAME`) or unknown: not read, only its bounds checked
         _ => return Ok(()),
     };
@@ -525,24 +549,33 @@ fn attribute(name: &str, a: &Acc) -> Result<(), String> {
     let ok_type = types.contains(&a.ty.as_str());
     let ok_comp = match a.comp {
         FLOAT => float && !a.normalized,
-        UNSIGNED_BYTE | UNSIGNED_SHORT => (norm && a.normalized) || (plain && !a.normalized),
-        _ => false,
+        c if a.normalized => norm.contains(&c),
+        c => plain.contains(&c),
     };
     if ok_type && ok_comp {
         return Ok(());
     }
+    let names = |list: &[u64]| {
+        let n: Vec<&str> = list.iter().map(|&c| component_name(c)).collect();
+        n.join(" or ")
+    };
     let mut comps = Vec::new();
     if float {
-        comps.push("FLOAT");
+        comps.push("FLOAT".to_string());
     }
-    if norm {
-        comps.push("UNSIGNED_BYTE or UNSIGNED_SHORT normalized");
+    if !norm.is_empty() {
+        comps.push(format!("{} normalized", names(norm)));
     }
-    if plain {
-        comps.push("UNSIGNED_BYTE or UNSIGNED_SHORT");
+    if !plain.is_empty() {
+        comps.push(names(plain));
     }
+    let hint = if quantized || matches!(base, "COLOR" | "JOINTS" | "WEIGHTS") {
+        ""
+    } else {
+        " (integer components need the file to use KHR_mesh_quantization)"
+    };
     Err(format!(
-        "it is {}{} {}; {base} must be {} of {}",
+        "it is {}{} {}; {base} must be {} of {}{hint}",
         if a.normalized { "normalized " } else { "" },
         component_name(a.comp),
         a.ty,

@@ -61,6 +61,7 @@ mod bounds;
 mod error;
 mod gltf;
 mod gltf_check;
+mod gltf_data;
 mod map_guard;
 mod obj;
 mod ply;
