@@ -297,6 +297,31 @@ fn glb_export_is_the_ply_export_and_valid_gltf() {
     let o = voxlod(&["export", "bunny.voxlod", "-o", "x.gltf"], d);
     assert!(!o.status.success());
     assert!(text(&o).contains("name it .glb"), "{}", text(&o));
+    // a name of a format export does not write is refused, nothing is left under it
+    for (args, says) in [
+        (
+            &["-o", "x.obj"][..],
+            "must end in .ply (binary PLY) or .glb",
+        ),
+        (
+            &["-o", "x.OBJ"][..],
+            "must end in .ply (binary PLY) or .glb",
+        ),
+        (&["-o", "x"][..], "must end in .ply (binary PLY) or .glb"),
+        (
+            &["--source", "-o", "x.glb"][..],
+            "--source writes binary PLY",
+        ),
+    ] {
+        let o = voxlod(&[&["export", "bunny.voxlod"][..], args].concat(), d);
+        assert!(!o.status.success(), "{args:?}");
+        let out = text(&o);
+        assert!(
+            out.contains(says) && out.contains(args[args.len() - 1]),
+            "{out}"
+        );
+        assert!(!d.join(args[args.len() - 1]).exists(), "{args:?}");
+    }
     let o = voxlod(
         &["export", "bunny.voxlod", "--level", "1", "-o", "l.glb"],
         d,
