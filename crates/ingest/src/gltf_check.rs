@@ -760,6 +760,45 @@ mod tests {
     }
 
     #[test]
+    fn quantization_widens_the_attribute_table() {
+        let acc = |comp: u32, ty: &str, norm: bool| {
+            format!(
+                r#"{{"bufferView":0,"componentType":{comp},"count":3,"type":"{ty}","normalized":{norm}}}"#
+            )
+        };
+        let with =
+            |d: String| d.replacen('{', r#"{"extensionsUsed":["KHR_mesh_quantization"],"#, 1);
+        // (attribute, accessor, allowed with KHR_mesh_quantization)
+        for (name, a, ok) in [
+            ("POSITION", acc(5122, "VEC3", false), true),
+            ("POSITION", acc(5120, "VEC3", true), true),
+            ("POSITION", acc(5123, "VEC3", false), true),
+            ("POSITION", acc(5125, "VEC3", false), false),
+            ("NORMAL", acc(5120, "VEC3", true), true),
+            ("NORMAL", acc(5122, "VEC3", true), true),
+            ("NORMAL", acc(5122, "VEC3", false), false),
+            ("NORMAL", acc(5121, "VEC3", true), false),
+            ("TEXCOORD_0", acc(5122, "VEC2", false), true),
+            ("TEXCOORD_0", acc(5120, "VEC2", true), true),
+            ("TEXCOORD_0", acc(5122, "VEC3", false), false),
+            ("COLOR_0", acc(5120, "VEC4", true), false),
+        ] {
+            let d = doc(
+                &format!("[{POS},{a}]"),
+                VIEW,
+                &format!(r#"{{"attributes":{{"POSITION":0,"{name}":1}}}}"#)
+                    .replace(r#""POSITION":0,"POSITION":1"#, r#""POSITION":1"#),
+                NODE,
+            );
+            // without the extension, none of these integer attributes is allowed
+            let e = document(&d, Some(&[0; 64])).unwrap_err();
+            assert!(e.contains(name.split('_').next().unwrap()), "{name}: {e}");
+            let got = document(&with(d), Some(&[0; 64]));
+            assert_eq!(got.is_ok(), ok, "{name} {a}: {got:?}");
+        }
+    }
+
+    #[test]
     fn strides_and_bounds() {
         let strided = r#"[{"buffer":0,"byteLength":64,"byteStride":4}]"#;
         let e = refused(
