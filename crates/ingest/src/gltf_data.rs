@@ -601,6 +601,36 @@ mod tests {
                 assert!((g - w[a]).abs() < 0.03, "{i} {a}: {g} vs {}", w[a]);
             }
         }
+        // KHR_meshopt_compression's COLOR filter (YCoCg, 8 bits): RGBA back within a few
+        // steps of 8 bits; EXT_meshopt_compression does not define it
+        let rgba: [[f32; 4]; 3] = [
+            [1.0, 0.0, 0.0, 1.0],
+            [0.2, 0.6, 0.9, 0.5],
+            [0.5, 0.5, 0.5, 0.0],
+        ];
+        let mut words = vec![0u32; 3];
+        // SAFETY: 3 elements of 4 bytes written from 3 × 4 floats.
+        unsafe {
+            meshopt::ffi::meshopt_encodeFilterColor(
+                words.as_mut_ptr().cast(),
+                3,
+                4,
+                8,
+                rgba.as_ptr().cast(),
+            )
+        };
+        let encoded = words.clone();
+        unfilter(&mut words, "COLOR", 4, true).unwrap();
+        assert_ne!(words, encoded);
+        for (i, w) in rgba.iter().enumerate() {
+            let b = words[i].to_ne_bytes();
+            for c in 0..4 {
+                let g = b[c] as f32 / 255.0;
+                assert!((g - w[c]).abs() < 0.03, "{i} {c}: {g} vs {}", w[c]);
+            }
+        }
+        let e = unfilter(&mut words, "COLOR", 4, false).unwrap_err();
+        assert!(e.contains("not one the extension defines"), "{e}");
         let e = unfilter(&mut [0; 3], "OCTAHEDRAL", 12, false).unwrap_err();
         assert!(e.contains("byteStride of 4 or 8"), "{e}");
         let e = unfilter(&mut [0; 1], "COLOR", 4, false).unwrap_err();
