@@ -192,7 +192,10 @@ fn khronos_report(glb: &Path) -> Option<serde_json::Value> {
             !voxlod_testkit::under_ci(),
             "the Khronos glTF validator is not installed (node and `npm ci` in tests/node: .ci/run does both)"
         );
-        eprintln!("skipped the Khronos glTF validator: not installed (run `npm ci` in tests/node)");
+        voxlod_testkit::skipped(
+            "export_gltf (the Khronos glTF validator)",
+            "not installed (run `npm ci` in tests/node)",
+        );
         return None;
     }
     let o = Command::new("node")

@@ -487,8 +487,9 @@ fn unwritable_output_folder_fails_up_front() {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
         if std::fs::write(ro.join("probe"), b"").is_ok() {
-            eprintln!(
-                "unwritable_output_folder_fails_up_front: SKIPPED: cannot make a read-only folder"
+            voxlod_testkit::skipped(
+                "unwritable_output_folder_fails_up_front",
+                "cannot make a read-only folder",
             );
             return;
         }
@@ -570,8 +571,9 @@ fn full_output_disk_fails_early_and_keeps_the_work() {
     // room for the file, the lock file and a little more
     let size = format!("size={}k", bytes.len() / 1024 + 512);
     let Some(_mount) = Mount::new(&mnt, &size) else {
-        eprintln!(
-            "full_output_disk_fails_early_and_keeps_the_work: SKIPPED: mounting a tmpfs needs root"
+        voxlod_testkit::skipped(
+            "full_output_disk_fails_early_and_keeps_the_work",
+            "mounting a tmpfs needs root",
         );
         return;
     };

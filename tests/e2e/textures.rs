@@ -682,7 +682,10 @@ fn gltf_from_an_independent_converter_matches_its_obj() {
             std::env::var("CI").as_deref() != Ok("true"),
             "{why}; CI=true requires it"
         );
-        eprintln!("gltf_from_an_independent_converter_matches_its_obj: skipped: {why}");
+        voxlod_testkit::skipped(
+            "textures::gltf_from_an_independent_converter_matches_its_obj",
+            &why,
+        );
         return;
     }
     let d = tempfile::tempdir().unwrap();

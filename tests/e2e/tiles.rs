@@ -125,7 +125,10 @@ fn browser_tools() -> bool {
             !voxlod_testkit::under_ci(),
             "node packages (npm ci in tests/node) or {chromium} missing: .ci/run installs both"
         );
-        eprintln!("skipped the browser check: npm ci in tests/node and apt-get install chromium");
+        voxlod_testkit::skipped(
+            "tiles (the browser check)",
+            "npm ci in tests/node and apt-get install chromium",
+        );
     }
     there
 }
