@@ -1,4 +1,4 @@
-//! Sharded builds on cluster schedulers (issues 16 and 30): the same four commands (`voxlod
+//! Sharded builds on cluster schedulers: the same four commands (`voxlod
 //! plan --parts`, `voxlod map --part I`, `voxlod build --plan --shard I`, `voxlod merge`) driven
 //! by Slurm and by Kubernetes.
 //!

@@ -1,4 +1,4 @@
-//! `voxlod export -o x.glb` (issue 31 §2) and the export size guard (§3).
+//! `voxlod export -o x.glb` and the export size guard.
 //!
 //! The GLB is checked three ways: the Khronos glTF validator (npm `gltf-validator`, run by node
 //! from `tests/node`, installed by `.ci/run`) reports no error and no warning; the `gltf`

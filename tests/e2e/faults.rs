@@ -1,4 +1,4 @@
-//! Fault tests (issue 17): what voxlod promises when outputs collide, inputs are damaged, files
+//! Fault tests: what voxlod promises when outputs collide, inputs are damaged, files
 //! change under a reader, or the output's disk is full or read-only. Each test made its
 //! defect happen before the fix; inputs are made here, not stored. docs/RELIABILITY.md lists
 //! the promises and names these tests.
@@ -870,7 +870,7 @@ fn stale_work_folders_are_reported_and_cleaned() {
         .contains("no voxlod work folders"));
 }
 
-/// Issue 32 §4 "clean": a run killed while writing its output (here `gen`, SIGKILL while it
+/// `clean`: a run killed while writing its output (here `gen`, SIGKILL while it
 /// writes) leaves `.voxlod-lock-NAME` and `.voxlod-part-NAME-…` beside it; `clean --dry-run`
 /// lists them and keeps them, `clean` removes them (and nothing else), and those of an output
 /// whose lock a running process holds are listed as being written and kept.
@@ -1018,7 +1018,7 @@ fn a_killed_tiles_exports_staging_folder_is_cleaned() {
     assert!(hidden(d).is_empty(), "{:?}", hidden(d));
 }
 
-/// Messages still open after the first pass (issue 17, "Messages"): each names the file and
+/// More messages (docs/RELIABILITY.md, "Messages"): each names the file and
 /// the place, in words.
 #[test]
 fn more_messages_name_the_problem() {

@@ -344,8 +344,8 @@ pub enum Method {
     Sat,
     /// The projected scanline of Zhang et al. ([`scanline::scan`]): the same voxels, found by
     /// settling interval ends. The default: never slower than `Sat` in our measurements, up
-    /// to 1.2× faster on triangles spanning many voxels (docs/BENCHMARKS.md, "Earlier
-    /// measurements", the scanline voxelizer).
+    /// to 1.2× faster on triangles spanning many voxels (docs/journal/benchmarks-notebook.md,
+    /// "Projected scanline voxelizer").
     #[default]
     Scanline,
     /// The paper's integer-only variant ([`scanline::scan_ilv`]): approximate, conservative
