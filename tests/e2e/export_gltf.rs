@@ -1,4 +1,4 @@
-//! `voxlod export -o x.glb` (issue 31 §2) and the export size guard (§3).
+//! `voxlod export -o x.glb` and the export size guard.
 //!
 //! The GLB is checked three ways: the Khronos glTF validator (npm `gltf-validator`, run by node
 //! from `tests/node`, installed by `.ci/run`) reports no error and no warning; the `gltf`
@@ -192,7 +192,10 @@ fn khronos_report(glb: &Path) -> Option<serde_json::Value> {
             !voxlod_testkit::under_ci(),
             "the Khronos glTF validator is not installed (node and `npm ci` in tests/node: .ci/run does both)"
         );
-        eprintln!("skipped the Khronos glTF validator: not installed (run `npm ci` in tests/node)");
+        voxlod_testkit::skipped(
+            "export_gltf (the Khronos glTF validator)",
+            "not installed (run `npm ci` in tests/node)",
+        );
         return None;
     }
     let o = Command::new("node")

@@ -1,4 +1,4 @@
-//! Fault tests (issue 17): what voxlod promises when outputs collide, inputs are damaged, files
+//! Fault tests: what voxlod promises when outputs collide, inputs are damaged, files
 //! change under a reader, or the output's disk is full or read-only. Each test made its
 //! defect happen before the fix; inputs are made here, not stored. docs/RELIABILITY.md lists
 //! the promises and names these tests.
@@ -487,8 +487,9 @@ fn unwritable_output_folder_fails_up_front() {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
         if std::fs::write(ro.join("probe"), b"").is_ok() {
-            eprintln!(
-                "unwritable_output_folder_fails_up_front: SKIPPED: cannot make a read-only folder"
+            voxlod_testkit::skipped(
+                "unwritable_output_folder_fails_up_front",
+                "cannot make a read-only folder",
             );
             return;
         }
@@ -570,8 +571,9 @@ fn full_output_disk_fails_early_and_keeps_the_work() {
     // room for the file, the lock file and a little more
     let size = format!("size={}k", bytes.len() / 1024 + 512);
     let Some(_mount) = Mount::new(&mnt, &size) else {
-        eprintln!(
-            "full_output_disk_fails_early_and_keeps_the_work: SKIPPED: mounting a tmpfs needs root"
+        voxlod_testkit::skipped(
+            "full_output_disk_fails_early_and_keeps_the_work",
+            "mounting a tmpfs needs root",
         );
         return;
     };
@@ -868,7 +870,7 @@ fn stale_work_folders_are_reported_and_cleaned() {
         .contains("no voxlod work folders"));
 }
 
-/// Issue 32 §4 "clean": a run killed while writing its output (here `gen`, SIGKILL while it
+/// `clean`: a run killed while writing its output (here `gen`, SIGKILL while it
 /// writes) leaves `.voxlod-lock-NAME` and `.voxlod-part-NAME-…` beside it; `clean --dry-run`
 /// lists them and keeps them, `clean` removes them (and nothing else), and those of an output
 /// whose lock a running process holds are listed as being written and kept.
@@ -1016,7 +1018,7 @@ fn a_killed_tiles_exports_staging_folder_is_cleaned() {
     assert!(hidden(d).is_empty(), "{:?}", hidden(d));
 }
 
-/// Messages still open after the first pass (issue 17, "Messages"): each names the file and
+/// More messages (docs/RELIABILITY.md, "Messages"): each names the file and
 /// the place, in words.
 #[test]
 fn more_messages_name_the_problem() {

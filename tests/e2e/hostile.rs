@@ -211,7 +211,10 @@ fn devices_and_fifos_are_refused_quickly() {
     let dir = d.path();
     let fifo = dir.join("fifo");
     if !mkfifo(&fifo) {
-        eprintln!("skipped: mkfifo is not available");
+        voxlod_testkit::skipped(
+            "hostile::devices_and_fifos_are_refused_quickly",
+            "mkfifo is not available",
+        );
         return;
     }
     let cwd = dir.to_str().unwrap();

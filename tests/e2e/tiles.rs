@@ -1,4 +1,4 @@
-//! `voxlod export FILE --3d-tiles DIR` (issue 31 §1): an OGC 3D Tiles 1.1 tileset.
+//! `voxlod export FILE --3d-tiles DIR`: an OGC 3D Tiles 1.1 tileset.
 //!
 //! `tileset.json` is checked against the file's node index read independently: one tile per
 //! node of the cut with the same tree, a content URI per node with faces whose GLB holds
@@ -125,7 +125,10 @@ fn browser_tools() -> bool {
             !voxlod_testkit::under_ci(),
             "node packages (npm ci in tests/node) or {chromium} missing: .ci/run installs both"
         );
-        eprintln!("skipped the browser check: npm ci in tests/node and apt-get install chromium");
+        voxlod_testkit::skipped(
+            "tiles (the browser check)",
+            "npm ci in tests/node and apt-get install chromium",
+        );
     }
     there
 }

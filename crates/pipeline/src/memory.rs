@@ -22,8 +22,9 @@ pub const BASE_BYTES: u64 = 64 << 20;
 /// The largest buffer of a run scatter (`voxlod_tile::RunScatter`: the ingest pass's bins and
 /// the map tasks'). Each run is sorted by chunk and written whole, so a larger buffer only adds
 /// first-touch page faults and cache misses, and a smaller one more pieces. Measured on gen 1e8
-/// at 2048³ (docs/BENCHMARKS.md): a 16 MiB buffer instead of the 1 GiB share of a 2 GiB budget
-/// takes about 2 CPU-s less in the one-machine build and 0.25 CPU-s less per map task.
+/// at 2048³ (docs/journal/benchmarks-experiments.md, "Sharded build with a map phase"): a
+/// 16 MiB buffer instead of the 1 GiB share of a 2 GiB budget takes about 2 CPU-s less in the
+/// one-machine build and 0.25 CPU-s less per map task.
 pub const RUN_BUFFER_MAX: u64 = 16 << 20;
 
 /// How the budget is spent.

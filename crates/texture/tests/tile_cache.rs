@@ -212,7 +212,7 @@ fn unwritable_tile_file_is_an_error_naming_it() {
     assert!(e.contains("no such folder/textures.tiles"), "{e}");
 }
 
-/// Issue 32 §4 "memory budget": a texture whose decoded image alone exceeds the share is
+/// The memory budget: a texture whose decoded image alone exceeds the share is
 /// decoded row by row when it is a PNG (here 4096² RGB: 64 MiB of RGBA8, 128 MiB with the
 /// whole-image path's copy, under a 16 MiB share) with the texels of the whole decode; the same
 /// image as JPEG cannot be decoded by rows and is refused with a warning that says how much

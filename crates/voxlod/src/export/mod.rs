@@ -169,7 +169,7 @@ pub fn run(a: ExportArgs) -> Result<()> {
     if a.source {
         return run_source(&a, &output, &r, &guard, &limit);
     }
-    // the size is known before anything is written: refused when too big (issue 31 §3), else
+    // the size is known before anything is written: refused when too big, else
     // said first (a fine level of a big model is gigabytes), without a prompt, as
     // command-line tools that write files do
     let mut before = |s: &voxlod_render::ExportSummary| {

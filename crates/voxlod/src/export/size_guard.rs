@@ -1,4 +1,4 @@
-//! Export never fills a disk by surprise (issue 31 §3): the size of an export is known before
+//! Export never fills a disk by surprise: the size of an export is known before
 //! its first byte is written (PLY and GLB count their faces first, a 3D Tiles tileset sums its
 //! tiles), and an export larger than the free space of the output's file system, or than
 //! 4 GiB unless `--max-size` allows more, is refused with the size, the limit, and the
