@@ -166,7 +166,10 @@ fn gltf_transform() -> Option<PathBuf> {
             !voxlod_testkit::under_ci(),
             "gltf-transform is not installed (node and `npm ci` in tests/node: .ci/run does both)"
         );
-        eprintln!("skipped gltf-transform's files: not installed (run `npm ci` in tests/node)");
+        voxlod_testkit::skipped(
+            "gltf_round_trip (gltf-transform's files)",
+            "gltf-transform is not installed (run `npm ci` in tests/node)",
+        );
         return None;
     }
     Some(bin)
