@@ -15,6 +15,7 @@ mod export_gltf;
 mod faults;
 mod gen;
 mod gen_blocks;
+mod gltf_budget;
 mod gpu;
 mod hostile;
 mod index_bins;

@@ -9,6 +9,7 @@ mod common;
 mod cross_format;
 mod fuzz;
 mod gltf;
+mod gltf_document;
 mod malformed;
 mod parallel_faces;
 mod parts;
