@@ -743,6 +743,25 @@ fn messages_name_the_problem() {
         d,
     );
     fails_with(&o, &["--resolution 300"]);
+    // a file that is no settings file (`/proc/self/environ`, a key file) is not echoed: the
+    // error says where and what, not the line
+    let secret = d.join("environ");
+    std::fs::write(&secret, "HOME=/root\0API_TOKEN=hunter2-secret\0").unwrap();
+    let o = voxlod(&["build", "-q", s(&sample()), "--config", s(&secret)], d);
+    let e = fails_with(&o, &["settings file", "environ", "line 1, column"]);
+    assert!(!e.contains("hunter2") && !e.contains("HOME=/root"), "{e}");
+    let o = voxlod(
+        &[
+            "build",
+            "-q",
+            s(&sample()),
+            "--config",
+            "/proc/self/environ",
+        ],
+        d,
+    );
+    let e = fails_with(&o, &["settings file /proc/self/environ"]);
+    assert!(!e.contains("PATH="), "{e}");
     // NaN tolerances are refused (clap's usage error: exit status 2)
     let f = d.join("f.voxlod");
     ok(&voxlod(
@@ -1098,4 +1117,83 @@ fn more_messages_name_the_problem() {
         plan.contains("= base 64.00 MiB + LOD 128.00 MiB + "),
         "{plan}"
     );
+}
+
+/// A textured quad (OBJ) whose texture is a `side`² PNG of one colour: a small file whose
+/// decoded pyramid is large.
+fn big_texture_quad(dir: &Path, side: u32) -> PathBuf {
+    image::RgbaImage::from_pixel(side, side, image::Rgba([200, 30, 30, 255]))
+        .save(dir.join("big.png"))
+        .unwrap();
+    std::fs::write(dir.join("q.mtl"), "newmtl m\nKd 1 1 1\nmap_Kd big.png\n").unwrap();
+    let p = dir.join("q.obj");
+    std::fs::write(
+        &p,
+        "mtllib q.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+         usemtl m\nf 1/1 2/2 3/3 4/4\n",
+    )
+    .unwrap();
+    p
+}
+
+/// The temporary-disk estimate counts the texture tiles a build writes when its textures
+/// exceed their memory share (their size from the images' headers), and a build whose tiles
+/// cannot fit is refused before anything is decoded or written, naming them. A 2048² PNG of
+/// one colour (a few KiB) under `--memory 336MiB` (a 16 MiB texture share) writes a 21 MiB
+/// tile file.
+#[test]
+fn texture_tiles_are_in_the_temporary_disk_estimate() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let obj = big_texture_quad(d, 2048);
+    let build = |tmp: &Path, out: &str| {
+        voxlod(
+            &[
+                "build",
+                "--json",
+                s(&obj),
+                "-o",
+                s(&d.join(out)),
+                "-r",
+                "256",
+                "--memory",
+                "336MiB",
+                "--tmp",
+                s(tmp),
+            ],
+            d,
+        )
+    };
+    // the estimate names the tiles, and they are what the build writes
+    let tmp = d.join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let o = build(&tmp, "ok.voxlod");
+    let t = ok(&o);
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let written = summary["texture_cache"]["file_bytes"].as_u64().unwrap();
+    assert!(written > 20 << 20, "{}", summary["texture_cache"]);
+    let line = t
+        .lines()
+        .find(|l| l.starts_with("temporary disk: up to about"))
+        .unwrap_or_else(|| panic!("no estimate: {t}"));
+    let said = format!(
+        "and texture tiles {:.2} MiB",
+        written as f64 / (1u64 << 20) as f64
+    );
+    assert!(line.contains(&said), "{line} (wanted {said})");
+    // an 8 MiB file system: refused up front, naming the tiles; nothing left behind
+    let mnt = d.join("small");
+    let Some(_mount) = Mount::new(&mnt, "size=8m") else {
+        eprintln!(
+            "texture_tiles_are_in_the_temporary_disk_estimate: the full-disk part SKIPPED: mounting a tmpfs needs root"
+        );
+        return;
+    };
+    let t0 = Instant::now();
+    let o = build(&mnt, "no.voxlod");
+    let e = fails_with(&o, &["not enough disk space", "texture tiles", "--tmp"]);
+    assert!(!e.contains("writing the texture tiles"), "{e}");
+    assert!(t0.elapsed() < Duration::from_secs(20));
+    assert!(!d.join("no.voxlod").exists());
+    assert_eq!(std::fs::read_dir(&mnt).unwrap().count(), 0);
 }

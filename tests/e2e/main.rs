@@ -15,6 +15,7 @@ mod export_gltf;
 mod faults;
 mod gen;
 mod gen_blocks;
+mod gltf_budget;
 mod gltf_round_trip;
 mod gpu;
 mod hostile;

@@ -673,6 +673,18 @@ fn missing_or_stale_map_outputs_are_refused() {
         "{e}"
     );
     std::fs::write(&bins, &keep).unwrap();
+    // a marker whose min was edited to lie outside the plan's grid, which holds every vertex:
+    // refused as the marker's doing, not blamed on the input's vertices
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["min"][0] = (-1e9).into();
+    std::fs::write(&marker, serde_json::to_string(&v).unwrap()).unwrap();
+    let e = err(build_shard(&p, 1, &[]));
+    assert!(
+        !e.contains("used by no triangle")
+            && (e.contains("part-IIII.json") || e.contains("part-0002.json")),
+        "{e}"
+    );
+    std::fs::write(&marker, &good).unwrap();
     for i in 0..2 {
         ok(&build_shard(&p, i, &[]));
     }

@@ -245,6 +245,41 @@ fn tileset_matches_the_octree_and_opens_in_three_js() {
     );
     assert!(!o.status.success());
     assert!(text(&o).contains("holds no tileset"), "{}", text(&o));
+    // a file the user keeps beside a tileset, or inside one of its level folders, is never
+    // removed, with --force either: refused, naming it, and the folder left as it was
+    let replace = |d: &Path| {
+        voxlod(
+            &[
+                "export",
+                "bunny.voxlod",
+                "--3d-tiles",
+                "coarse",
+                "--level",
+                "1",
+                "--force",
+            ],
+            d,
+        )
+    };
+    for (file, named) in [
+        ("coarse/index.html", "index.html"),
+        ("coarse/1/notes.txt", "notes.txt"),
+    ] {
+        std::fs::write(d.join(file), "mine").unwrap();
+        let (top, level1) = (listing(&d.join("coarse")), listing(&d.join("coarse/1")));
+        let o = replace(d);
+        let t = text(&o);
+        assert!(!o.status.success(), "{t}");
+        assert!(
+            t.contains(named) && t.contains("not part of a tileset"),
+            "{t}"
+        );
+        assert_eq!(listing(&d.join("coarse")), top);
+        assert_eq!(listing(&d.join("coarse/1")), level1);
+        assert_eq!(std::fs::read(d.join(file)).unwrap(), b"mine");
+        std::fs::remove_file(d.join(file)).unwrap();
+    }
+    ok(&replace(d));
 
     // the size guard: refused before a byte is written, naming the level that fits
     let before = listing(d);

@@ -113,6 +113,8 @@ const SHORT: u64 = 5122;
 const UNSIGNED_SHORT: u64 = 5123;
 const UNSIGNED_INT: u64 = 5125;
 const FLOAT: u64 = 5126;
+/// Primitive mode TRIANGLES, the default.
+const TRIANGLES: u64 = 4;
 
 fn component_name(c: u64) -> &'static str {
     match c {
@@ -399,10 +401,20 @@ fn rules(root: &Value, bin: Option<&[u8]>, quantized: bool) -> Result<(), String
                     return Err(format!("{what}: indices (accessor {ii}): {rule}"));
                 }
             }
-            if let Some(mode) = uint(p, "mode", &what)? {
-                if mode > 6 {
-                    return Err(format!("{what}: mode {mode} is not 0 to 6"));
-                }
+            let mode = uint(p, "mode", &what)?.unwrap_or(TRIANGLES);
+            if mode > 6 {
+                return Err(format!("{what}: mode {mode} is not 0 to 6"));
+            }
+            // 3.7.2.1: TRIANGLES takes its vertices in threes; a remainder is no triangle
+            let indices = index(p, "indices", &what, accs.len(), "accessor")?;
+            let vertices = match indices {
+                Some(ii) => Some(("indices", accs[ii].count)),
+                None => count.as_ref().map(|(_, n)| ("vertices", *n)),
+            };
+            if let Some((of, n)) = vertices.filter(|&(_, n)| mode == TRIANGLES && n % 3 != 0) {
+                return Err(format!(
+                    "{what}: mode TRIANGLES takes {of} in threes (glTF 2.0, 3.7.2.1), but it has {n}"
+                ));
             }
         }
     }
@@ -635,11 +647,18 @@ fn nodes(d: &Doc) -> Result<(), String> {
     }
     for (s, scene) in d.list("scenes").iter().enumerate() {
         let list = scene.get("nodes").and_then(Value::as_array);
+        // 3.5.2: a scene's nodes are unique; a root listed twice would be read twice
+        let mut listed = vec![false; n];
         for x in list.map_or(&[][..], Vec::as_slice) {
             let i =
                 x.as_u64().filter(|&c| c < n as u64).ok_or_else(|| {
                     format!("scene {s}: node {x} names no node (the file has {n})")
                 })? as usize;
+            if std::mem::replace(&mut listed[i], true) {
+                return Err(format!(
+                    "scene {s} lists node {i} twice; the root nodes of a scene must be unique (glTF 2.0, 3.5.2)"
+                ));
+            }
             if let Some(p) = parent[i] {
                 return Err(format!(
                     "scene {s} lists node {i}, a child of node {p}; a scene lists root nodes only"
@@ -648,6 +667,97 @@ fn nodes(d: &Doc) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// The tokens of a JSON text that its parsed forms allocate for.
+#[derive(Debug, Default, PartialEq)]
+struct Tokens {
+    objects: u64,
+    arrays: u64,
+    /// Object members (`:`).
+    members: u64,
+    /// Separators (`,`): with `arrays`, a bound of the array elements.
+    commas: u64,
+    strings: u64,
+    string_bytes: u64,
+}
+
+fn tokens(json: &[u8]) -> Tokens {
+    let mut t = Tokens::default();
+    let (mut in_string, mut escaped) = (false, false);
+    for &b in json {
+        if in_string {
+            match (escaped, b) {
+                (true, _) => escaped = false,
+                (false, b'\\') => escaped = true,
+                (false, b'"') => in_string = false,
+                _ => t.string_bytes += 1,
+            }
+            continue;
+        }
+        match b {
+            b'"' => {
+                in_string = true;
+                t.strings += 1;
+            }
+            b'{' => t.objects += 1,
+            b'[' => t.arrays += 1,
+            b':' => t.members += 1,
+            b',' => t.commas += 1,
+            _ => {}
+        }
+    }
+    t
+}
+
+/// The most bytes a parsed element of the `gltf` crate's document takes inline (its largest
+/// object type: every `{` may be one).
+fn largest_object() -> u64 {
+    use gltf::json;
+    [
+        std::mem::size_of::<json::Node>(),
+        std::mem::size_of::<json::Accessor>(),
+        std::mem::size_of::<json::Mesh>(),
+        std::mem::size_of::<json::mesh::Primitive>(),
+        std::mem::size_of::<json::Material>(),
+        std::mem::size_of::<json::Texture>(),
+        std::mem::size_of::<json::Image>(),
+        std::mem::size_of::<json::Buffer>(),
+        std::mem::size_of::<json::buffer::View>(),
+        std::mem::size_of::<json::Scene>(),
+        std::mem::size_of::<json::texture::Sampler>(),
+        std::mem::size_of::<json::Camera>(),
+        std::mem::size_of::<json::Skin>(),
+        std::mem::size_of::<json::Animation>(),
+        std::mem::size_of::<json::animation::Channel>(),
+        std::mem::size_of::<json::animation::Sampler>(),
+        std::mem::size_of::<json::accessor::sparse::Sparse>(),
+    ]
+    .into_iter()
+    .max()
+    .unwrap_or(0) as u64
+}
+
+/// An upper bound of the memory that parsing the glTF JSON text `json` takes, beside the text
+/// itself: the checks' `serde_json` tree ([`document`]) and then the `gltf` crate's document,
+/// one after the other, each bounded by the text's tokens. A tree value is 32 bytes and an
+/// array's vector grows by doubling (at most 3 values' room per element while it moves), an
+/// object is a B-tree of at most 640 bytes a node, at least 5 members a node past its first,
+/// a string its bytes and an allocation's rounding; the crate's document holds at most one of
+/// its objects per `{` and no more in its vectors and maps than the tree does, and the reader lists
+/// each node once with its transform. A 50 MB chain of
+/// a million nodes is bounded at about 1.5 GB, so it is refused under a budget that cannot
+/// hold it instead of being parsed past it.
+pub(crate) fn document_bound(json: &[u8]) -> u64 {
+    let t = tokens(json);
+    let tree = 96 * (t.commas + t.arrays + 1)
+        + 640 * t.objects
+        + 256 * t.members
+        + t.string_bytes
+        + 32 * t.strings;
+    // the reader's list of the scene's nodes with their world transforms, one per node
+    let nodes = std::mem::size_of::<(gltf::Node, [[f64; 4]; 4])>() as u64;
+    tree + (largest_object() + nodes) * t.objects
 }
 
 #[cfg(test)]

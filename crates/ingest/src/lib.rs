@@ -114,6 +114,11 @@ pub struct MeshInfo {
     /// The up axis the format defines, if it defines one (glTF: `+Y`); the build's manifest
     /// gives it to `render` as `input.up`.
     pub up: Option<[f32; 3]>,
+    /// Bytes of memory the reader holds from opening to streaming, at most (the file, its
+    /// parsed document, its buffers and the decoding of one primitive, for glTF); counted
+    /// against [`ReadOptions::memory`] before they are read. 0 for the other formats, which
+    /// map the file or hold O(vertices) ([`MeshSource::stream`]).
+    pub held: u64,
 }
 
 /// How [`MeshSource::open_with`] reads the files a mesh refers to (OBJ `mtllib` and `map_Kd`,
@@ -125,6 +130,10 @@ pub struct ReadOptions {
     /// these; otherwise it is refused (a warning for a texture or MTL, an error for a glTF
     /// buffer) with a message that names it and says how to allow it.
     pub allow: Vec<PathBuf>,
+    /// The most memory the reader may hold ([`MeshInfo::held`]), if bounded: a glTF file whose
+    /// document, buffers or decoding would need more is refused before that part is read,
+    /// naming each part and the limit.
+    pub memory: Option<u64>,
 }
 
 /// Counts of one [`MeshSource::stream`] run.
@@ -221,6 +230,13 @@ fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
     ))
 }
 
+/// An upper bound of the memory that parsing a glTF JSON text takes beside the text (the
+/// checks' tree, then the `gltf` crate's document), bytes: the part of [`MeshInfo::held`]
+/// counted for the document before it is parsed.
+pub fn gltf_document_bound(json: &[u8]) -> u64 {
+    gltf_check::document_bound(json)
+}
+
 impl MeshSource {
     /// Opens a mesh: detects the format by extension (and magic bytes) and reads the header
     /// (PLY), the counts (OBJ: one pass over the file) or the facet count (binary STL). Files
@@ -275,7 +291,7 @@ impl MeshSource {
                 (Reader::Obj(s), i)
             }
             Format::Gltf => {
-                let (s, i) = gltf::GltfSource::open(path, &scope)?;
+                let (s, i) = gltf::GltfSource::open(path, &scope, opts.memory)?;
                 (Reader::Gltf(Box::new(s)), i)
             }
             Format::Stl => {

@@ -132,6 +132,7 @@ impl PlySource {
             materials: table.materials,
             warnings,
             up: None,
+            held: 0,
         };
         Ok((src, info))
     }

@@ -62,7 +62,18 @@
 //! 0..255)` with round half away from zero. Voxels are sorted by `morton8` of their in-chunk
 //! position.
 //!
-//! That is the definition, in exact arithmetic. [`ChunkVoxelizer`] evaluates it as follows, and
+//! That is the definition, in exact arithmetic on the triangles as [`ChunkVoxelizer`] is given
+//! them: corners in grid coordinates as f32 (`Grid::to_grid` of the input's positions, each
+//! coordinate rounded to f32 once), vertex normals, colours and texture coordinates as read.
+//! The overlap test is exact for the input's own (world) numbers where the caller passes them
+//! (`add_world`); the attributes are not: against the input's own positions each grid
+//! coordinate has moved by at most ε ≤ 2⁻²⁴·R voxel (half an f32 unit in the last place, R the
+//! grid's resolution), so to first order a contribution's face normal turns by at most
+//! `√3·ε·(|e1|+|e2|)/A` radians (edges and area of the triangle in voxels), its weight changes
+//! by at most `√3·ε·P` (`P` the perimeter of its part inside the voxel), and the voxel's mean
+//! normal turns by at most `(Σ w·θ + 2·Σ Δw)/|N|`: far below one normal step for triangles
+//! much larger than ε, up to several steps for slivers and triangles much smaller than a voxel
+//! (docs/FORMAT.md section 6 states the same). [`ChunkVoxelizer`] evaluates it as follows, and
 //! its records are within one quantization step of the exact ones (normal: one 10-bit step per
 //! component; colour: one unit per channel) except where the normals of a voxel's
 //! contributions nearly cancel (`|N|/W` below about `1.06e-4·(K+2)`, opposite faces in one

@@ -333,7 +333,21 @@ fn load_config(path: &Path) -> Result<BuildSettings> {
         .with_context(|| format!("reading settings file {}", path.display()))?;
     let text = String::from_utf8(bytes)
         .with_context(|| format!("settings file {} is not UTF-8 text", path.display()))?;
-    toml::from_str(&text).with_context(|| format!("settings file {}", path.display()))
+    // the parser's own message quotes the offending line: only where and what is said, so a
+    // file that is not a settings file (`/proc/self/environ`) is not echoed to the terminal
+    toml::from_str(&text).map_err(|e| {
+        let at = e.span().map_or(String::new(), |s| {
+            let before = &text[..s.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            format!(" at line {line}, column {column}")
+        });
+        anyhow::anyhow!(
+            "settings file {}{at}: {}",
+            path.display(),
+            e.message().trim_end()
+        )
+    })
 }
 
 /// The settings of `build` and `plan`: the settings file's (or the defaults), each flag given

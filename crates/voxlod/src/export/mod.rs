@@ -165,7 +165,11 @@ pub fn run(a: ExportArgs) -> Result<()> {
     };
     let guard = OutputGuard::acquire(&output, &[&a.file], kind, a.force)?;
     let r = Reader::open(&a.file)?;
-    let limit = SizeLimit::for_dir(a.max_size, &output_dir(&output));
+    let mut limit = SizeLimit::for_dir(a.max_size, &output_dir(&output));
+    if kind == OutputKind::Glb {
+        // a GLB's lengths are 32-bit: past that, refused by the guard naming the level that fits
+        limit = limit.with_format_cap(u32::MAX as u64, "the 4 GiB a GLB can hold");
+    }
     if a.source {
         return run_source(&a, &output, &r, &guard, &limit);
     }
