@@ -659,7 +659,7 @@ fn missing_or_stale_map_outputs_are_refused() {
     std::fs::write(&marker, good.replace(sha, &"0".repeat(64))).unwrap();
     let e = err(build_shard(&p, 1, &[]));
     assert!(
-        e.contains("part 2:") && e.contains("made for another plan"),
+        e.contains("part 2:") && e.contains("checksum does not match its content"),
         "{e}"
     );
     std::fs::write(&marker, &good).unwrap();
