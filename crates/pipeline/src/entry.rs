@@ -162,7 +162,7 @@ pub fn plan(
         .fingerprint
         .clone()
         .expect("a plan's runner takes the input's fingerprint");
-    let p = ShardPlan {
+    let mut p = ShardPlan {
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,
         tool_version: env!("CARGO_PKG_VERSION").into(),
@@ -183,9 +183,10 @@ pub fn plan(
         split_level,
         shards: ranges.clone(),
         balance: balance.clone(),
+        checksum: String::new(),
     };
     drop(ctx);
-    let text = serde_json::to_vec_pretty(&p).context("serializing the plan")?;
+    let text = p.sealed_json();
     runner.guard.write_whole(&text)?;
     let t0 = runner.t0;
     runner.finish(&mut Vec::new())?;
@@ -292,7 +293,7 @@ fn plan_parts(
         page_bytes: page,
         xxh3: hashes[..npages].iter().map(|&h| hex64(h)).collect(),
     });
-    let p = ShardPlan {
+    let mut p = ShardPlan {
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,
         tool_version: env!("CARGO_PKG_VERSION").into(),
@@ -309,9 +310,10 @@ fn plan_parts(
         split_level,
         shards: ranges.clone(),
         balance: balance.clone(),
+        checksum: String::new(),
     };
     drop(ctx);
-    let text = serde_json::to_vec_pretty(&p).context("serializing the plan")?;
+    let text = p.sealed_json();
     runner.guard.write_whole(&text)?;
     let t0 = runner.t0;
     let nparts = p.parts.len() as u32;

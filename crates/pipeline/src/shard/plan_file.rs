@@ -29,7 +29,8 @@ pub const PLAN_FORMAT: &str = "voxlod-plan";
 /// faces (no `ingest`, no `content_xxh3`; `chunks` estimated from a sample). 4: a shard holds a
 /// list of Morton `ranges` (the split's LPT assignment), not one range. 5: with parts, the
 /// XXH3-64 of each part's face records (`parts[].faces_xxh3`) and of the pages before the
-/// faces (`input.pages`), which the map tasks check the bytes they read against.
+/// faces (`input.pages`), which the map tasks check the bytes they read against; the plan's
+/// own `checksum`.
 pub const PLAN_VERSION: u32 = 5;
 /// Bytes hashed at each end of the input for its fingerprint.
 const FINGERPRINT_SPAN: u64 = 1 << 20;
@@ -283,6 +284,26 @@ pub struct ShardPlan {
     pub shards: Vec<ShardRange>,
     /// How even they are.
     pub balance: Balance,
+    /// Hex SHA-256 of the plan's JSON as `plan` writes it (pretty-printed, keys in this order)
+    /// with this field empty: an edited plan is refused, so every shard and map task builds
+    /// what was planned.
+    pub checksum: String,
+}
+
+impl ShardPlan {
+    /// The SHA-256 of the plan with `checksum` empty, serialized as it is written.
+    fn own_sha256(&self) -> String {
+        let mut p = self.clone();
+        p.checksum.clear();
+        let text = serde_json::to_vec_pretty(&p).expect("a plan serializes");
+        voxlod_io::hex(&Sha256::digest(&text))
+    }
+
+    /// The plan's file bytes: its JSON, pretty-printed, with `checksum` set.
+    pub fn sealed_json(&mut self) -> Vec<u8> {
+        self.checksum = self.own_sha256();
+        serde_json::to_vec_pretty(self).expect("a plan serializes")
+    }
 }
 
 /// The grid (`voxlod_geom::Grid`) as the plan stores it.
@@ -347,6 +368,12 @@ impl LoadedPlan {
                 path.display(),
                 plan.format,
                 plan.version
+            );
+        }
+        if plan.checksum != plan.own_sha256() {
+            bail!(
+                "{}: its checksum does not match its content (edited or damaged since it was planned): plan again",
+                path.display()
             );
         }
         if plan.tool_version != env!("CARGO_PKG_VERSION") {
