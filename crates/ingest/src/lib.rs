@@ -378,7 +378,7 @@ impl MeshSource {
     }
 
     /// What part `part` of [`MeshSource::face_parts`] reads besides its face records: the
-    /// indices of the pages of `page` bytes (counted from byte 0 of the file, up to the first
+    /// indices of the pages of `page` bytes (a power of two; counted from byte 0 of the file, up to the first
     /// face record) that hold the file's header and the elements before the vertex list, or a
     /// vertex record that one of the part's face records names (an index out of range names
     /// none: the stream reports it). `faces` is handed the part's face record bytes, in order,

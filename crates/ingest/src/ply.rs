@@ -407,7 +407,7 @@ impl PlySource {
     }
 
     /// What part `part` of [`PlySource::face_parts`] reads besides its face records: the
-    /// indices of the pages of `page` bytes (counted from byte 0 of the file, up to the first
+    /// indices of the pages of `page` bytes (a power of two) (counted from byte 0 of the file, up to the first
     /// face record) that hold the header and the elements before the vertex list, or a vertex
     /// record one of the part's face records names. `faces` is handed the part's face record
     /// bytes, in order. `None` if the file cannot be cut into parts.
@@ -418,7 +418,7 @@ impl PlySource {
         faces: &mut dyn FnMut(&[u8]),
     ) -> Option<Vec<u64>> {
         use crate::ply_header::Kind;
-        assert!(page > 0, "pages of at least one byte");
+        assert!(page.is_power_of_two(), "pages of a power of two bytes");
         let (ei, list, size, off) = self.fixed_faces()?;
         let data: &[u8] = self.map.as_ref()?;
         let el = &self.header.elements[ei];
@@ -440,14 +440,14 @@ impl PlySource {
             + count.size();
         let be = self.header.encoding == Encoding::BinaryBe;
         let pages = (off as u64).div_ceil(page) as usize;
+        let shift = page.trailing_zeros();
         let mut used = vec![0u64; pages.div_ceil(64)];
-        let mut mark = |a: u64, b: u64| {
-            for k in a / page..=(b - 1) / page {
-                used[k as usize / 64] |= 1 << (k % 64);
-            }
-        };
+        let mut set = |k: u64| used[k as usize / 64] |= 1 << (k % 64);
+        // the header and the elements before the vertex list
         if voff > 0 {
-            mark(0, voff);
+            for k in 0..=((voff - 1) >> shift) {
+                set(k);
+            }
         }
         let (nv, isz) = (vel.count, item.size());
         let value = |b: &[u8]| -> Option<u64> {
@@ -470,6 +470,22 @@ impl PlySource {
             // an index out of range is the decoder's error to report, not a page to check
             u64::try_from(v).ok().filter(|&v| v < nv)
         };
+        // the pages of vertex `v`'s record (one, or two when it straddles a border); a run of
+        // faces mostly names vertices of the page named last
+        let mut last = u64::MAX;
+        let mut mark = |v: u64| {
+            let a = voff + v * stride;
+            let (p, q) = (a >> shift, (a + stride - 1) >> shift);
+            if p != last {
+                set(p);
+                last = p;
+            }
+            if q != p {
+                set(q);
+            }
+        };
+        // plain little-endian 32-bit indices (what scanners write) without the general decode
+        let plain_le = !be && matches!(item, Scalar::I32 | Scalar::U32);
         // in blocks of whole records, the map's pages released after each
         let block = ((16u64 << 20) / size as u64).max(1) as usize * size;
         let (start, end) = (part.bytes[0] as usize, part.bytes[1] as usize);
@@ -482,9 +498,15 @@ impl PlySource {
             for r in bytes.chunks_exact(size) {
                 for k in 0..3 {
                     let i = first + k * isz;
-                    if let Some(v) = value(&r[i..i + isz]) {
-                        let a = voff + v * stride;
-                        mark(a, a + stride);
+                    let v = if plain_le {
+                        let v = u32::from_le_bytes([r[i], r[i + 1], r[i + 2], r[i + 3]]) as u64;
+                        let negative = item == Scalar::I32 && v > i32::MAX as u64;
+                        (!negative && v < nv).then_some(v)
+                    } else {
+                        value(&r[i..i + isz])
+                    };
+                    if let Some(v) = v {
+                        mark(v);
                     }
                 }
             }
