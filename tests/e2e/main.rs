@@ -28,6 +28,7 @@ mod python_package;
 mod python_reader;
 mod resume;
 mod shard;
+mod shard_integrity;
 mod textures;
 mod tiles;
 mod tools;

@@ -394,6 +394,34 @@ impl MeshSource {
         }
     }
 
+    /// What part `part` of [`MeshSource::face_parts`] reads besides its face records: the
+    /// indices of the pages of `page` bytes (a power of two; counted from byte 0 of the file, up to the first
+    /// face record) that hold the file's header and the elements before the vertex list, or a
+    /// vertex record that one of the part's face records names (an index out of range names
+    /// none: the stream reports it). `faces` is handed the part's face record bytes, in order,
+    /// as they are read. `None` for an input that cannot be cut into parts.
+    pub fn part_footprint(
+        &self,
+        part: &FacePart,
+        page: u64,
+        faces: &mut dyn FnMut(&[u8]),
+    ) -> Option<Vec<u64>> {
+        match &self.reader {
+            Reader::Ply(p) => p.part_footprint(part, page, faces),
+            Reader::Obj(_) | Reader::Gltf(_) | Reader::Stl(_) => None,
+        }
+    }
+
+    /// The whole file's bytes as mapped, for a memory-mapped binary PLY (the input of
+    /// [`MeshSource::face_parts`]); `None` otherwise. Touching them makes them resident:
+    /// [`MeshSource::release_pages`] after.
+    pub fn mapped_bytes(&self) -> Option<&[u8]> {
+        match &self.reader {
+            Reader::Ply(p) => p.mapped_bytes(),
+            Reader::Obj(_) | Reader::Gltf(_) | Reader::Stl(_) => None,
+        }
+    }
+
     /// For a sample of scattered records (the plan's): `true` reads a memory-mapped PLY without
     /// readahead, `false` with it again. Nothing for other inputs.
     pub fn advise_random(&self, random: bool) {

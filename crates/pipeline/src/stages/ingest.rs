@@ -235,7 +235,12 @@ fn from_parts(
     layout: RecordLayout,
 ) -> Result<Ingested, StageError> {
     use crate::shard::map_part;
-    let markers = map_part::load_markers(&scope.plan_path, &scope.plan_sha256_hex, &scope.parts)?;
+    let markers = map_part::load_markers(
+        &scope.plan_path,
+        &scope.plan_sha256_hex,
+        &scope.parts,
+        &scope.grid,
+    )?;
     let (triangles, degenerate, tb) = map_part::totals(&markers);
     let plan = scope.plan_path.display();
     let Some(tb) = tb else {
