@@ -1,11 +1,12 @@
 // WebGL2 drawing of voxels from the voxel buffers, as the native renderer does it
 // (docs/VIEWER.md, "How voxels are drawn"): each resident node keeps its voxels' 12-byte records
-// as decoded (nothing per face); one instance per voxel, 18 vertices per instance: slot
-// s = gl_VertexID / 6 is axis s, whose face on the eye's side is drawn if the face mask has it
-// (two-sided: either bit of the axis, the back lit as its front), else the slot collapses to a
-// point outside the clip volume. Source triangles of close-up leaves are indexed triangle
-// lists in the same camera and light. Occlusion queries (ANY_SAMPLES_PASSED_CONSERVATIVE)
-// wrap each node's draw.
+// as decoded (nothing per face), in an RGB32UI texture the vertex shader reads (vertex
+// pulling: 18 vertices per voxel, one draw per node; on SwiftShader twice as fast as the same
+// with instanced attributes). Slot s = (gl_VertexID mod 18) / 6 is axis s, whose face on the
+// eye's side is drawn if the face mask has it (two-sided: either bit of the axis, the back lit
+// as its front), else the slot collapses to a point outside the clip volume. Source triangles
+// of close-up leaves are indexed triangle lists in the same camera and light. Occlusion tests
+// are node boxes drawn inside ANY_SAMPLES_PASSED_CONSERVATIVE queries.
 
 const VOXEL_VS = `#version 300 es
 precision highp float;
@@ -75,6 +76,32 @@ void main() {
   vec3 n = normalize(v_normal);
   float shade = 0.22 + 0.78 * max(dot(n, u_light), 0.0);
   color = vec4(v_color.rgb * shade, 1.0);
+}`;
+
+// an occlusion test: the 36 vertices of a box (two triangles per side) from gl_VertexID
+const BOX_VS = `#version 300 es
+precision highp float;
+uniform mat4 u_viewProj;
+uniform vec3 u_min;
+uniform vec3 u_max;
+void main() {
+  int side = gl_VertexID / 6;
+  int axis = side / 2;
+  vec2 corners[6] = vec2[6](vec2(0.0, 0.0), vec2(1.0, 0.0), vec2(1.0, 1.0),
+                            vec2(0.0, 0.0), vec2(1.0, 1.0), vec2(0.0, 1.0));
+  vec2 uv = corners[gl_VertexID % 6];
+  vec3 t = vec3(0.0);
+  t[axis] = float(side % 2);
+  t[(axis + 1) % 3] = uv.x;
+  t[(axis + 2) % 3] = uv.y;
+  gl_Position = u_viewProj * vec4(mix(u_min, u_max, t), 1.0);
+}`;
+
+const BOX_FS = `#version 300 es
+precision highp float;
+out vec4 color;
+void main() {
+  color = vec4(1.0);
 }`;
 
 const SOURCE_VS = `#version 300 es
@@ -156,6 +183,7 @@ export class Renderer {
     this.gl = gl;
     this.voxel = compile(gl, VOXEL_VS, SHADE_FS);
     this.source = compile(gl, SOURCE_VS, SOURCE_FS);
+    this.box = compile(gl, BOX_VS, BOX_FS);
     this.queriesOk = typeof gl.ANY_SAMPLES_PASSED_CONSERVATIVE === 'number';
     // voxel draws read no vertex attributes: everything comes from gl_VertexID
     this.empty = gl.createVertexArray();
@@ -218,11 +246,11 @@ export class Renderer {
 
   /**
    * Draws one frame. `frame`: {viewProj (Float32Array, column-major), eye, light (relative to
-   * the origin), twoSided}; `draws`: [{res, corner: [x, y, z] relative to the origin, edge,
-   * probe, query}] in order. A probe draws with colour and depth writes off. A `query` (a
-   * WebGLQuery) wraps the draw.
+   * the origin), twoSided}; `draws`: [{res, corner: [x, y, z] relative to the origin, edge}]
+   * in order; then `tests`: [{min, max, query}], boxes drawn with colour and depth writes off,
+   * each inside its occlusion query (a WebGLQuery, ANY_SAMPLES_PASSED_CONSERVATIVE).
    */
-  draw(width, height, frame, draws) {
+  draw(width, height, frame, draws, tests = []) {
     const gl = this.gl;
     gl.viewport(0, 0, width, height);
     gl.clearColor(BACKGROUND[0] / 255, BACKGROUND[1] / 255, BACKGROUND[2] / 255, 1);
@@ -251,11 +279,6 @@ export class Renderer {
         gl.disable(gl.CULL_FACE);
       }
       gl.uniform4f(p.uniforms.u_node, d.corner[0], d.corner[1], d.corner[2], d.edge ?? 0);
-      if (d.probe) {
-        gl.colorMask(false, false, false, false);
-        gl.depthMask(false);
-      }
-      if (d.query) gl.beginQuery(gl.ANY_SAMPLES_PASSED_CONSERVATIVE, d.query);
       if (d.res.kind === 'voxels') {
         gl.bindVertexArray(this.empty);
         gl.activeTexture(gl.TEXTURE0);
@@ -267,11 +290,23 @@ export class Renderer {
         gl.bindVertexArray(d.res.vao);
         gl.drawElements(gl.TRIANGLES, d.res.count, gl.UNSIGNED_INT, 0);
       }
-      if (d.query) gl.endQuery(gl.ANY_SAMPLES_PASSED_CONSERVATIVE);
-      if (d.probe) {
-        gl.colorMask(true, true, true, true);
-        gl.depthMask(true);
+    }
+    if (tests.length) {
+      gl.useProgram(this.box.prog);
+      gl.uniformMatrix4fv(this.box.uniforms.u_viewProj, false, frame.viewProj);
+      gl.bindVertexArray(this.empty);
+      gl.disable(gl.CULL_FACE);
+      gl.colorMask(false, false, false, false);
+      gl.depthMask(false);
+      for (const t of tests) {
+        gl.uniform3fv(this.box.uniforms.u_min, t.min);
+        gl.uniform3fv(this.box.uniforms.u_max, t.max);
+        gl.beginQuery(gl.ANY_SAMPLES_PASSED_CONSERVATIVE, t.query);
+        gl.drawArrays(gl.TRIANGLES, 0, 36);
+        gl.endQuery(gl.ANY_SAMPLES_PASSED_CONSERVATIVE);
       }
+      gl.colorMask(true, true, true, true);
+      gl.depthMask(true);
     }
     gl.bindVertexArray(null);
   }

@@ -82,6 +82,7 @@ function readParams() {
   p.source = flag('source', true);
   p.occlusion = flag('occlusion', true);
   p.twoSided = flag('two_sided', true);
+  p.progressive = flag('progressive', true);
   p.budget = number('budget', 256) * 1024 * 1024;
   p.workers = Math.max(1, Math.min(8, number('workers', 2)));
   return p;
@@ -210,25 +211,29 @@ async function main() {
   resize();
   window.addEventListener('resize', () => { if (!p.size) resize(); });
 
-  // occlusion culling: per drawn node its last query and what it said
-  // i → {query, hidden, pendingScene, resultScene}; a scene is one camera and one set of draws,
-  // so a result counts for completeness only if it was taken in the scene drawn now
+  // occlusion culling (Chajdas et al. section 4, with occlusion queries): a node of the cut
+  // that is not resident is first tested, its box (grown by a voxel of the stand-in drawn
+  // for it, so the stand-in's coarser voxels cannot hide it) drawn after everything else with
+  // depth test on and colour and depth writes off inside an ANY_SAMPLES_PASSED_CONSERVATIVE
+  // query; it is fetched only once a test passed, and a node whose box is hidden is neither
+  // fetched nor drawn while it stays hidden (`occluded`). Tests are read a frame or more later.
+  // i → {query, hidden, pendingScene, resultScene}; a scene is one camera and one set of draws
+  // and tests, and a result counts for completeness only if it was taken in the scene drawn now.
   const occ = new Map();
   let sceneVersion = 0;
   let lastSceneKey = '';
 
   function collectQueries() {
     let changed = false;
-    for (const [i, o] of occ) {
-      if (!o.query || !o.pendingScene) continue;
+    for (const o of occ.values()) {
+      if (!o.pendingScene) continue;
       if (!gl.getQueryParameter(o.query, gl.QUERY_RESULT_AVAILABLE)) continue;
-      const passed = gl.getQueryParameter(o.query, gl.QUERY_RESULT) !== 0;
-      const hidden = !passed;
-      if (hidden !== o.hidden) changed = true;
+      const hidden = gl.getQueryParameter(o.query, gl.QUERY_RESULT) === 0;
+      // a first answer lets the node be fetched; a changed one changes the frame
+      if (hidden !== o.hidden || !o.resultScene) changed = true;
       o.hidden = hidden;
       o.resultScene = o.pendingScene;
       o.pendingScene = 0;
-      if (!resident.has(`v${i}`) && !resident.has(`s${i}`)) occ.delete(i);
     }
     return changed;
   }
@@ -242,42 +247,51 @@ async function main() {
     const ctx = new CutContext(file, shot, p.error);
     const origin = shot.target;
     const want = [];
+    const tests = [];
     let occluded = 0;
-    const depthOf = (i) => vec.dot(vec.sub(vec.scale(vec.add(ctx.boxes[i].min, ctx.boxes[i].max), 0.5), shot.eye), vec.norm(vec.sub(shot.target, shot.eye)));
+    const fwd = vec.norm(vec.sub(shot.target, shot.eye));
+    const depthOf = (i) => vec.dot(vec.sub(vec.scale(vec.add(ctx.boxes[i].min, ctx.boxes[i].max), 0.5), shot.eye), fwd);
 
-    // the nodes to draw for the subtree of i, front to back, or null if it cannot be covered yet
-    function cover(i) {
+    // the nodes to draw for the subtree of i, front to back, or null if it cannot be covered
+    // yet (then its parent stands in); `standIn` is the voxel edge of the resident ancestor
+    // that would be drawn in its place
+    function cover(i, standIn) {
       if (!ctx.visible(i)) return [];
       const e = file.nodes[i];
-      const o = useOcclusion ? occ.get(i) : null;
       const vkey = `v${i}`;
-      const hidden = !!(o && o.hidden && resident.has(vkey));
+      const edge = voxelSizeAt(h, e.level);
       if (ctx.refines(i)) {
-        if (hidden) {
-          occluded++;
-          return [{ i, key: vkey, probe: true }];
-        }
         const kids = file.children[i].slice().sort((a, b) => depthOf(a) - depthOf(b));
-        const lists = kids.map(cover);
+        const below = resident.has(vkey) ? edge : standIn;
+        const lists = kids.map((k) => cover(k, below));
         if (lists.every((l) => l !== null)) return lists.flat();
-        return resident.has(vkey) ? [{ i, key: vkey, probe: false, standIn: true }] : null;
+        return resident.has(vkey) ? [{ i, key: vkey, standIn: true }] : null;
       }
       const err = ctx.error(i);
       const over = e.level === 0 && !(err <= p.error);
       const key = over && p.source && e.channels[CHANNEL_SOURCE_TRIANGLES] ? `s${i}` : vkey;
-      // a hidden node of the cut is drawn as usual (nothing to save by not refining it)
-      if (resident.has(key)) return [{ i, key, probe: false }];
+      if (resident.has(key)) return [{ i, key }];
+      if (useOcclusion) {
+        const o = occ.get(i);
+        const grow = Math.max(edge, standIn ?? 0);
+        const b = ctx.boxes[i];
+        const inside = [0, 1, 2].every((a) => shot.eye[a] > b.min[a] - grow && shot.eye[a] < b.max[a] + grow);
+        if (!inside) {
+          tests.push({ i, grow });
+          if (!o || !o.resultScene) return resident.has(vkey) ? [{ i, key: vkey, standIn: true }] : null;
+          if (o.hidden) {
+            occluded++;
+            return [];
+          }
+        }
+      }
       want.push({ key, i, level: e.level, err });
-      return resident.has(vkey) ? [{ i, key: vkey, probe: false, standIn: true }] : null;
+      return resident.has(vkey) ? [{ i, key: vkey, standIn: true }] : null;
     }
 
-    let list = cover(file.root) ?? [];
-    // the stand-ins of missing nodes stay until their nodes arrive
-    const visible = list.filter((d) => !d.probe);
-    const probes = list.filter((d) => d.probe);
-    list = visible.concat(probes);
+    const list = cover(file.root, null) ?? [];
     const sceneKey = JSON.stringify([shot.eye, shot.target, shot.up, shot.fovY, shot.width, shot.height])
-      + list.map((d) => d.key + (d.probe ? 'p' : '')).join(',');
+      + list.map((d) => d.key).join(',') + '|' + tests.map((t) => t.i).join(',');
     if (sceneKey !== lastSceneKey) {
       lastSceneKey = sceneKey;
       sceneVersion++;
@@ -285,15 +299,23 @@ async function main() {
 
     // requests: coarse levels first, then the largest error
     want.sort((a, b) => b.level - a.level || b.err - a.err);
-    const slots = 6 - inflight.size;
     let starved = false;
     for (const w of want) {
-      if (inflight.size >= 6 || slots <= 0) break;
+      if (inflight.size >= 6) break;
       if (residentBytes > p.budget) {
         starved = true;
         break;
       }
       request(w.key, w.i);
+    }
+
+    // progressive=0: draw only frames without missing nodes, and those that test nodes for
+    // occlusion before they are fetched (as `view --fly` draws complete frames)
+    const testing = tests.some((t) => !occ.get(t.i)?.resultScene);
+    if (!p.progressive && !testing && (want.length > 0 || inflight.size > 0)) {
+      last = { want: want.length, standIns: 1, tests: [] };
+      status.wanted = want.length;
+      return;
     }
 
     // draw
@@ -307,22 +329,23 @@ async function main() {
       const e = file.nodes[d.i];
       const edge = voxelSizeAt(h, e.level);
       const corner = rel([0, 1, 2].map((a) => h.origin[a] + edge * 256 * [e.x, e.y, e.z][a]));
-      let query = null;
-      if (useOcclusion && r.res.kind === 'voxels') {
-        let o = occ.get(d.i);
-        if (!o) occ.set(d.i, (o = { query: null, hidden: false, pendingScene: 0, resultScene: 0 }));
-        if (!o.pendingScene) {
-          o.query = o.query ?? gl.createQuery();
-          o.pendingScene = sceneVersion;
-          query = o.query;
-        }
-      }
-      if (!d.probe) levels.add(e.level);
-      draws.push({ res: r.res, corner, edge, probe: d.probe, query });
+      levels.add(e.level);
+      draws.push({ res: r.res, corner, edge });
+    }
+    const boxes = [];
+    for (const t of tests) {
+      let o = occ.get(t.i);
+      if (!o) occ.set(t.i, (o = { query: gl.createQuery(), hidden: false, pendingScene: 0, resultScene: 0 }));
+      if (o.pendingScene) continue;
+      o.pendingScene = sceneVersion;
+      const b = ctx.boxes[t.i];
+      boxes.push({ min: rel(b.min.map((c) => c - t.grow)), max: rel(b.max.map((c) => c + t.grow)), query: o.query });
     }
     renderer.draw(shot.width, shot.height, {
       viewProj: vp, eye: rel(shot.eye), light: lightDirection(shot), twoSided: p.twoSided,
-    }, draws);
+    }, draws, boxes);
+    fence = gl.fenceSync(gl.SYNC_GPU_COMMANDS_COMPLETE, 0);
+    gl.flush();
 
     // the memory budget: least recently used nodes not drawn this frame go first
     if (residentBytes > p.budget) {
@@ -339,10 +362,10 @@ async function main() {
     last = {
       want: want.length,
       standIns: list.filter((d) => d.standIn).length,
-      queried: useOcclusion ? list.filter((d) => occ.has(d.i)).map((d) => d.i) : [],
+      tests: tests.map((t) => t.i),
     };
     Object.assign(status, {
-      nodes: list.filter((d) => !d.probe).length,
+      nodes: list.length,
       frameMs,
       occluded,
       wanted: want.length,
@@ -350,7 +373,7 @@ async function main() {
       residentBytes,
       starved,
       levels: [...levels].sort((a, b) => a - b),
-      drawn: list.filter((d) => !d.probe).map((d) => d.i).sort((a, b) => a - b),
+      drawn: list.map((d) => d.i).sort((a, b) => a - b),
     });
   }
 
@@ -359,8 +382,10 @@ async function main() {
   let last = null;
   function settle() {
     if (!last) return;
-    const answered = last.queried.every((i) => occ.get(i)?.resultScene === sceneVersion);
-    const complete = last.want === 0 && last.standIns === 0 && inflight.size === 0 && answered && !status.error && !dirty;
+    const answered = last.tests.every((i) => occ.get(i)?.resultScene === sceneVersion);
+    // results of an older scene only, none on its way: draw again to test in this one
+    if (!answered && !dirty && last.tests.every((i) => !occ.get(i)?.pendingScene)) dirty = true;
+    const complete = last.want === 0 && last.standIns === 0 && inflight.size === 0 && answered && !status.error && !dirty && !fence;
     status.complete = complete;
     if (complete && status.firstCompleteMs === null) status.firstCompleteMs = performance.now() - started;
     const mb = (b) => `${(b / 1048576).toFixed(2)} MB`;
@@ -369,9 +394,23 @@ async function main() {
       + (complete ? '' : ` · loading ${last.want + inflight.size}`);
   }
 
+  // the last frame's fence: no new frame is drawn before the GPU has finished the last one
+  // (a software rasterizer would otherwise queue a frame per arriving node), and a frame
+  // counts as drawn (for `complete`) once it has finished
+  let fence = null;
+  function gpuBusy() {
+    if (!fence) return false;
+    if (gl.getSyncParameter(fence, gl.SYNC_STATUS) !== gl.SIGNALED) return true;
+    gl.deleteSync(fence);
+    fence = null;
+    return false;
+  }
+
   function loop() {
     try {
-      if (dirty) {
+      if (gpuBusy()) {
+        // wait
+      } else if (dirty) {
         dirty = false;
         drawFrame();
       } else if (p.occlusion && renderer.queriesOk && collectQueries()) {
