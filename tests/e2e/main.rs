@@ -31,6 +31,7 @@ mod tiles;
 mod tools;
 mod validation;
 mod view;
+mod web;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};

@@ -111,6 +111,12 @@ function fileRanges(file) {
   };
 }
 
+/** A file's bytes as little-endian u32 words. */
+function u32s(file) {
+  const b = fs.readFileSync(file);
+  return new Uint32Array(b.buffer.slice(b.byteOffset, b.byteOffset + b.length));
+}
+
 const refDir = process.env.VOXLOD_WEB_REF;
 test('every node of the reference files equals the Rust reader\'s', { skip: !refDir && 'VOXLOD_WEB_REF is not set (tests/e2e/web.rs sets it)' }, async () => {
   const refs = JSON.parse(fs.readFileSync(path.join(refDir, 'refs.json'), 'utf8'));
@@ -123,7 +129,7 @@ test('every node of the reference files equals the Rust reader\'s', { skip: !ref
     assert.deepEqual(f.channels, r.channels, r.file);
     assert.equal(f.root, r.root);
     for (let i = 0; i < f.nodes.length; i++) {
-      const want = new Uint32Array(fs.readFileSync(path.join(r.dir, `node-${i}.vox`)).buffer.slice(0));
+      const want = u32s(path.join(r.dir, `node-${i}.vox`));
       const v = await f.readVoxels(i);
       const n = f.nodes[i].voxelCount;
       assert.equal(want.length, 3 * n, `${r.file} node ${i}`);
@@ -136,7 +142,7 @@ test('every node of the reference files equals the Rust reader\'s', { skip: !ref
       const matFile = path.join(r.dir, `node-${i}.mat`);
       const mats = await f.readMaterials(i);
       if (fs.existsSync(matFile)) {
-        const wm = new Uint32Array(fs.readFileSync(matFile).buffer.slice(0));
+        const wm = u32s(matFile);
         assert.deepEqual([...mats], [...wm], `${r.file} node ${i} materials`);
         seen.materials++;
       } else {

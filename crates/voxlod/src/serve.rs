@@ -283,13 +283,15 @@ fn answer(s: &Served, req: Request) -> std::io::Result<()> {
             &format!("bytes {}-{}/{}", r.start(), r.end(), s.size),
         ));
     }
-    // tiny_http sends no body for HEAD
+    // tiny_http sends no body for HEAD; with Content-Length, never chunked (tiny_http chunks
+    // bodies above 32 KiB by default)
     let r = Response::new(
         StatusCode(status),
         headers,
         file.take(len),
         Some(len as usize),
         None,
-    );
+    )
+    .with_chunked_threshold(usize::MAX);
     req.respond(r)
 }
