@@ -81,7 +81,9 @@ function readParams() {
   p.material = color === 'material';
   p.source = flag('source', true);
   p.occlusion = flag('occlusion', true);
-  p.twoSided = flag('two_sided', true);
+  const sides = params.get('sides') ?? '2';
+  if (sides !== '1' && sides !== '2') throw new Error(`sides=${sides} is neither 1 nor 2`);
+  p.twoSided = sides === '2';
   p.progressive = flag('progressive', true);
   p.budget = number('budget', 256) * 1024 * 1024;
   p.workers = Math.max(1, Math.min(8, number('workers', 2)));

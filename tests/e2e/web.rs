@@ -22,7 +22,7 @@ use std::process::{Child, Command, Stdio};
 use serde_json::Value;
 use voxlod_format::Reader;
 
-use super::{build_ok, ok, sample, shared_meshes, voxlod, BIN, REPO};
+use super::{build_ok, ok, sample, shared_meshes, text, voxlod, BIN, REPO};
 
 /// Whether node, the npm packages and Chromium are there (a failure under CI).
 fn browser_tools(what: &str) -> bool {
@@ -276,7 +276,7 @@ fn serve_answers_ranges_and_nothing_else() {
     std::fs::write(d.join("x.voxlod"), b"not an octree").unwrap();
     let o = voxlod(&["serve", "x.voxlod", "--port", "0"], d);
     assert!(!o.status.success());
-    assert!(super::text(&o).contains("x.voxlod"), "{}", super::text(&o));
+    assert!(text(&o).contains("x.voxlod"), "{}", text(&o));
 }
 
 /// Pixels of a picture that are not the background.
@@ -286,6 +286,40 @@ fn silhouette(png: &Path) -> Vec<bool> {
     img.pixels()
         .map(|p| (0..3).any(|c| (p.0[c] as i32 - bg[c] as i32).abs() > 6))
         .collect()
+}
+
+/// Mean RGB of the pixels both pictures cover.
+fn mean_colours(a: &Path, b: &Path) -> ([f64; 3], [f64; 3]) {
+    let (sa, sb) = (silhouette(a), silhouette(b));
+    let (ia, ib) = (
+        image::open(a).unwrap().to_rgb8(),
+        image::open(b).unwrap().to_rgb8(),
+    );
+    let mut sums = [[0.0; 3]; 2];
+    let mut n = 0.0;
+    for (k, (pa, pb)) in ia.pixels().zip(ib.pixels()).enumerate() {
+        if sa[k] && sb[k] {
+            n += 1.0;
+            for c in 0..3 {
+                sums[0][c] += pa.0[c] as f64;
+                sums[1][c] += pb.0[c] as f64;
+            }
+        }
+    }
+    (sums[0].map(|x| x / n), sums[1].map(|x| x / n))
+}
+
+/// The silhouettes' IoU is at least `min` and the covered pixels' mean colours differ by at
+/// most 3 per channel.
+fn same_picture(web: &Path, render: &Path, min: f64, what: &str) {
+    let a = iou(web, render);
+    let (cw, cr) = mean_colours(web, render);
+    eprintln!("{what}: IoU {a:.4}, mean colour {cw:.1?} against render's {cr:.1?}");
+    assert!(a >= min, "{what}: IoU {a}");
+    assert!(
+        (0..3).all(|c| (cw[c] - cr[c]).abs() <= 3.0),
+        "{what}: {cw:?} {cr:?}"
+    );
 }
 
 fn iou(a: &Path, b: &Path) -> f64 {
@@ -335,7 +369,15 @@ fn render(file: &Path, query: &[(&str, &str)], png: &Path) -> u64 {
     before.rsplit(' ').next().unwrap().parse().unwrap()
 }
 
+/// The viewer's query for `render`'s parameters `q`. The viewer draws open surfaces from
+/// behind by default (`sides=2`); a `render` without `--one-sided` draws only the face-mask's
+/// faces, and the viewer is asked for the same (`sides=1`).
 fn query_string(q: &[(&str, &str)]) -> String {
+    let help = text(&voxlod(&["render", "--help"], REPO));
+    let mut q = q.to_vec();
+    if !help.contains("--one-sided") {
+        q.push(("sides", "1"));
+    }
     q.iter()
         .map(|(k, v)| format!("{k}={v}"))
         .collect::<Vec<_>>()
@@ -356,7 +398,7 @@ fn viewer_frame_matches_render_from_both_servers() {
         ("size", "320x240"),
         ("view", "-0.4,0.3,1"),
         ("fov", "40"),
-        ("zoom", "1.3"),
+        ("zoom", "3"),
         ("error", "1.5"),
     ];
     let nodes = render(&file, &q, &d.join("render.png"));
@@ -366,10 +408,16 @@ fn viewer_frame_matches_render_from_both_servers() {
     let v = browse(&["--url", &url], &d.join("served.png"));
     let sent = stats(&s.url)["bytes_sent"].as_u64().unwrap();
     drop(s);
-    let a = iou(&d.join("served.png"), &d.join("render.png"));
-    eprintln!("viewer (voxlod serve) vs render: IoU {a:.4}, {v}");
-    assert!(a >= 0.97, "IoU {a}");
-    assert_eq!(v["nodes"], nodes, "the cut of render");
+    eprintln!("viewer (voxlod serve): {v}");
+    same_picture(
+        &d.join("served.png"),
+        &d.join("render.png"),
+        0.97,
+        "bunny, voxlod serve",
+    );
+    // the cut of render: drawn, or hidden behind the drawn nodes and not fetched
+    let cut = |v: &Value| v["nodes"].as_u64().unwrap() + v["occluded"].as_u64().unwrap();
+    assert_eq!(cut(&v), nodes, "{v}");
     assert_eq!(
         v["bytesFetched"], sent,
         "the page counts what the server sent"
@@ -387,10 +435,13 @@ fn viewer_frame_matches_render_from_both_servers() {
         ],
         &d.join("static.png"),
     );
-    let b = iou(&d.join("static.png"), &d.join("render.png"));
-    eprintln!("viewer (serve-static) vs render: IoU {b:.4}");
-    assert!(b >= 0.97, "IoU {b}");
-    assert_eq!(v2["nodes"], nodes);
+    same_picture(
+        &d.join("static.png"),
+        &d.join("render.png"),
+        0.97,
+        "bunny, serve-static",
+    );
+    assert_eq!(cut(&v2), nodes, "{v2}");
     assert_eq!(v2["server_bytes"], v["bytesFetched"], "{v2}");
 }
 
@@ -427,8 +478,84 @@ fn a_close_up_of_the_dragon_fetches_a_tenth_of_the_file() {
     );
     assert!(fraction <= 0.10, "fetched {sent} of {size} bytes");
     assert!(v["occluded"].as_u64().unwrap() > 0, "{v}");
-    let nodes = render(&file, &q, &d.join("render.png"));
-    let a = iou(&d.join("web.png"), &d.join("render.png"));
-    eprintln!("dragon close-up vs render ({nodes} nodes): IoU {a:.4}");
-    assert!(a >= 0.97, "IoU {a}");
+    render(&file, &q, &d.join("render.png"));
+    same_picture(
+        &d.join("web.png"),
+        &d.join("render.png"),
+        0.97,
+        "dragon close-up",
+    );
+}
+
+#[test]
+fn viewer_draws_materials_and_source_triangles_as_render_does() {
+    if !browser_tools("viewer_draws_materials_and_source_triangles_as_render_does") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // material colours: the block world
+    ok(&voxlod(
+        &[
+            "gen", "--kind", "blocks", "-o", "w.obj", "--size", "32", "--seed", "3",
+        ],
+        d,
+    ));
+    build_ok(&d.join("w.obj"), &d.join("w.voxlod"), &["-r", "256"], d);
+    // source triangles of the leaves a close-up shows
+    build_ok(
+        &sample(),
+        &d.join("s.voxlod"),
+        &["-r", "512", "--source-geometry"],
+        d,
+    );
+    let cases: [(&str, &[(&str, &str)]); 2] = [
+        (
+            "w",
+            &[
+                ("size", "320x240"),
+                ("color", "material"),
+                ("progressive", "0"),
+            ],
+        ),
+        (
+            "s",
+            &[("size", "320x240"), ("zoom", "4"), ("progressive", "0")],
+        ),
+    ];
+    for (name, q) in cases {
+        let file = d.join(format!("{name}.voxlod"));
+        let mut args: Vec<String> = vec![
+            "render".into(),
+            file.to_str().unwrap().into(),
+            "-o".into(),
+            d.join(format!("{name}-render.png"))
+                .to_str()
+                .unwrap()
+                .into(),
+        ];
+        for (k, v) in q.iter().filter(|(k, _)| *k != "progressive") {
+            args.push(format!("--{k}={v}"));
+        }
+        let out = ok(&voxlod(&args, d));
+        let s = serve(&file);
+        let url = format!("{}?{}", s.url, query_string(q));
+        let v = browse(&["--url", &url], &d.join(format!("{name}-web.png")));
+        drop(s);
+        if name == "s" {
+            // render drew every leaf from its triangles; the viewer fetched triangles, no voxels
+            // of level 0
+            assert!(
+                out.contains(" 0 voxels, 0 faces drawn, 8 leaves as"),
+                "{out}"
+            );
+            assert_eq!(v["levels"], serde_json::json!([0]), "{v}");
+        }
+        same_picture(
+            &d.join(format!("{name}-web.png")),
+            &d.join(format!("{name}-render.png")),
+            0.97,
+            name,
+        );
+    }
 }
