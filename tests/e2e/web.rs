@@ -442,6 +442,24 @@ fn viewer_frame_matches_render_from_both_servers() {
         "bunny, serve-static",
     );
     assert_eq!(cut(&v2), nodes, "{v2}");
+
+    // a server that ignores ranges: the viewer says so (and stops reading the answer: how much
+    // of it the server got out first depends on the socket buffers)
+    let o = Command::new("node")
+        .arg(Path::new(REPO).join("tests/node/web-check.js"))
+        .args([
+            "--static-no-ranges",
+            web.to_str().unwrap(),
+            file.to_str().unwrap(),
+        ])
+        .arg(query_string(&q))
+        .arg(d.join("no-ranges.png"))
+        .output()
+        .unwrap();
+    let v3: Value = serde_json::from_slice(&o.stdout).unwrap();
+    let said = v3["error"].as_str().unwrap_or_default();
+    assert!(said.contains("the server ignores range requests"), "{v3}");
+    assert_eq!(v3["bytesFetched"], 0, "{v3}");
     assert_eq!(v2["server_bytes"], v["bytesFetched"], "{v2}");
 }
 

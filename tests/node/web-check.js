@@ -9,6 +9,8 @@
 //       serves WEB_DIR (the viewer) and FILE (as /data/NAME) with serve-static, a plain static
 //       server with range support, counts the bytes of FILE it sends, and opens
 //       /index.html?file=data/NAME&QUERY
+//   node tests/node/web-check.js --static-no-ranges WEB_DIR FILE QUERY OUT.png
+//       the same from a server that ignores Range headers (the viewer must say so)
 // CHROMIUM names the browser (default /usr/bin/chromium); TIMEOUT_MS the wait (default 90000).
 // The JSON: the page's voxlodStatus, `logs` (its console) and, with --static,
 // `server_bytes` (bytes of FILE sent) and `server_requests`.
@@ -20,10 +22,10 @@ const path = require('path');
 const puppeteer = require('puppeteer-core');
 const serveStatic = require('serve-static');
 
-async function staticServer(webDir, file) {
+async function staticServer(webDir, file, ranges) {
   const name = path.basename(file);
   const viewer = serveStatic(webDir, { index: ['index.html'] });
-  const data = serveStatic(path.dirname(file), { index: false });
+  const data = serveStatic(path.dirname(file), { index: false, acceptRanges: ranges });
   const counted = { bytes: 0, requests: 0 };
   const server = http.createServer((req, res) => {
     const done = () => {
@@ -59,13 +61,13 @@ async function main() {
   let local = null;
   if (args[0] === '--url') {
     [, url, out] = args;
-  } else if (args[0] === '--static') {
+  } else if (args[0] === '--static' || args[0] === '--static-no-ranges') {
     const [, webDir, file, query] = args;
     out = args[4];
-    local = await staticServer(webDir, file);
+    local = await staticServer(webDir, file, args[0] === '--static');
     url = `${local.base}/index.html?file=data/${encodeURIComponent(local.name)}&${query}`;
   } else {
-    throw new Error('usage: web-check.js --url URL OUT.png | --static WEB_DIR FILE QUERY OUT.png');
+    throw new Error('usage: web-check.js --url URL OUT.png | --static[-no-ranges] WEB_DIR FILE QUERY OUT.png');
   }
   const size = /[?&]size=(\d+)x(\d+)/.exec(url);
   const [width, height] = size ? [Number(size[1]), Number(size[2])] : [800, 600];
