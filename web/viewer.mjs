@@ -376,6 +376,7 @@ async function main() {
       starved,
       levels: [...levels].sort((a, b) => a - b),
       drawn: list.map((d) => d.i).sort((a, b) => a - b),
+      camera: { eye: shot.eye, target: shot.target, up: shot.up, zoom: view.zoom },
     });
   }
 

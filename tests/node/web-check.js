@@ -11,6 +11,8 @@
 //       /index.html?file=data/NAME&QUERY
 //   node tests/node/web-check.js --static-no-ranges WEB_DIR FILE QUERY OUT.png
 //       the same from a server that ignores Range headers (the viewer must say so)
+// INTERACT=1: after the picture, orbit, zoom out and pan with the mouse, each followed by a
+// complete frame; the cameras in `interactions`.
 // CHROMIUM names the browser (default /usr/bin/chromium); TIMEOUT_MS the wait (default 90000).
 // The JSON: the page's voxlodStatus, `logs` (its console) and, with --static,
 // `server_bytes` (bytes of FILE sent) and `server_requests`.
@@ -108,6 +110,33 @@ async function main() {
     // the canvas's own pixels (the overlay is a separate element, not in them)
     const png = await page.evaluate("document.getElementById('view').toDataURL('image/png')");
     fs.writeFileSync(out, Buffer.from(png.slice(png.indexOf(',') + 1), 'base64'));
+    // INTERACT=1: after the picture, the mouse
+    if (process.env.INTERACT === '1') {
+      // orbit (left drag), then zoom (wheel), then pan (right drag): each changes the camera
+      // and leads to another complete frame
+      const box = await (await page.$('canvas')).boundingBox();
+      const cx = box.x + box.width / 2;
+      const cy = box.y + box.height / 2;
+      status.interactions = [];
+      const settle = async () => {
+        await page.waitForFunction('window.voxlodStatus.complete === false', { timeout: 10000, polling: 20 }).catch(() => {});
+        await page.waitForFunction('window.voxlodStatus.complete || window.voxlodStatus.error', { timeout: 90000, polling: 100 });
+        status.interactions.push(await page.evaluate('window.voxlodStatus.camera'));
+      };
+      await page.mouse.move(cx, cy);
+      await page.mouse.down();
+      await page.mouse.move(cx + 60, cy + 20, { steps: 4 });
+      await page.mouse.up();
+      await settle();
+      await page.mouse.wheel({ deltaY: 400 });
+      await settle();
+      await page.mouse.move(cx, cy);
+      await page.mouse.down({ button: 'right' });
+      await page.mouse.move(cx + 40, cy, { steps: 4 });
+      await page.mouse.up({ button: 'right' });
+      await settle();
+      status.afterInteraction = await page.evaluate('window.voxlodStatus');
+    }
     status.logs = logs;
     if (local) {
       status.server_bytes = local.counted.bytes;
