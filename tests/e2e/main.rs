@@ -34,6 +34,7 @@ mod tiles;
 mod tools;
 mod validation;
 mod view;
+mod web;
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};

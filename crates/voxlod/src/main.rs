@@ -18,6 +18,7 @@ mod gen_blocks;
 mod inspect;
 mod json;
 mod render;
+mod serve;
 mod shard;
 mod verify;
 mod view;
@@ -69,6 +70,9 @@ enum Command {
     /// path to PNGs (--fly, headless) or a window.
     #[command(after_help = view::EXAMPLES)]
     View(view::ViewArgs),
+    /// Serve the browser viewer and an octree file over HTTP (range requests) on this machine.
+    #[command(after_help = serve::EXAMPLES)]
+    Serve(serve::ServeArgs),
     /// List and remove stale work folders of killed builds (`.voxlod-work-*`) in a folder.
     #[command(after_help = EXAMPLES_CLEAN)]
     Clean(clean::CleanArgs),
@@ -313,6 +317,7 @@ fn main() -> ExitCode {
         Command::Render(a) => render::run(a),
         Command::Export(a) => export::run(a),
         Command::View(a) => view::run(a),
+        Command::Serve(a) => serve::run(a),
         Command::Clean(a) => clean::run(a),
         Command::Plan(a) => shard::run_plan(a),
         Command::Map(a) => shard::run_map(a),
