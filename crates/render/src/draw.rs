@@ -209,15 +209,15 @@ impl Renderer {
             layout,
             node_layout,
             adapter: name,
-            two_sided: true,
+            two_sided: false,
         };
         r.check()?;
         Ok(r)
     }
 
-    /// Draws open surfaces from behind (the default): per axis, a voxel whose face mask has
-    /// either face of the axis draws the one on the eye's side, lit with the normal turned
-    /// towards it where the mask lacks that face. False: only the faces of the mask.
+    /// Draws open surfaces from behind too: per axis, a voxel whose face mask has either face
+    /// of the axis draws the one on the eye's side, lit with the normal turned towards it
+    /// where the mask lacks that face. False (the default): only the faces of the mask.
     pub fn set_two_sided(&mut self, two_sided: bool) {
         self.two_sided = two_sided;
     }

@@ -76,10 +76,10 @@ pub struct ViewArgs {
     /// until a sample of them shows); complete --fly frames are the same pictures either way.
     #[arg(long)]
     no_occlusion: bool,
-    /// Draw only the faces of the voxels' face masks (by default open surfaces are drawn from
-    /// behind too, as `render` does).
+    /// Draw open surfaces from behind too, as `render --two-sided` does (default: only the
+    /// faces of the voxels' face masks).
     #[arg(long)]
-    one_sided: bool,
+    two_sided: bool,
 }
 
 #[cfg(feature = "window")]
@@ -118,7 +118,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
     };
     let reader = Reader::open(&a.file)?;
     let (Some(path), Some(dir)) = (a.fly, a.frames) else {
-        return interactive(&reader, config, a.size, !a.one_sided);
+        return interactive(&reader, config, a.size, a.two_sided);
     };
     let path = FlyPath::load(&path)?;
     // the folder itself may be new, its parent must exist (a typo in a path is an error, as
@@ -132,7 +132,7 @@ pub fn run(a: ViewArgs) -> Result<()> {
         })?;
     }
     let mut renderer = Renderer::new()?;
-    renderer.set_two_sided(!a.one_sided);
+    renderer.set_two_sided(a.two_sided);
     let mut viewer = Viewer::new(&reader, renderer, config)?;
     fly(&mut viewer, &path, a.size, a.real_time, &mut |i, frame| {
         // each frame as every output of voxlod: not the octree viewed (nor a link to it), not

@@ -1,9 +1,9 @@
 //! Open surfaces seen from behind. A one-voxel-thick square sheet with its normal up (as a
 //! voxelizer marks it: the +z face and the chunk border caps) is drawn from below: one-sided
-//! (only the mask's faces) almost nothing of it shows; two-sided (the default) it covers what
-//! it covers from above, lit as brightly as its front is (the normal turned towards the eye).
-//! On closed surfaces (the bunny) two-sided draws the same picture as one-sided. No adapter is
-//! a FAILURE, not a skip.
+//! (the default: only the mask's faces) nothing of it shows; two-sided it covers what it
+//! covers from above, lit as its front would be (the normal turned towards the eye). On
+//! closed surfaces seen from outside (the bunny) two-sided draws the same picture as
+//! one-sided. No adapter is a FAILURE, not a skip.
 
 use crate::common;
 
@@ -76,6 +76,8 @@ fn an_open_sheet_is_drawn_and_lit_from_behind() {
     let r = Reader::open(&path).unwrap();
 
     let mut renderer = renderer();
+    assert!(!renderer.two_sided(), "one-sided by default");
+    renderer.set_two_sided(true);
     let up = [0.0, 1.0, 0.0];
     let (above, light_above) = picture(&r, &renderer, [0.4, 0.3, 1.0], up);
     let (below, light_below) = picture(&r, &renderer, [0.4, 0.3, -1.0], up);
@@ -118,6 +120,7 @@ fn closed_surfaces_look_the_same_two_sided() {
     common::build(&m, "npm-bunny/bunny.ply", &file, 512, Mode::Thin);
     let r = Reader::open(&file).unwrap();
     let mut renderer = renderer();
+    renderer.set_two_sided(true);
     for direction in [[0.55, 0.35, 1.0], [-1.0, 0.2, -0.3]] {
         let (two, _) = picture(&r, &renderer, direction, [0.0, 1.0, 0.0]);
         renderer.set_two_sided(false);
