@@ -81,7 +81,7 @@ function readParams() {
   p.material = color === 'material';
   p.source = flag('source', true);
   p.occlusion = flag('occlusion', true);
-  const sides = params.get('sides') ?? '2';
+  const sides = params.get('sides') ?? '1';
   if (sides !== '1' && sides !== '2') throw new Error(`sides=${sides} is neither 1 nor 2`);
   p.twoSided = sides === '2';
   p.progressive = flag('progressive', true);

@@ -161,6 +161,35 @@ fn fly_frames_are_complete_unless_real_time() {
     );
     let last = complete.last().unwrap();
     assert_eq!(last["finest_level_drawn"], 0, "{last}");
+    // the GPU holds 12 bytes per resident voxel (nothing partly uploaded in a complete frame)
+    for s in &complete {
+        let voxel_bytes =
+            s["bytes_resident"].as_u64().unwrap() - s["source_bytes_resident"].as_u64().unwrap();
+        assert_eq!(
+            voxel_bytes,
+            12 * s["voxels_resident"].as_u64().unwrap(),
+            "{s}"
+        );
+        assert!(
+            s["occluded_nodes"].is_u64() && s["draws"].as_u64().unwrap() >= 1,
+            "{s}"
+        );
+    }
+    // without occlusion culling: nothing occluded, the same pictures
+    let (plain, plain_pixels) = fly_in(
+        &file,
+        &dir.path().join("plain"),
+        &[limit[0], limit[1], "--no-occlusion"],
+    );
+    for (i, s) in plain.iter().enumerate() {
+        assert_eq!(s["occluded_nodes"], 0, "{s}");
+        assert_eq!(s["probe_nodes"], 0, "{s}");
+        let (a, b) = (pixels[i] as f64, plain_pixels[i] as f64);
+        assert!(
+            (a - b).abs() <= 0.01 * b,
+            "frame {i}: {a} vs {b} model pixels"
+        );
+    }
 
     let (real, real_pixels) = fly_in(
         &file,

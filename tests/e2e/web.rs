@@ -377,15 +377,9 @@ fn render(file: &Path, query: &[(&str, &str)], png: &Path) -> u64 {
     before.rsplit(' ').next().unwrap().parse().unwrap()
 }
 
-/// The viewer's query for `render`'s parameters `q`. The viewer draws open surfaces from
-/// behind by default (`sides=2`); a `render` without `--one-sided` draws only the face-mask's
-/// faces, and the viewer is asked for the same (`sides=1`).
+/// The viewer's query for `render`'s parameters `q`: both draw one-sided by default
+/// (`render --two-sided` is `sides=2`), so the parameters carry over as they are.
 fn query_string(q: &[(&str, &str)]) -> String {
-    let help = text(&voxlod(&["render", "--help"], REPO));
-    let mut q = q.to_vec();
-    if !help.contains("--one-sided") {
-        q.push(("sides", "1"));
-    }
     q.iter()
         .map(|(k, v)| format!("{k}={v}"))
         .collect::<Vec<_>>()

@@ -112,17 +112,31 @@ pub fn refines(reader: &Reader, index: usize, shot: &Shot, max_error_px: f64) ->
 /// The cut for `shot`: the nodes in the frustum whose error is at most `max_error_px` (or
 /// leaves) below ancestors that all exceed it, in depth-first order.
 pub fn select(reader: &Reader, shot: &Shot, max_error_px: f64) -> Vec<CutNode> {
+    select_unless(reader, shot, max_error_px, &|_| false).0
+}
+
+/// [`select`], but a node for which `hidden` is true is not refined (occlusion culling: it
+/// stays in the cut in place of its subtree); also returns how many nodes that stopped.
+pub fn select_unless(
+    reader: &Reader,
+    shot: &Shot,
+    max_error_px: f64,
+    hidden: &dyn Fn(usize) -> bool,
+) -> (Vec<CutNode>, usize) {
     assert!(max_error_px > 0.0, "the pixel threshold must be positive");
     let mut out = Vec::new();
+    let mut stopped = 0;
     let mut stack: Vec<usize> = reader.root().into_iter().collect();
     while let Some(i) = stack.pop() {
         let b = reader.node_bounds(i).expect("a node of the file");
         if !in_frustum(shot, b) {
             continue;
         }
-        if refines(reader, i, shot, max_error_px) {
+        let refine = refines(reader, i, shot, max_error_px);
+        if refine && !hidden(i) {
             stack.extend(reader.children(i).iter().rev().flatten());
         } else {
+            stopped += refine as usize;
             let error = node_error(reader, i, shot);
             let over = reader.nodes()[i].level == 0 && !(error <= max_error_px);
             out.push(CutNode {
@@ -132,7 +146,7 @@ pub fn select(reader: &Reader, shot: &Shot, max_error_px: f64) -> Vec<CutNode> {
             });
         }
     }
-    out
+    (out, stopped)
 }
 
 #[cfg(test)]

@@ -9,10 +9,10 @@
 use std::ops::Range;
 
 use glam::DVec3;
-use voxlod_format::Reader;
+use voxlod_format::{Reader, Voxel};
 
 use crate::camera::Shot;
-use crate::faces::{face_direction, node_faces_by, ColorBy};
+use crate::faces::{material_color, ColorBy};
 use crate::pass::{pass_pipeline, Targets};
 use crate::picture::Picture;
 use crate::source_draw;
@@ -21,55 +21,93 @@ use crate::RenderError;
 /// Background of the picture (light grey); covered pixels have alpha 255, the rest 0.
 pub const BACKGROUND: [u8; 3] = [236, 238, 242];
 
-/// One face instance as the vertex shader reads it (28 bytes).
+/// Bytes of one resident voxel on the GPU: the three words of its record as the file stores
+/// them (FORMAT.md section 6; `--color material` replaces the colour word), nothing per face.
+/// The vertex shader makes the faces from them.
+pub const VOXEL_BYTES: u64 = std::mem::size_of::<Voxel>() as u64;
+
+/// The constants of one node's draw (group 1 at a dynamic offset): the minimum corner of its
+/// chunk relative to the picture's origin (computed in f64, so f32 keeps the precision near
+/// the camera's subject), the voxel edge, and flags (bit 0: two-sided).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-pub(crate) struct FaceInstance {
-    pub min_corner: [f32; 3],
-    pub edge: f32,
-    pub dir: u32,
-    pub normal: u32,
-    pub color: u32,
+pub(crate) struct NodeConstants {
+    pub min_edge: [f32; 4],
+    pub flags: [u32; 4],
 }
 
-impl FaceInstance {
-    /// The instance of a voxel face, its corner relative to `origin` (f32 keeps the precision
-    /// near the camera's subject, not near the world's origin).
-    pub(crate) fn of(f: &crate::faces::Face, origin: DVec3) -> Self {
-        let rel = DVec3::from(f.min) - origin;
-        FaceInstance {
-            min_corner: rel.as_vec3().into(),
-            edge: f.edge as f32,
-            dir: f.dir as u32,
-            normal: f.normal,
-            color: u32::from_le_bytes(f.rgba),
+impl NodeConstants {
+    /// The constants of node `index` of `reader`, relative to `origin` (flags 0).
+    pub(crate) fn of(reader: &Reader, index: usize, origin: DVec3) -> Self {
+        let e = reader.nodes()[index];
+        let spec = reader.spec();
+        let min = DVec3::from(spec.voxel_min_corner(e.level, e.pos(), [0; 3])) - origin;
+        let edge = spec.voxel_size_at(e.level) as f32;
+        NodeConstants {
+            min_edge: [min.x as f32, min.y as f32, min.z as f32, edge],
+            flags: [0; 4],
         }
     }
 }
 
-/// Bytes of one [`FaceInstance`] in a vertex buffer.
-pub(crate) const FACE_BYTES: u64 = std::mem::size_of::<FaceInstance>() as u64;
-
-/// Instances `range` of a vertex buffer of [`FaceInstance`]s, to be drawn.
-pub(crate) type Batch<'a> = (&'a wgpu::Buffer, Range<u32>);
+/// One node's voxels to draw: instances `voxels` of `buffer` (records of [`VOXEL_BYTES`]),
+/// with the node's constants; `probe`: drawn as occlusion culling's test of a hidden node
+/// (depth tested, no colour or depth written); `query`: inside an occlusion query.
+pub(crate) struct Batch<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub voxels: Range<u32>,
+    pub node: NodeConstants,
+    pub probe: bool,
+    pub query: bool,
+}
 
 /// Source triangles to draw: vertices (`SourceVertex`), `u32` indices and the number of
 /// indices.
 pub(crate) type SourceBatch<'a> = (wgpu::BufferSlice<'a>, wgpu::BufferSlice<'a>, u32);
 
-/// A GPU device with the voxel-face pipeline, reusable for many pictures.
+/// Vertices per voxel instance: three slots (x, y, z) of one face (two triangles) each.
+const VERTICES_PER_VOXEL: u32 = 18;
+
+/// Flag bit of [`NodeConstants::flags`]: an axis with either face-mask bit draws the face on
+/// the eye's side (open surfaces seen from behind).
+const FLAG_TWO_SIDED: u32 = 1;
+
+/// Faces the vertex shader draws for a voxel with minimum corner `min`, edge `edge` and face
+/// mask `mask` seen from `eye` (the shader's rule, in f64): per axis the face on the eye's side
+/// if the eye is outside the voxel's slab and the mask has that face's bit (`two_sided`: either
+/// bit of the axis).
+pub fn faces_seen(eye: DVec3, min: [f64; 3], edge: f64, mask: u8, two_sided: bool) -> u32 {
+    (0..3)
+        .filter(|&a| {
+            let dir = if eye[a] > min[a] + edge {
+                2 * a
+            } else if eye[a] < min[a] {
+                2 * a + 1
+            } else {
+                return false;
+            };
+            mask >> dir & 1 == 1 || (two_sided && mask >> (2 * a) & 3 != 0)
+        })
+        .count() as u32
+}
+
+/// A GPU device with the voxel pipeline, reusable for many pictures.
 pub struct Renderer {
     gpu: voxlod_gpu::Gpu,
     pipeline: wgpu::RenderPipeline,
+    probe_pipeline: wgpu::RenderPipeline,
     source_pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
+    node_layout: wgpu::BindGroupLayout,
     adapter: String,
+    two_sided: bool,
 }
 
 impl std::fmt::Debug for Renderer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Renderer")
             .field("adapter", &self.adapter)
+            .field("two_sided", &self.two_sided)
             .finish_non_exhaustive()
     }
 }
@@ -86,6 +124,14 @@ pub(crate) fn gpu_error(e: voxlod_gpu::GpuError) -> RenderError {
     }
 }
 
+/// Bytes between two nodes' constants in the per-draw uniform buffer (the dynamic offset
+/// alignment every adapter accepts).
+const NODE_STRIDE: u64 = 256;
+
+/// Occlusion queries of one draw: results of more batches than this are not asked for (those
+/// batches count as visible).
+pub(crate) const MAX_QUERIES: u32 = wgpu::QUERY_SET_MAX_QUERIES;
+
 impl Renderer {
     /// Finds an adapter (Vulkan first, then GL; `WGPU_BACKEND` overrides) and builds the
     /// pipeline.
@@ -100,57 +146,85 @@ impl Renderer {
         let name = format!("{} ({:?})", gpu.info.name, gpu.info.backend);
         let device = &gpu.device;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("voxel faces"),
+            label: Some("voxels"),
             source: wgpu::ShaderSource::Wgsl(include_str!("shader.wgsl").into()),
         });
+        let uniform = |dynamic: bool| wgpu::BindGroupLayoutEntry {
+            binding: 0,
+            visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: dynamic,
+                min_binding_size: None,
+            },
+            count: None,
+        };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("uniforms"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
+            entries: &[uniform(false)],
         });
-        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        let node_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("node constants"),
+            entries: &[uniform(true)],
+        });
+        let source_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: None,
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let attributes = wgpu::vertex_attr_array![
-            0 => Float32x3, 1 => Float32, 2 => Uint32, 3 => Uint32, 4 => Uint32
-        ];
-        let pipeline = pass_pipeline(
-            device,
-            "voxel faces",
-            &pl,
-            &module,
-            wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<FaceInstance>() as u64,
-                step_mode: wgpu::VertexStepMode::Instance,
-                attributes: &attributes,
-            },
-            wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                front_face: wgpu::FrontFace::Ccw,
-                cull_mode: Some(wgpu::Face::Back),
-                ..Default::default()
-            },
-        );
-        let source_pipeline = source_draw::pipeline(device, &pl);
+        let voxel_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: None,
+            bind_group_layouts: &[Some(&layout), Some(&node_layout)],
+            immediate_size: 0,
+        });
+        let attributes = wgpu::vertex_attr_array![0 => Uint32x3];
+        let voxel_pipeline = |probe: bool| {
+            pass_pipeline(
+                device,
+                if probe { "voxel probes" } else { "voxels" },
+                &voxel_layout,
+                &module,
+                wgpu::VertexBufferLayout {
+                    array_stride: VOXEL_BYTES,
+                    step_mode: wgpu::VertexStepMode::Instance,
+                    attributes: &attributes,
+                },
+                wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    front_face: wgpu::FrontFace::Ccw,
+                    cull_mode: Some(wgpu::Face::Back),
+                    ..Default::default()
+                },
+                probe,
+            )
+        };
+        let pipeline = voxel_pipeline(false);
+        let probe_pipeline = voxel_pipeline(true);
+        let source_pipeline = source_draw::pipeline(device, &source_layout);
         let r = Renderer {
             gpu,
             pipeline,
+            probe_pipeline,
             source_pipeline,
             layout,
+            node_layout,
             adapter: name,
+            two_sided: false,
         };
         r.check()?;
         Ok(r)
+    }
+
+    /// Draws open surfaces from behind too: per axis, a voxel whose face mask has either face
+    /// of the axis draws the one on the eye's side, lit with the normal turned towards it
+    /// where the mask lacks that face. False (the default): only the faces of the mask.
+    pub fn set_two_sided(&mut self, two_sided: bool) {
+        self.two_sided = two_sided;
+    }
+
+    /// True if open surfaces are drawn from behind ([`set_two_sided`](Self::set_two_sided)).
+    pub fn two_sided(&self) -> bool {
+        self.two_sided
     }
 
     /// The adapter's name and backend, e.g. "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)".
@@ -204,44 +278,79 @@ impl Renderer {
     ) -> Result<Picture, RenderError> {
         let centre = shot.target;
         let tris = source_draw::gather(reader, source, centre, color)?;
-        let mut faces: Vec<FaceInstance> = Vec::new();
+        // every node's voxels in one buffer, each node's range and constants
+        let mut words: Vec<Voxel> = Vec::new();
+        let mut ranges: Vec<(Range<u32>, NodeConstants)> = Vec::new();
         let mut buf = Vec::new();
-        let mut voxels = 0u64;
+        let (mut voxels, mut faces) = (0u64, 0u64);
+        let spec = reader.spec();
         for &i in nodes {
             if tris.leaves.binary_search(&i).is_ok() {
                 continue;
             }
-            node_faces_by(reader, i, &mut buf, color, &mut |f| {
-                // a face is seen only from its outer side: (eye − point on its plane)·d > 0
-                let d = face_direction(f.dir);
-                let a = (f.dir >> 1) as usize;
-                let plane = f.min[a] + if f.dir & 1 == 0 { f.edge } else { 0.0 };
-                let side = (shot.eye[a] - plane) * d[a] as f64;
-                if side <= 0.0 {
-                    return;
+            reader.read_node_into(i, &mut buf)?;
+            let materials = match color {
+                ColorBy::Voxel => None,
+                ColorBy::Material => Some(reader.read_materials(i)?.ok_or_else(|| {
+                    RenderError::Option(
+                        "the file has no material channel (built from a mesh with fewer than two materials)"
+                            .into(),
+                    )
+                })?),
+            };
+            let e = reader.nodes()[i];
+            let edge = spec.voxel_size_at(e.level);
+            let start = words.len() as u32;
+            for (j, v) in buf.iter().enumerate() {
+                if v.mask() == 0 {
+                    continue;
                 }
-                faces.push(FaceInstance::of(&f, centre));
-            })?;
+                let min = spec.voxel_min_corner(e.level, e.pos(), v.pos());
+                faces += faces_seen(shot.eye, min, edge, v.mask(), self.two_sided) as u64;
+                let mut w = *v;
+                if let Some(m) = &materials {
+                    w.color = u32::from_le_bytes(material_color(m[j]));
+                }
+                words.push(w);
+            }
             voxels += buf.len() as u64;
+            ranges.push((
+                start..words.len() as u32,
+                NodeConstants::of(reader, i, centre),
+            ));
         }
-        let face_bytes = std::mem::size_of_val(faces.as_slice()) as u64;
-        if face_bytes > self.gpu.device.limits().max_buffer_size {
+        let voxel_bytes = std::mem::size_of_val(words.as_slice()) as u64;
+        if voxel_bytes > self.gpu.device.limits().max_buffer_size {
             return Err(RenderError::Option(format!(
-                "{} faces ({face_bytes} bytes) exceed the adapter's largest buffer; draw a coarser level or a larger --error",
-                faces.len()
+                "{} voxels ({voxel_bytes} bytes) exceed the adapter's largest buffer; draw a coarser level or a larger --error",
+                words.len()
             )));
         }
         use wgpu::util::DeviceExt;
-        let vbuf = (!faces.is_empty()).then(|| {
+        let vbuf = (!words.is_empty()).then(|| {
             self.gpu
                 .device
                 .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("faces"),
-                    contents: bytemuck::cast_slice(&faces),
+                    label: Some("voxels"),
+                    contents: bytemuck::cast_slice(&words),
                     usage: wgpu::BufferUsages::VERTEX,
                 })
         });
-        let batches: Vec<Batch> = vbuf.iter().map(|b| (b, 0..faces.len() as u32)).collect();
+        let batches: Vec<Batch> = vbuf
+            .iter()
+            .flat_map(|b| {
+                ranges
+                    .iter()
+                    .filter(|(r, _)| !r.is_empty())
+                    .map(move |(r, node)| Batch {
+                        buffer: b,
+                        voxels: r.clone(),
+                        node: *node,
+                        probe: false,
+                        query: false,
+                    })
+            })
+            .collect();
         let tri_bufs = (!tris.indices.is_empty()).then(|| {
             let init = |label, contents, usage| {
                 self.gpu
@@ -269,15 +378,15 @@ impl Renderer {
             .iter()
             .map(|(v, i)| (v.slice(..), i.slice(..), tris.indices.len() as u32))
             .collect();
-        let (w, h, rgba) = self.draw(shot, centre, &batches, &source_batches)?;
+        let drawn = self.draw(shot, centre, &batches, &source_batches)?;
         Ok(Picture {
-            width: w,
-            height: h,
-            rgba,
+            width: drawn.width,
+            height: drawn.height,
+            rgba: drawn.rgba,
             shot: *shot,
             nodes: nodes.to_vec(),
             voxels,
-            faces_drawn: faces.len() as u64,
+            faces_drawn: faces,
             source_leaves: tris.leaves.len() as u64,
             source_triangles: tris.triangles,
         })
@@ -299,16 +408,16 @@ impl Renderer {
         &self.gpu.queue
     }
 
-    /// Draws `batches` of face instances (corners relative to `origin`) and `sources`, batches
-    /// of source triangles (positions relative to `origin` too), as seen by `shot` into an
-    /// offscreen picture and reads it back: width, height and RGBA rows.
+    /// Draws `sources`, batches of source triangles, then `batches` of voxels in their order
+    /// (positions relative to `origin`) as seen by `shot` into an offscreen picture and reads
+    /// it back, with the results of the batches' occlusion queries.
     pub(crate) fn draw(
         &self,
         shot: &Shot,
         origin: DVec3,
         batches: &[Batch],
         sources: &[SourceBatch],
-    ) -> Result<(u32, u32, Vec<u8>), RenderError> {
+    ) -> Result<Drawing, RenderError> {
         let (w, h) = (shot.width, shot.height);
         let max_dim = self.gpu.device.limits().max_texture_dimension_2d;
         if w > max_dim || h > max_dim {
@@ -317,16 +426,99 @@ impl Renderer {
             )));
         }
         let (_uniforms, bind) = self.uniforms(shot, origin);
+        let (_nodes, node_bind) = self.node_constants(batches);
+        // one occlusion query per batch that asks for one, up to the query set's size
+        let mut query_of = vec![None; batches.len()];
+        let mut queries = 0u32;
+        for (k, b) in batches.iter().enumerate() {
+            if b.query && queries < MAX_QUERIES {
+                query_of[k] = Some(queries);
+                queries += 1;
+            }
+        }
+        let query_set = (queries > 0).then(|| {
+            self.gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("occlusion"),
+                ty: wgpu::QueryType::Occlusion,
+                count: queries,
+            })
+        });
         let targets = Targets::new(&self.gpu.device, w, h);
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-        self.encode_pass(&mut enc, &targets, &bind, batches, sources);
-        let rgba = self.read_back(enc, &targets, w, h)?;
-        Ok((w, h, rgba))
+        self.encode_pass(
+            &mut enc,
+            &targets,
+            (&bind, node_bind.as_ref()),
+            batches,
+            sources,
+            query_set.as_ref().map(|q| (q, query_of.as_slice())),
+        );
+        let resolve = query_set.as_ref().map(|q| {
+            let buf = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("occlusion results"),
+                size: 8 * queries as u64,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            enc.resolve_query_set(q, 0..queries, &buf, 0);
+            buf
+        });
+        let (rgba, samples) = self.read_back(enc, &targets, w, h, resolve.as_ref())?;
+        let passed = query_of
+            .iter()
+            .map(|q| q.map(|q| samples[q as usize] > 0))
+            .collect();
+        Ok(Drawing {
+            width: w,
+            height: h,
+            rgba,
+            passed,
+        })
+    }
+
+    /// The per-draw uniform buffer of the batches' node constants ([`NODE_STRIDE`] apart, the
+    /// flags set from the renderer's settings) and its bind group; none without batches.
+    fn node_constants(&self, batches: &[Batch]) -> (Option<wgpu::Buffer>, Option<wgpu::BindGroup>) {
+        if batches.is_empty() {
+            return (None, None);
+        }
+        let mut data = vec![0u8; batches.len() * NODE_STRIDE as usize];
+        for (k, b) in batches.iter().enumerate() {
+            let mut node = b.node;
+            node.flags[0] = if self.two_sided { FLAG_TWO_SIDED } else { 0 };
+            let at = k * NODE_STRIDE as usize;
+            data[at..at + std::mem::size_of::<NodeConstants>()]
+                .copy_from_slice(bytemuck::bytes_of(&node));
+        }
+        use wgpu::util::DeviceExt;
+        let buf = self
+            .gpu
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("node constants"),
+                contents: &data,
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+        let bind = self
+            .gpu
+            .device
+            .create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &self.node_layout,
+                entries: &[wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &buf,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(std::mem::size_of::<NodeConstants>() as u64),
+                    }),
+                }],
+            });
+        (Some(buf), Some(bind))
     }
 
     /// The uniform buffer of `shot` (positions relative to `origin`) and its bind group:
-    /// view_proj, the light (vec4), the eye relative to the origin (vec4; read by
-    /// source.wgsl).
+    /// view_proj, the light (vec4), the eye relative to the origin (vec4).
     fn uniforms(&self, shot: &Shot, origin: DVec3) -> (wgpu::Buffer, wgpu::BindGroup) {
         let view_proj = shot.view_proj(origin).as_mat4();
         // light from the upper left behind the eye, fixed relative to the camera
@@ -364,18 +556,21 @@ impl Renderer {
     }
 
     /// The render pass into `targets`: cleared to [`BACKGROUND`] (alpha 0) and depth 1, the
-    /// face instances of `batches`, then the source triangles of `sources`.
+    /// source triangles of `sources`, then the voxels of `batches` in their order (probes with
+    /// the probe pipeline), each batch with a query index in `queries` inside that occlusion
+    /// query.
     fn encode_pass(
         &self,
         enc: &mut wgpu::CommandEncoder,
         targets: &Targets,
-        bind: &wgpu::BindGroup,
+        (bind, node_bind): (&wgpu::BindGroup, Option<&wgpu::BindGroup>),
         batches: &[Batch],
         sources: &[SourceBatch],
+        queries: Option<(&wgpu::QuerySet, &[Option<u32>])>,
     ) {
         let bg = BACKGROUND.map(|c| c as f64 / 255.0);
         let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("voxel faces"),
+            label: Some("voxels"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
                 view: &targets.msaa_view,
                 depth_slice: None,
@@ -398,16 +593,9 @@ impl Renderer {
                 }),
                 stencil_ops: None,
             }),
+            occlusion_query_set: queries.map(|(q, _)| q),
             ..Default::default()
         });
-        if !batches.is_empty() {
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, bind, &[]);
-        }
-        for (vbuf, range) in batches {
-            pass.set_vertex_buffer(0, vbuf.slice(..));
-            pass.draw(0..6, range.clone());
-        }
         if !sources.is_empty() {
             pass.set_pipeline(&self.source_pipeline);
             pass.set_bind_group(0, bind, &[]);
@@ -417,23 +605,50 @@ impl Renderer {
             pass.set_index_buffer(*indices, wgpu::IndexFormat::Uint32);
             pass.draw_indexed(0..*count, 0, 0..1);
         }
+        let Some(node_bind) = node_bind else { return };
+        let mut probing = None;
+        for (k, b) in batches.iter().enumerate() {
+            if probing != Some(b.probe) {
+                pass.set_pipeline(if b.probe {
+                    &self.probe_pipeline
+                } else {
+                    &self.pipeline
+                });
+                pass.set_bind_group(0, bind, &[]);
+                probing = Some(b.probe);
+            }
+            pass.set_bind_group(1, node_bind, &[(k as u64 * NODE_STRIDE) as u32]);
+            pass.set_vertex_buffer(0, b.buffer.slice(..));
+            let query = queries.and_then(|(_, q)| q[k]);
+            if let Some(q) = query {
+                pass.begin_occlusion_query(q);
+            }
+            pass.draw(0..VERTICES_PER_VOXEL, b.voxels.clone());
+            if query.is_some() {
+                pass.end_occlusion_query();
+            }
+        }
     }
 
     /// Copies the resolved picture of `targets` (`w`×`h`) into a mapped buffer after the
-    /// commands of `enc`, submits them, waits, and returns its RGBA rows without the row
-    /// padding the copy needs.
+    /// commands of `enc`, and after it the resolved occlusion query results of `queries`,
+    /// submits them, waits, and returns the RGBA rows without the row padding the copy needs
+    /// and the queries' sample counts.
     fn read_back(
         &self,
         mut enc: wgpu::CommandEncoder,
         targets: &Targets,
         w: u32,
         h: u32,
-    ) -> Result<Vec<u8>, RenderError> {
+        queries: Option<&wgpu::Buffer>,
+    ) -> Result<(Vec<u8>, Vec<u64>), RenderError> {
         let row = (4 * w).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
             * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+        let picture = row as u64 * h as u64;
+        let query_bytes = queries.map_or(0, |q| q.size());
         let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("readback"),
-            size: row as u64 * h as u64,
+            size: picture + query_bytes,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -454,6 +669,10 @@ impl Renderer {
             },
             targets.size,
         );
+        if let Some(q) = queries {
+            // the picture's rows are 256-byte multiples: the results start 8-byte aligned
+            enc.copy_buffer_to_buffer(q, 0, &staging, picture, query_bytes);
+        }
         self.gpu.queue.submit([enc.finish()]);
         let (tx, rx) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, .., move |r| {
@@ -472,6 +691,7 @@ impl Renderer {
             .map_err(|e| gpu(e.to_string()))?
             .map_err(|e| gpu(e.to_string()))?;
         let mut rgba = Vec::with_capacity(4 * w as usize * h as usize);
+        let samples;
         {
             let view = staging
                 .get_mapped_range(..)
@@ -480,8 +700,21 @@ impl Renderer {
                 let start = y * row as usize;
                 rgba.extend_from_slice(&view[start..start + 4 * w as usize]);
             }
+            samples = view[picture as usize..]
+                .chunks_exact(8)
+                .map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes")))
+                .collect();
         }
         staging.unmap();
-        Ok(rgba)
+        Ok((rgba, samples))
     }
+}
+
+/// What [`Renderer::draw`] returns: the picture and, per batch, whether its occlusion query
+/// passed a sample (none for a batch drawn without one).
+pub(crate) struct Drawing {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<u8>,
+    pub passed: Vec<Option<bool>>,
 }

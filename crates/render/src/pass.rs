@@ -11,7 +11,9 @@ const SAMPLES: u32 = 4;
 
 /// A pipeline of the picture's pass (the voxel faces', the source triangles'): `module`'s `vs`
 /// and `fs` entries over one vertex buffer with `layout`'s uniforms, depth tested (less) and
-/// written, into the pass's targets ([`COLOR_FORMAT`], [`DEPTH_FORMAT`], [`SAMPLES`]).
+/// written, into the pass's targets ([`COLOR_FORMAT`], [`DEPTH_FORMAT`], [`SAMPLES`]). A
+/// `probe` pipeline (occlusion culling's test of a hidden node) is depth tested the same way
+/// but writes neither colour nor depth.
 pub(crate) fn pass_pipeline(
     device: &wgpu::Device,
     label: &str,
@@ -19,6 +21,7 @@ pub(crate) fn pass_pipeline(
     module: &wgpu::ShaderModule,
     buffer: wgpu::VertexBufferLayout,
     primitive: wgpu::PrimitiveState,
+    probe: bool,
 ) -> wgpu::RenderPipeline {
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(label),
@@ -32,7 +35,7 @@ pub(crate) fn pass_pipeline(
         primitive,
         depth_stencil: Some(wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
+            depth_write_enabled: Some(!probe),
             depth_compare: Some(wgpu::CompareFunction::Less),
             stencil: Default::default(),
             bias: Default::default(),
@@ -48,7 +51,11 @@ pub(crate) fn pass_pipeline(
             targets: &[Some(wgpu::ColorTargetState {
                 format: COLOR_FORMAT,
                 blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
+                write_mask: if probe {
+                    wgpu::ColorWrites::empty()
+                } else {
+                    wgpu::ColorWrites::ALL
+                },
             })],
         }),
         multiview_mask: None,

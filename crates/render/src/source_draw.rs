@@ -135,5 +135,6 @@ pub(crate) fn pipeline(
             cull_mode: None,
             ..Default::default()
         },
+        false,
     )
 }

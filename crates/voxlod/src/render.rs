@@ -57,6 +57,12 @@ pub struct RenderArgs {
     /// their source triangles.
     #[arg(long)]
     no_source: bool,
+    /// Draw open surfaces (scans, photogrammetry, single walls) from behind too: per axis, a
+    /// voxel with either face of the axis in its mask shows the one towards the eye, lit as
+    /// the front would be from that side. Closed surfaces seen from outside look the same;
+    /// from inside a closed shell its inner side shows. Default: only the faces of the masks.
+    #[arg(long)]
+    two_sided: bool,
 }
 
 fn parse_color(s: &str) -> Result<ColorBy, String> {
@@ -143,7 +149,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
         target: a.target,
     };
     let (shot, nodes) = voxlod_render::frame(&r, &view, lod)?;
-    let renderer = Renderer::new()?;
+    let mut renderer = Renderer::new()?;
+    renderer.set_two_sided(a.two_sided);
     let source = if a.no_source {
         Vec::new()
     } else {

@@ -26,9 +26,13 @@ Headless frames are complete (drawn once all their camera wants is resident); --
 draws each after one frame's upload, as the window shows it. No display: use --fly, or run the
 window under xvfb-run. The camera path format: docs/VIEWER.md.
 Each headless frame prints one JSON line: frame, cut_nodes, cut_leaf_nodes, drawn_nodes,
-drawn_leaf_nodes, source_leaves_drawn, faces_drawn, nodes_resident, bytes_resident,
-source_bytes_resident, cache_budget, bytes_uploaded, upload_limit, cache_hits, cache_misses,
-evictions, pending, starved, passes, ... (bytes are bytes; every field in docs/JSON.md).";
+drawn_leaf_nodes, source_leaves_drawn, faces_drawn, occluded_nodes, probe_nodes,
+nodes_resident, voxels_resident, bytes_resident, source_bytes_resident, cache_budget,
+bytes_uploaded, upload_limit, cache_hits, cache_misses, evictions, pending, starved, passes,
+draws, ... (bytes are bytes; every field in docs/JSON.md).
+The GPU holds each resident node's voxels as the file stores them (12 bytes a voxel; the
+faces are made in the vertex shader). Occlusion culling (default; --no-occlusion turns it
+off) stops refining nodes the last frame found hidden behind nearer ones.";
 
 #[derive(Args)]
 pub struct ViewArgs {
@@ -67,15 +71,31 @@ pub struct ViewArgs {
     /// voxels are coarser than --error pixels.
     #[arg(long)]
     no_source: bool,
+    /// Refine every node the cut wants. By default nodes found hidden behind nearer ones by
+    /// the last frame's occlusion queries are not refined (drawn coarse as depth-only probes
+    /// until a sample of them shows); complete --fly frames are the same pictures either way.
+    #[arg(long)]
+    no_occlusion: bool,
+    /// Draw open surfaces from behind too, as `render --two-sided` does (default: only the
+    /// faces of the voxels' face masks).
+    #[arg(long)]
+    two_sided: bool,
 }
 
 #[cfg(feature = "window")]
-fn interactive(reader: &Reader, config: StreamConfig, size: (u32, u32)) -> Result<()> {
-    Ok(voxlod_render::view::window::run(reader, config, size)?)
+fn interactive(
+    reader: &Reader,
+    config: StreamConfig,
+    size: (u32, u32),
+    two_sided: bool,
+) -> Result<()> {
+    Ok(voxlod_render::view::window::run(
+        reader, config, size, two_sided,
+    )?)
 }
 
 #[cfg(not(feature = "window"))]
-fn interactive(_: &Reader, _: StreamConfig, _: (u32, u32)) -> Result<()> {
+fn interactive(_: &Reader, _: StreamConfig, _: (u32, u32), _: bool) -> Result<()> {
     bail!("this build of voxlod has no window (feature `window`); render a camera path with --fly PATH.json --frames DIR")
 }
 
@@ -94,10 +114,11 @@ pub fn run(a: ViewArgs) -> Result<()> {
         upload_bytes_per_frame: bytes(a.upload_kib_per_frame, 1024.0, "--upload-kib-per-frame")?,
         max_error_px: a.error,
         source: !a.no_source,
+        occlusion: !a.no_occlusion,
     };
     let reader = Reader::open(&a.file)?;
     let (Some(path), Some(dir)) = (a.fly, a.frames) else {
-        return interactive(&reader, config, a.size);
+        return interactive(&reader, config, a.size, a.two_sided);
     };
     let path = FlyPath::load(&path)?;
     // the folder itself may be new, its parent must exist (a typo in a path is an error, as
@@ -110,7 +131,8 @@ pub fn run(a: ViewArgs) -> Result<()> {
             )
         })?;
     }
-    let renderer = Renderer::new()?;
+    let mut renderer = Renderer::new()?;
+    renderer.set_two_sided(a.two_sided);
     let mut viewer = Viewer::new(&reader, renderer, config)?;
     fly(&mut viewer, &path, a.size, a.real_time, &mut |i, frame| {
         // each frame as every output of voxlod: not the octree viewed (nor a link to it), not

@@ -77,25 +77,37 @@ impl<'a> Viewer<'a> {
         &self.stream
     }
 
+    /// Turns occlusion culling on or off (the cache is kept).
+    pub fn set_occlusion(&mut self, on: bool) {
+        self.stream.set_occlusion(on);
+    }
+
     /// Streams and draws one real-time frame for `shot`: one stream pass, at most the upload
     /// limit, and what is resident drawn (as the window does: after a jump, coarse levels or
-    /// nothing until the cut arrives over the next frames).
+    /// nothing until the cut arrives over the next frames; with occlusion culling, a node
+    /// seen again after being hidden is refined from the next frame).
     pub fn frame(&mut self, shot: &Shot) -> Result<Frame, RenderError> {
         let (stats, drawn) = self.stream.frame(self.reader, &self.renderer, shot)?;
-        self.draw(shot, stats, drawn)
+        let (frame, _) = self.draw(shot, stats, drawn)?;
+        Ok(frame)
     }
 
     /// Streams and draws one complete frame for `shot`: stream passes (each within the upload
     /// limit, as in [`frame`](Self::frame)) repeat until nothing the frame wants is pending,
     /// or until a pass makes no progress (the cache budget is full of entries this frame needs,
-    /// or an entry exceeds it: then what fits is drawn, as `starved` and `too_big` say). The
-    /// picture is the one the camera gets once streaming has caught up, whatever the upload
-    /// limit. Counters: hits and misses are those of the first pass (the cache as the frame
-    /// found it), bytes uploaded, evictions and completions are summed over the passes, the
-    /// rest are the last pass's; `passes` says how many there were.
+    /// or an entry exceeds it: then what fits is drawn, as `starved` and `too_big` say). With
+    /// occlusion culling, if a probe (a node hidden in the last draw) passes a sample, the
+    /// frame is streamed and drawn again, refined there (`draws`), so the picture is the one
+    /// without occlusion culling. The picture is the one the camera gets once streaming has
+    /// caught up, whatever the upload limit. Counters: hits and misses are those of the first
+    /// pass (the cache as the frame found it), bytes uploaded, evictions and completions are
+    /// summed over the passes, the rest are the last pass's; `passes` says how many there
+    /// were.
     pub fn complete_frame(&mut self, shot: &Shot) -> Result<Frame, RenderError> {
         /// A bound on the passes, far above any need (each pass that continues uploads bytes).
         const MAX_PASSES: u32 = 1 << 20;
+        /// A bound on the draws of one frame (each after probes passed).
+        const MAX_DRAWS: u32 = 8;
         let mut first: Option<FrameStats> = None;
         let mut sum = FrameStats::default();
         loop {
@@ -126,45 +138,70 @@ impl<'a> Viewer<'a> {
                     passes: sum.passes,
                     ..stats
                 };
-                return self.draw(shot, stats, drawn);
+                let (mut frame, revealed) = self.draw(shot, stats, drawn)?;
+                sum.draws += 1;
+                sum.draw_ms += frame.stats.draw_ms;
+                frame.stats.draws = sum.draws;
+                frame.stats.draw_ms = sum.draw_ms;
+                if revealed == 0 || sum.draws == MAX_DRAWS {
+                    return Ok(frame);
+                }
             }
         }
     }
 
-    /// Draws the entries `drawn` of a stream pass.
+    /// Draws the entries `drawn` of a stream pass and takes the occlusion results; also
+    /// returns how many probes passed.
     fn draw(
         &mut self,
         shot: &Shot,
         mut stats: FrameStats,
         drawn: Vec<stream::Drawn>,
-    ) -> Result<Frame, RenderError> {
-        let (batches, all, kept) = self.stream.batches(self.reader, shot, &drawn);
+    ) -> Result<(Frame, usize), RenderError> {
+        let two_sided = self.renderer.two_sided();
+        let (batches, which, counts) = self.stream.batches(self.reader, shot, &drawn, two_sided);
         let source = self.stream.source_batches(&drawn);
-        stats.faces_resident_in_drawn = all;
-        stats.faces_drawn = kept;
-        let (width, height, rgba) =
-            self.renderer
-                .draw(shot, self.stream.origin(), &batches, &source.batches)?;
+        stats.faces_resident_in_drawn = counts.resident;
+        stats.faces_drawn = counts.drawn;
+        stats.voxels_drawn = counts.voxels;
+        stats.draws = 1;
+        let t = std::time::Instant::now();
+        let drawing = self
+            .renderer
+            .draw(shot, self.stream.origin(), &batches, &source.batches)?;
+        stats.draw_ms = t.elapsed().as_secs_f64() * 1e3;
+        let (source_leaves, source_triangles) = (source.leaves, source.triangles);
+        drop(batches);
+        drop(source);
+        let mut passed = vec![None; drawn.len()];
+        for (k, p) in which.iter().zip(&drawing.passed) {
+            passed[*k] = *p;
+        }
+        let revealed = self
+            .stream
+            .occlusion_results(self.reader, shot, &drawn, &passed);
+        stats.probes_passed = revealed;
         let nodes: Vec<usize> = drawn.iter().map(|d| d.index).collect();
         let voxels = drawn
             .iter()
             .filter(|d| !d.triangles)
             .map(|d| self.reader.nodes()[d.index].voxel_count as u64)
             .sum();
-        Ok(Frame {
+        let frame = Frame {
             picture: Picture {
-                width,
-                height,
-                rgba,
+                width: drawing.width,
+                height: drawing.height,
+                rgba: drawing.rgba,
                 shot: *shot,
                 nodes,
                 voxels,
-                faces_drawn: kept,
-                source_leaves: source.leaves,
-                source_triangles: source.triangles,
+                faces_drawn: counts.drawn,
+                source_leaves,
+                source_triangles,
             },
             stats,
-        })
+        };
+        Ok((frame, revealed))
     }
 }
 

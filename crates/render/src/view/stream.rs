@@ -7,10 +7,19 @@
 //! is drawn only when resident, and where a refined node's children are not all resident yet
 //! the parent stays drawn in their place.
 //!
-//! A resident node is one GPU vertex buffer of its voxels' active faces (the face masks),
-//! grouped by face direction, so a frame skips whole directions that face away from the eye
-//! (back-face culling per voxel face: a face with outward direction +a can be seen only from
-//! `eye[a]` above its plane). The CPU holds only the node being uploaded.
+//! A resident node is one GPU vertex buffer of its voxels as the file decodes them (the three
+//! words of each record, [`VOXEL_BYTES`] per voxel, nothing per face: "we never store the
+//! geometric representation but rather generate it on-the-fly from the voxel buffers",
+//! section 4); the vertex shader makes each voxel's at most three faces towards the eye. The
+//! CPU holds only the node being uploaded.
+//!
+//! **Occlusion culling** (section 4). With [`StreamConfig::occlusion`], every voxel node drawn
+//! is drawn inside an occlusion query, nearest first; the results of a draw
+//! ([`Stream::occlusion_results`]) mark the nodes none of whose samples passed the depth test
+//! as hidden, and a refined node all of whose drawn parts were hidden as hidden too. In the
+//! next frame the cut is not refined below a hidden node (its children are neither requested
+//! nor drawn: `occluded_nodes`); the node itself is drawn as a probe (depth tested, no colour
+//! or depth written) inside a query, and refined again once a sample of it passes.
 //!
 //! **Source triangles** (section 4 of the paper). In a file that stores them, a leaf
 //! of the cut whose voxels still project above the threshold ([`cut::CutNode::over`], the rule
@@ -22,16 +31,13 @@
 //! [`StreamConfig::source`] off (`--no-source`) draws voxels everywhere; a leaf whose
 //! triangles exceed the whole budget is drawn as voxels from then on.
 
-use std::ops::Range;
-
 use glam::DVec3;
 use voxlod_format::{Aabb, Reader, Voxel};
 
 use super::source::{leaf_entry, TriangleLayout};
 use crate::camera::Shot;
 use crate::cut;
-use crate::draw::{Batch, FaceInstance, Renderer, SourceBatch, FACE_BYTES};
-use crate::faces::node_faces;
+use crate::draw::{Batch, NodeConstants, Renderer, SourceBatch, VOXEL_BYTES};
 use crate::RenderError;
 
 /// The budgets of a [`Stream`].
@@ -46,6 +52,9 @@ pub struct StreamConfig {
     /// Draw the cut's leaves whose voxels are still coarser than `max_error_px` from their
     /// source triangles, where the file stores them (false: voxels everywhere, `--no-source`).
     pub source: bool,
+    /// Occlusion culling: nodes found hidden behind nearer ones by the last draw's occlusion
+    /// queries are not refined (false: `--no-occlusion`).
+    pub occlusion: bool,
 }
 
 /// What one frame did, printed as JSON by `voxlod view`.
@@ -76,12 +85,33 @@ pub struct FrameStats {
     pub source_bytes_drawn: u64,
     /// Finest (lowest) level drawn, if anything was.
     pub finest_level_drawn: Option<u32>,
-    /// Face instances drawn (after the per-direction culling).
+    /// Faces drawn: of the nodes drawn (probes included), per voxel the faces of the axes on
+    /// which the eye is outside the node's box that the face mask allows, and on the other
+    /// axes each voxel's faces of the axis (an upper bound there: the vertex shader draws
+    /// one face per axis at most, none where the eye is inside the voxel's slab).
     pub faces_drawn: u64,
-    /// Face instances of the drawn nodes before that culling.
+    /// Active faces (face-mask bits) of the voxels of the drawn nodes.
     pub faces_resident_in_drawn: u64,
-    /// Nodes whose voxel faces are resident after the frame.
+    /// Voxels of the drawn nodes (one instance each).
+    pub voxels_drawn: u64,
+    /// Nodes the cut did not refine because the last draw found them hidden behind nearer
+    /// ones (occlusion culling; 0 with `--no-occlusion`).
+    pub occluded_nodes: usize,
+    /// Nodes drawn as occlusion probes (hidden in the last draw: depth tested, nothing
+    /// written); they count in `drawn_nodes` and `faces_drawn`.
+    pub probe_nodes: usize,
+    /// Of the probes, those a sample of which passed (refined again from the next frame).
+    pub probes_passed: usize,
+    /// Draws made for this frame: 1, or for a complete frame with occlusion culling more when
+    /// probes passed (each time the frame is streamed and drawn again, refined where they did).
+    pub draws: u32,
+    /// Wall milliseconds of the frame's GPU draws (encoding, submitting and waiting for them,
+    /// with the picture's read-back); the measure of the draw on a hardware GPU.
+    pub draw_ms: f64,
+    /// Nodes whose voxels are resident after the frame.
     pub nodes_resident: usize,
+    /// Voxels of those nodes (their buffers hold [`VOXEL_BYTES`] per voxel).
+    pub voxels_resident: u64,
     /// Leaves whose source triangles are resident after the frame.
     pub source_resident: usize,
     /// Bytes resident after the frame, face and triangle buffers together (never above the
@@ -128,17 +158,26 @@ pub struct FrameStats {
     pub passes: u32,
 }
 
-/// The two kinds of cache entry: a node's voxel faces, a leaf's source triangles.
+/// The two kinds of cache entry: a node's voxels, a leaf's source triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 enum Kind {
-    Faces,
+    Voxels,
     Triangles,
+}
+
+/// What a node's voxel buffer holds: its voxels with a face (instances), and how many of them
+/// have each face-mask bit and each axis (either bit).
+#[derive(Clone, Copy, Debug, Default)]
+struct VoxelCounts {
+    voxels: u32,
+    dirs: [u32; 6],
+    axes: [u32; 3],
 }
 
 /// What an entry's buffer holds.
 enum Layout {
-    /// Face instances grouped by direction (`ranges[dir]`).
-    Faces([Range<u32>; 6]),
+    /// Voxel records.
+    Voxels(VoxelCounts),
     /// Vertices, then indices.
     Triangles(TriangleLayout),
 }
@@ -184,6 +223,11 @@ pub struct Stream {
     frame: u64,
     /// Reused decode buffer.
     voxels: Vec<Voxel>,
+    /// Per node, the number of the draw that found it hidden (occlusion culling); a node is
+    /// hidden for the next draw only.
+    hidden_at: Vec<u64>,
+    /// Draws whose occlusion results were taken.
+    draws: u64,
 }
 
 impl std::fmt::Debug for Stream {
@@ -201,6 +245,19 @@ pub(crate) struct Drawn {
     pub index: usize,
     /// Drawn from its source triangles instead of its voxels.
     pub triangles: bool,
+    /// Drawn as an occlusion probe (hidden in the last draw).
+    pub probe: bool,
+}
+
+/// Faces of a frame's drawn voxel nodes (see [`FrameStats`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct FaceCounts {
+    /// Face-mask bits.
+    pub resident: u64,
+    /// Faces drawn (a bound; `faces_drawn`).
+    pub drawn: u64,
+    /// Voxels.
+    pub voxels: u64,
 }
 
 /// The source triangles to draw in a frame.
@@ -273,6 +330,8 @@ impl Stream {
             bytes: 0,
             frame: 0,
             voxels: Vec::new(),
+            hidden_at: vec![0; n],
+            draws: 0,
         })
     }
 
@@ -313,17 +372,27 @@ impl Stream {
         self.config.source && c.over && self.stored[c.index] > 0 && !self.refused[c.index]
     }
 
+    /// True if the last draw found node `i` hidden (with occlusion culling on).
+    fn is_hidden(&self, i: usize) -> bool {
+        self.config.occlusion && self.draws > 0 && self.hidden_at[i] == self.draws
+    }
+
+    /// Turns occlusion culling on or off (off: every node is refined as the cut says).
+    pub fn set_occlusion(&mut self, on: bool) {
+        self.config.occlusion = on;
+    }
+
     /// True if the entry of `kind` of node `i` is resident.
     fn has(&self, kind: Kind, i: usize) -> bool {
         match kind {
-            Kind::Faces => self.resident[i].is_some(),
+            Kind::Voxels => self.resident[i].is_some(),
             Kind::Triangles => self.triangles[i].is_some(),
         }
     }
 
     fn entries(&mut self, kind: Kind) -> &mut Vec<Option<Resident>> {
         match kind {
-            Kind::Faces => &mut self.resident,
+            Kind::Voxels => &mut self.resident,
             Kind::Triangles => &mut self.triangles,
         }
     }
@@ -346,7 +415,8 @@ impl Stream {
             passes: 1,
             ..Default::default()
         };
-        let want = cut::select(reader, shot, px);
+        let (want, occluded) = cut::select_unless(reader, shot, px, &|i| self.is_hidden(i));
+        stats.occluded_nodes = occluded;
         stats.cut_nodes = want.len();
         stats.cut_over_error = want.iter().filter(|c| c.over).count();
         stats.cut_leaf_nodes = want
@@ -372,7 +442,7 @@ impl Stream {
                         error: cut::node_error(reader, index, shot),
                         over: false,
                     };
-                    (Kind::Faces, c)
+                    (Kind::Voxels, c)
                 })
                 .collect();
             first.sort_by_key(|(_, c)| (std::cmp::Reverse(reader.nodes()[c.index].level), c.index));
@@ -406,6 +476,16 @@ impl Stream {
             }
         }
         stats.nodes_resident = self.resident.iter().flatten().count();
+        stats.voxels_resident = self
+            .resident
+            .iter()
+            .flatten()
+            .map(|r| match r.layout {
+                Layout::Voxels(c) => c.voxels as u64,
+                Layout::Triangles(_) => 0,
+            })
+            .sum();
+        stats.probe_nodes = drawn.iter().filter(|d| d.probe).count();
         stats.source_resident = self.triangles.iter().flatten().count();
         stats.bytes_resident = self.bytes;
         stats.source_bytes_resident = self.triangles.iter().flatten().map(|r| r.bytes).sum();
@@ -464,7 +544,7 @@ impl Stream {
                 }
                 None => {
                     stats.cache_misses += 1;
-                    faces.push((Kind::Faces, *c));
+                    faces.push((Kind::Voxels, *c));
                 }
             }
         }
@@ -497,11 +577,13 @@ impl Stream {
         if !cut::in_frustum(shot, b) {
             return true;
         }
-        if !cut::refines(reader, i, shot, self.config.max_error_px) {
+        let hidden = self.is_hidden(i);
+        if hidden || !cut::refines(reader, i, shot, self.config.max_error_px) {
             if self.wanted[i] == walk.tick && self.triangles[i].is_some() {
                 walk.out.push(Drawn {
                     index: i,
                     triangles: true,
+                    probe: false,
                 });
                 return true;
             }
@@ -510,6 +592,7 @@ impl Stream {
                 walk.out.push(Drawn {
                     index: i,
                     triangles: false,
+                    probe: hidden,
                 });
             }
             return here;
@@ -538,6 +621,7 @@ impl Stream {
                 walk.out.push(Drawn {
                     index: i,
                     triangles: false,
+                    probe: false,
                 });
                 true
             }
@@ -592,7 +676,7 @@ impl Stream {
             }
             let u = self.upload.take().expect("set above");
             match u.kind {
-                Kind::Faces => stats.nodes_completed += 1,
+                Kind::Voxels => stats.nodes_completed += 1,
                 Kind::Triangles => stats.source_completed += 1,
             }
             self.entries(u.kind)[u.node] = Some(Resident {
@@ -620,14 +704,14 @@ impl Stream {
         loop {
             // after a request had to wait, only leaf triangles are tried (without reading the
             // voxel nodes): far smaller than a node's faces, they should not wait behind one
-            let skip = |k: Kind| stats.starved && k == Kind::Faces;
+            let skip = |k: Kind| stats.starved && k == Kind::Voxels;
             let Some(&(kind, c)) = next.find(|(k, c)| !skip(*k) && !self.has(*k, c.index)) else {
                 return Ok(false);
             };
             let (data, layout) = match kind {
-                Kind::Faces => {
-                    let (data, ranges) = self.node_instances(reader, c.index)?;
-                    (data, Layout::Faces(ranges))
+                Kind::Voxels => {
+                    let (data, counts) = self.node_voxels(reader, c.index)?;
+                    (data, Layout::Voxels(counts))
                 }
                 Kind::Triangles => match leaf_entry(reader, c.index, self.origin)? {
                     Some((data, t)) => (data, Layout::Triangles(t)),
@@ -662,12 +746,12 @@ impl Stream {
                 continue;
             }
             let usage = match kind {
-                Kind::Faces => wgpu::BufferUsages::VERTEX,
+                Kind::Voxels => wgpu::BufferUsages::VERTEX,
                 Kind::Triangles => wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::INDEX,
             };
             let buffer = renderer.device().create_buffer(&wgpu::BufferDescriptor {
                 label: Some(match kind {
-                    Kind::Faces => "node faces",
+                    Kind::Voxels => "node voxels",
                     Kind::Triangles => "leaf triangles",
                 }),
                 size,
@@ -699,7 +783,7 @@ impl Stream {
                     })
                     .min()
             };
-            let victim = lru(Kind::Faces, &self.resident)
+            let victim = lru(Kind::Voxels, &self.resident)
                 .into_iter()
                 .chain(lru(Kind::Triangles, &self.triangles))
                 .min();
@@ -716,66 +800,180 @@ impl Stream {
         true
     }
 
-    /// The face instances of node `i`, grouped by direction, as bytes, and each direction's
-    /// instance range.
-    fn node_instances(
+    /// The voxels of node `i` that have a face (their records as decoded, as bytes) and
+    /// their counts.
+    fn node_voxels(
         &mut self,
         reader: &Reader,
         i: usize,
-    ) -> Result<(Vec<u8>, [Range<u32>; 6]), RenderError> {
-        let mut by_dir: [Vec<FaceInstance>; 6] = Default::default();
-        let origin = self.origin;
-        node_faces(reader, i, &mut self.voxels, &mut |f| {
-            by_dir[f.dir as usize].push(FaceInstance::of(&f, origin));
-        })?;
-        let mut data = Vec::new();
-        let mut at = 0u32;
-        let ranges = std::array::from_fn(|d| {
-            let r = at..at + by_dir[d].len() as u32;
-            at = r.end;
-            data.extend_from_slice(bytemuck::cast_slice(&by_dir[d]));
-            r
-        });
-        debug_assert_eq!(data.len() as u64, at as u64 * FACE_BYTES);
-        Ok((data, ranges))
+    ) -> Result<(Vec<u8>, VoxelCounts), RenderError> {
+        reader.read_node_into(i, &mut self.voxels)?;
+        self.voxels.retain(|v| v.mask() != 0);
+        let mut counts = VoxelCounts {
+            voxels: self.voxels.len() as u32,
+            ..Default::default()
+        };
+        for v in &self.voxels {
+            let m = v.mask();
+            for d in 0..6 {
+                counts.dirs[d] += (m >> d & 1) as u32;
+            }
+            for a in 0..3 {
+                counts.axes[a] += (m >> (2 * a) & 3 != 0) as u32;
+            }
+        }
+        let data = bytemuck::cast_slice(&self.voxels).to_vec();
+        debug_assert_eq!(data.len() as u64, counts.voxels as u64 * VOXEL_BYTES);
+        Ok((data, counts))
     }
 
-    /// The batches to draw for `drawn`: per node, only the face directions that can face
-    /// the eye (direction +a when the eye is above the box's low side on axis a, −a when below
-    /// its high side). Returns the batches and the instances before and after culling.
+    /// The voxel batches to draw for `drawn`, as occlusion culling wants them: the nodes
+    /// drawn normally nearest first (by the nearest view depth of their boxes), then the
+    /// probes, nearest first; each inside an occlusion query with occlusion culling on. Also
+    /// returns, per batch, its entry of `drawn`, and the counts of [`FaceCounts`].
     pub(crate) fn batches<'a>(
         &'a self,
         reader: &Reader,
         shot: &Shot,
         drawn: &[Drawn],
-    ) -> (Vec<Batch<'a>>, u64, u64) {
+        two_sided: bool,
+    ) -> (Vec<Batch<'a>>, Vec<usize>, FaceCounts) {
+        let mut order: Vec<(bool, f64, usize, usize)> = drawn
+            .iter()
+            .enumerate()
+            .filter(|(_, d)| !d.triangles)
+            .map(|(k, d)| {
+                let b = reader.node_bounds(d.index).expect("a node of the file");
+                (d.probe, cut::nearest_depth(shot, b), d.index, k)
+            })
+            .collect();
+        order.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
         let mut out = Vec::new();
-        let (mut all, mut kept) = (0u64, 0u64);
-        for d in drawn.iter().filter(|d| !d.triangles) {
-            let r = self.resident[d.index]
+        let mut which = Vec::new();
+        let mut counts = FaceCounts::default();
+        for (probe, _, index, k) in order {
+            let r = self.resident[index]
                 .as_ref()
                 .expect("drawn nodes are resident");
-            let Some(buffer) = &r.buffer else { continue };
-            let Layout::Faces(ranges) = &r.layout else {
-                unreachable!("a face entry")
+            let Layout::Voxels(c) = &r.layout else {
+                unreachable!("a voxel entry")
             };
-            let b: Aabb = reader.node_bounds(d.index).expect("a node of the file");
-            for dir in 0..6usize {
-                let range = ranges[dir].clone();
-                all += range.len() as u64;
-                let a = dir >> 1;
-                let seen = if dir & 1 == 0 {
-                    shot.eye[a] > b.min[a]
+            counts.resident += c.dirs.iter().map(|&n| n as u64).sum::<u64>();
+            counts.voxels += c.voxels as u64;
+            let b: Aabb = reader.node_bounds(index).expect("a node of the file");
+            for a in 0..3 {
+                counts.drawn += if shot.eye[a] > b.max[a] {
+                    if two_sided {
+                        c.axes[a]
+                    } else {
+                        c.dirs[2 * a]
+                    }
+                } else if shot.eye[a] < b.min[a] {
+                    if two_sided {
+                        c.axes[a]
+                    } else {
+                        c.dirs[2 * a + 1]
+                    }
+                } else if two_sided {
+                    c.axes[a]
                 } else {
-                    shot.eye[a] < b.max[a]
-                };
-                if seen && !range.is_empty() {
-                    kept += range.len() as u64;
-                    out.push((buffer, range));
+                    c.dirs[2 * a] + c.dirs[2 * a + 1]
+                } as u64;
+            }
+            let Some(buffer) = &r.buffer else { continue };
+            out.push(Batch {
+                buffer,
+                voxels: 0..c.voxels,
+                node: NodeConstants::of(reader, index, self.origin),
+                probe,
+                query: self.config.occlusion,
+            });
+            which.push(k);
+        }
+        (out, which, counts)
+    }
+
+    /// Takes the occlusion results of a draw of `drawn` for `shot`: `passed[k]` for entry `k`
+    /// (none where no query was made). A node drawn whose query passed no sample is hidden in
+    /// the next draw; so is a node refined in this one all of whose children in the frustum
+    /// had something drawn, all of it hidden. Returns the number of probes that passed (their
+    /// nodes are refined again).
+    pub(crate) fn occlusion_results(
+        &mut self,
+        reader: &Reader,
+        shot: &Shot,
+        drawn: &[Drawn],
+        passed: &[Option<bool>],
+    ) -> usize {
+        self.draws += 1;
+        if !self.config.occlusion {
+            return 0;
+        }
+        let mut result = std::collections::HashMap::new();
+        let mut revealed = 0;
+        for (d, p) in drawn.iter().zip(passed) {
+            result.insert(d.index, *p);
+            revealed += (d.probe && *p == Some(true)) as usize;
+        }
+        // the ancestors of drawn nodes are the nodes refined in this draw
+        let mut refined = std::collections::HashSet::new();
+        for d in drawn {
+            let mut i = d.index;
+            while let Some(p) = parent(reader, i) {
+                if !refined.insert(p) {
+                    break;
                 }
+                i = p;
             }
         }
-        (out, all, kept)
+        if let Some(root) = reader.root() {
+            self.pull_up(reader, shot, root, &result, &refined);
+        }
+        revealed
+    }
+
+    /// Whether the subtree of node `i` was hidden in the draw (`Some(true)`), seen
+    /// (`Some(false)`), or not known (`None`: nothing drawn, out of the frustum); marks the
+    /// hidden nodes.
+    fn pull_up(
+        &mut self,
+        reader: &Reader,
+        shot: &Shot,
+        i: usize,
+        result: &std::collections::HashMap<usize, Option<bool>>,
+        refined: &std::collections::HashSet<usize>,
+    ) -> Option<bool> {
+        let hidden = if let Some(p) = result.get(&i) {
+            p.map(|passed| !passed)
+        } else if refined.contains(&i) {
+            let b = reader.node_bounds(i).expect("a node of the file");
+            if !cut::in_frustum(shot, b) {
+                return None;
+            }
+            let mut any_hidden = false;
+            let mut all_hidden = true;
+            for c in reader.children(i).into_iter().flatten() {
+                match self.pull_up(reader, shot, c, result, refined) {
+                    Some(true) => any_hidden = true,
+                    Some(false) => all_hidden = false,
+                    None => {
+                        // outside the frustum it hides nothing; inside, with nothing drawn,
+                        // it is not known to be hidden
+                        let cb = reader.node_bounds(c).expect("a node of the file");
+                        if cut::in_frustum(shot, cb) {
+                            all_hidden = false;
+                        }
+                    }
+                }
+            }
+            Some(any_hidden && all_hidden)
+        } else {
+            None
+        };
+        if hidden == Some(true) {
+            self.hidden_at[i] = self.draws;
+        }
+        hidden
     }
 
     /// The source triangles to draw for `drawn` (the leaves drawn as triangles).
@@ -798,4 +996,13 @@ impl Stream {
         }
         out
     }
+}
+
+/// The parent of node `i`, none for the root.
+fn parent(reader: &Reader, i: usize) -> Option<usize> {
+    let e = reader.nodes()[i];
+    if e.level + 1 >= reader.spec().levels {
+        return None;
+    }
+    reader.find(e.level + 1, e.pos().map(|p| p / 2))
 }

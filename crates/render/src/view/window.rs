@@ -61,6 +61,7 @@ struct Open<'a> {
 struct App<'a> {
     reader: &'a Reader,
     config: StreamConfig,
+    two_sided: bool,
     size: (u32, u32),
     orbit: Orbit,
     drag: Option<(f64, f64)>,
@@ -95,7 +96,12 @@ pub fn no_display() -> Option<String> {
 }
 
 /// Opens a window on `reader` and runs until it is closed.
-pub fn run(reader: &Reader, config: StreamConfig, size: (u32, u32)) -> Result<(), RenderError> {
+pub fn run(
+    reader: &Reader,
+    config: StreamConfig,
+    size: (u32, u32),
+    two_sided: bool,
+) -> Result<(), RenderError> {
     if let Some(why) = no_display() {
         return Err(RenderError::Option(why));
     }
@@ -106,6 +112,7 @@ pub fn run(reader: &Reader, config: StreamConfig, size: (u32, u32)) -> Result<()
     let mut app = App {
         reader,
         config,
+        two_sided,
         size,
         orbit: Orbit::default(),
         drag: None,
@@ -163,7 +170,8 @@ impl<'a> App<'a> {
                 "the window's surface cannot be copied into".into(),
             ));
         }
-        let renderer = Renderer::with_gpu(gpu)?;
+        let mut renderer = Renderer::with_gpu(gpu)?;
+        renderer.set_two_sided(self.two_sided);
         let viewer = Viewer::new(self.reader, renderer, self.config)?;
         let open = Open {
             window,
@@ -224,8 +232,9 @@ impl<'a> App<'a> {
         queue.submit([]);
         queue.present(texture);
         open.window.set_title(&format!(
-            "voxlod view: {} nodes drawn, {} resident ({:.1} MiB), {} pending, error {} px",
+            "voxlod view: {} nodes drawn ({} occluded), {} resident ({:.1} MiB), {} pending, error {} px",
             frame.stats.drawn_nodes,
+            frame.stats.occluded_nodes,
             frame.stats.nodes_resident,
             frame.stats.bytes_resident as f64 / 1048576.0,
             frame.stats.pending,

@@ -6,9 +6,11 @@
 
 mod common;
 mod export;
+mod occlusion;
 mod render;
 mod source;
 mod source_attributes;
+mod two_sided;
 mod view;
 mod view_source;
 mod viewing;

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use glam::{DMat4, DVec3, DVec4};
-use viewing::{ancestors, face_bytes};
+use viewing::{ancestors, voxel_bytes};
 use voxlod_format::{Aabb, Reader};
 use voxlod_render::view::{fly, FlyPath, StreamConfig, Viewer};
 use voxlod_render::{cut, Renderer, Shot, BACKGROUND};
@@ -68,16 +68,17 @@ fn fly_in_streams_within_its_budgets() {
     let Some(file) = dragon() else { return };
     let r = Reader::open(file).unwrap();
     let renderer = renderer();
-    let sizes: Vec<u64> = (0..r.nodes().len()).map(|i| face_bytes(&r, i)).collect();
+    let sizes: Vec<u64> = (0..r.nodes().len()).map(|i| voxel_bytes(&r, i)).collect();
     let total: u64 = sizes.iter().sum();
     let largest = *sizes.iter().max().unwrap();
     // the close-up's working set fits but not with everything seen on the way (evictions), and
     // the largest nodes take several frames to upload
     let config = StreamConfig {
-        cache_bytes: 150 << 20,
-        upload_bytes_per_frame: 6 << 20,
+        cache_bytes: 20 << 20,
+        upload_bytes_per_frame: 1 << 20,
         max_error_px: 1.0,
         source: true,
+        occlusion: false,
     };
     assert!(config.cache_bytes < total && config.upload_bytes_per_frame < largest);
     let mut viewer = Viewer::new(&r, renderer, config).unwrap();
@@ -238,6 +239,7 @@ fn the_cut_matches_a_cpu_recomputation() {
             upload_bytes_per_frame: 1 << 30,
             max_error_px: 1.0,
             source: true,
+            occlusion: false,
         },
     )
     .unwrap();

@@ -3,13 +3,15 @@
 
 use voxlod_format::Reader;
 
-/// Bytes of node `i`'s face buffer, from its voxels' face masks (28 bytes per active face).
-pub fn face_bytes(r: &Reader, i: usize) -> u64 {
+/// Bytes of node `i`'s voxel buffer, from the file: 12 bytes (the record's three words) per
+/// voxel with a face.
+pub fn voxel_bytes(r: &Reader, i: usize) -> u64 {
     r.read_node(i)
         .unwrap()
         .iter()
-        .map(|v| v.mask().count_ones() as u64 * 28)
-        .sum()
+        .filter(|v| v.mask() != 0)
+        .count() as u64
+        * 12
 }
 
 /// The ancestors of node `i`, parent first, up to the root.
