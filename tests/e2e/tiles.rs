@@ -188,6 +188,52 @@ fn check_placement(j: &Value, corner: [f64; 3], edge: f64) {
     assert_eq!(node["scale"], serde_json::json!([edge, edge, edge]));
 }
 
+/// The triangles of part tile `k` (uri `PATH.glb`), or of its parts where it is split again
+/// (a tile without content, error `wrapper_error`, over parts `PATH-o`); every content at
+/// most 4 MB and placed at the node's corner.
+fn part_triangles(
+    k: &Value,
+    path: &str,
+    dir: &Path,
+    corner: [f64; 3],
+    edge: f64,
+    wrapper_error: f64,
+) -> Vec<Tri> {
+    if let Some(uri) = k["content"]["uri"].as_str() {
+        assert_eq!(uri, format!("{path}.glb"));
+        let glb = std::fs::read(dir.join(uri)).unwrap();
+        assert!(glb.len() <= 4_000_000, "{uri}: {} bytes", glb.len());
+        let (j, tris) = content_triangles(&glb);
+        check_placement(&j, corner, edge);
+        return tris;
+    }
+    assert_eq!(k["geometricError"].as_f64().unwrap(), wrapper_error);
+    let mut out = Vec::new();
+    for c in k["children"].as_array().unwrap() {
+        let uri = first_uri(c);
+        // the sub-part's path: PATH-o
+        let rest = &uri[path.len() + 1..];
+        let o = &rest[..1];
+        out.extend(part_triangles(
+            c,
+            &format!("{path}-{o}"),
+            dir,
+            corner,
+            edge,
+            wrapper_error,
+        ));
+    }
+    out
+}
+
+/// The first content uri at or under tile `t`.
+fn first_uri(t: &Value) -> String {
+    match t["content"]["uri"].as_str() {
+        Some(u) => u.to_string(),
+        None => first_uri(&t["children"][0]),
+    }
+}
+
 /// Compares decoded triangles with the wanted ones (the normals within a byte's rounding).
 fn same_triangles(mut got: Vec<Tri>, mut want: Vec<Tri>, what: &str) {
     got.sort_by_key(|a| a.0);
@@ -288,13 +334,9 @@ fn check_tile(
             n += 1;
             assert!(inside(box_of(k), bx, edge * 1e-6), "octant box outside");
             if !by_octant[o as usize].is_empty() {
-                let uri = k["content"]["uri"].as_str().unwrap();
-                assert_eq!(uri, format!("{prefix}{o}.glb"));
-                let glb = std::fs::read(dir.join(uri)).unwrap();
-                assert!(glb.len() <= 4_000_000, "{uri}: {} bytes", glb.len());
-                let (j, tris) = content_triangles(&glb);
-                check_placement(&j, corner, edge);
-                same_triangles(tris, by_octant[o as usize].clone(), uri);
+                let tris =
+                    part_triangles(k, &format!("{prefix}{o}"), dir, corner, edge, parent_error);
+                same_triangles(tris, by_octant[o as usize].clone(), &format!("{prefix}{o}"));
             } else {
                 assert!(k.get("content").is_none());
             }
@@ -310,10 +352,12 @@ fn check_tile(
                     assert!(inside(box_of(&below[0]), box_of(k), edge * 1e-6));
                     n += check_tile(r, c, &below[0], min_level, dir, node_error);
                 }
-                None => {
+                None if k.get("content").is_some() => {
                     assert!(below.is_empty());
                     assert_eq!(k["geometricError"].as_f64().unwrap(), 0.0);
                 }
+                // split further (checked by part_triangles)
+                None => {}
             }
         }
         return n;
@@ -562,6 +606,80 @@ fn tileset_matches_the_octree_and_opens_in_three_js() {
         "{result}"
     );
     assert!(iou >= 0.97, "silhouette IoU {iou:.4} against level 0");
+}
+
+/// A model with materials: every tile's faces carry their voxel's material id as an
+/// `EXT_mesh_features` feature id (checked face by face against the file's material channel in
+/// `check_tile`), one primitive per material named as in the source, and the Khronos
+/// validator reports no error or warning on it.
+#[test]
+fn materials_are_feature_ids() {
+    let Some(m) = shared_meshes("materials_are_feature_ids") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let file = d.join("sib.voxlod");
+    build_ok(
+        &m.join("mcguire-sibenik/sibenik.obj"),
+        &file,
+        &["-r", "256"],
+        d,
+    );
+    let r = Reader::open(&file).unwrap();
+    assert!(r.has_materials());
+    ok(&voxlod(&["export", "sib.voxlod", "--3d-tiles", "tiles"], d));
+    let tiles = d.join("tiles");
+    let ts: Value =
+        serde_json::from_slice(&std::fs::read(tiles.join("tileset.json")).unwrap()).unwrap();
+    let top = ts["geometricError"].as_f64().unwrap();
+    check_tile(&r, r.root().unwrap(), &ts["root"], 0, &tiles, top);
+    let names: Vec<String> = r.manifest().unwrap()["materials"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect();
+    let mut ids = std::collections::BTreeSet::new();
+    for p in walk(&tiles)
+        .iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "glb"))
+    {
+        let (j, tris) = content_triangles(&std::fs::read(p).unwrap());
+        assert!(j["extensionsUsed"]
+            .as_array()
+            .unwrap()
+            .contains(&serde_json::json!("EXT_mesh_features")));
+        for prim in j["meshes"][0]["primitives"].as_array().unwrap() {
+            let f = &prim["extensions"]["EXT_mesh_features"]["featureIds"][0];
+            assert_eq!(
+                (f["attribute"].as_u64(), f["label"].as_str()),
+                (Some(0), Some("material"))
+            );
+            assert_eq!(f["featureCount"], 1);
+            // the primitive's material is named as the source's material of its faces
+            let name = j["materials"][prim["material"].as_u64().unwrap() as usize]["name"]
+                .as_str()
+                .unwrap();
+            assert!(names.iter().any(|n| n == name), "{name}");
+        }
+        ids.extend(tris.iter().map(|t| (t.0).2));
+    }
+    assert!(ids.len() >= 3, "material ids {ids:?}");
+    if browser_tools() {
+        let any = walk(&tiles)
+            .into_iter()
+            .find(|p| p.extension().is_some_and(|e| e == "glb"))
+            .unwrap();
+        let report = Command::new("node")
+            .arg(Path::new(REPO).join("tests/node/validate-gltf.js"))
+            .arg(&any)
+            .output()
+            .unwrap();
+        let report: Value = serde_json::from_slice(&report.stdout).unwrap();
+        assert_eq!(report["issues"]["numErrors"], 0, "{report}");
+        assert_eq!(report["issues"]["numWarnings"], 0, "{report}");
+    }
 }
 
 /// `--origin LON,LAT,HEIGHT --units mm`: the root transform is the east-north-up frame at that

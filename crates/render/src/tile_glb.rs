@@ -111,7 +111,7 @@ fn face_normal_i8(dir: u8) -> [i8; 4] {
 fn node_streams(
     reader: &Reader,
     index: usize,
-    octant: Option<u8>,
+    part: &[u8],
     buf: &mut Vec<Voxel>,
 ) -> Result<Vec<Streams>, RenderError> {
     reader.read_node_into(index, buf)?;
@@ -125,7 +125,7 @@ fn node_streams(
     let mut by_material: BTreeMap<u32, Streams> = BTreeMap::new();
     for (j, v) in buf.iter().enumerate() {
         let mask = v.mask();
-        if mask == 0 || octant.is_some_and(|o| voxel_octant(v) != o) {
+        if mask == 0 || !in_part(v, part) {
             continue;
         }
         let material = materials.as_ref().map_or(0, |m| m[j]);
@@ -177,11 +177,20 @@ fn node_streams(
     Ok(by_material.into_values().collect())
 }
 
-/// The octant of its node a voxel lies in (`x | y<<1 | z<<2` of the position's high bits):
-/// the octant of the child node that holds its finer voxels.
-pub fn voxel_octant(v: &Voxel) -> u8 {
+/// The octant of its node a voxel lies in at depth `k` (`x | y<<1 | z<<2` of the position's
+/// bit `7 − k`): at depth 0 the octant of the child node that holds its finer voxels.
+pub fn voxel_octant(v: &Voxel, k: usize) -> u8 {
     let p = v.pos();
-    p[0] >> 7 | (p[1] >> 7) << 1 | (p[2] >> 7) << 2
+    let b = 7 - k;
+    (p[0] >> b & 1) | (p[1] >> b & 1) << 1 | (p[2] >> b & 1) << 2
+}
+
+/// Whether voxel `v` lies in the part of its node given by the octant path `part` (the octant
+/// at depth 0, then the octant inside that, …; empty: the whole node).
+pub fn in_part(v: &Voxel, part: &[u8]) -> bool {
+    part.iter()
+        .enumerate()
+        .all(|(k, &o)| voxel_octant(v, k) == o)
 }
 
 /// The binary chunk and the JSON arrays being laid out.
@@ -255,22 +264,19 @@ pub(crate) fn material_names(reader: &Reader) -> Vec<String> {
         .unwrap_or_default()
 }
 
-/// Node `index` as a tile content GLB in `frame`: all its voxels, or those of one `octant`
-/// ([`voxel_octant`]).
+/// Node `index` as a tile content GLB in `frame`: the voxels of `part` ([`in_part`]; empty:
+/// all).
 pub fn tile_content(
     reader: &Reader,
     index: usize,
-    octant: Option<u8>,
+    part: &[u8],
     frame: &TileFrame,
     names: &[String],
 ) -> Result<TileContent, RenderError> {
     let mut buf = Vec::new();
-    let streams = node_streams(reader, index, octant, &mut buf)?;
+    let streams = node_streams(reader, index, part, &mut buf)?;
     let mut out = TileContent {
-        voxels: match octant {
-            None => buf.len(),
-            Some(o) => buf.iter().filter(|v| voxel_octant(v) == o).count(),
-        } as u64,
+        voxels: buf.iter().filter(|v| in_part(v, part)).count() as u64,
         ..TileContent::default()
     };
     if streams.is_empty() {
@@ -349,10 +355,10 @@ pub fn tile_content(
     let corner = frame.map(spec.voxel_min_corner(e.level, e.pos(), [0; 3]));
     let edge = spec.voxel_size_at(e.level) * frame.scale;
     let h = std::f64::consts::FRAC_1_SQRT_2;
-    let name = match octant {
-        None => format!("node {} {} {} {}", e.level, e.x, e.y, e.z),
-        Some(o) => format!("node {} {} {} {} octant {o}", e.level, e.x, e.y, e.z),
-    };
+    let mut name = format!("node {} {} {} {}", e.level, e.x, e.y, e.z);
+    if !part.is_empty() {
+        name += &format!(" part {part:?}");
+    }
     let mut used = vec!["EXT_meshopt_compression", "KHR_mesh_quantization"];
     if features {
         used.push("EXT_mesh_features");

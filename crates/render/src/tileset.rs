@@ -102,22 +102,27 @@ pub fn tile_uri(reader: &Reader, index: usize) -> String {
     format!("{}/{}-{}-{}.glb", e.level, e.x, e.y, e.z)
 }
 
-/// The relative path of the content of octant `o` of node `index` (a node split for size).
-pub fn tile_part_uri(reader: &Reader, index: usize, o: u8) -> String {
+/// The relative path of the content of part `part` (an octant path) of node `index` (a node
+/// split for size): `L/X-Y-Z-o1-o2….glb`.
+pub fn tile_part_uri(reader: &Reader, index: usize, part: &[u8]) -> String {
     let e = reader.nodes()[index];
-    format!("{}/{}-{}-{}-{o}.glb", e.level, e.x, e.y, e.z)
+    let mut s = format!("{}/{}-{}-{}", e.level, e.x, e.y, e.z);
+    for o in part {
+        s += &format!("-{o}");
+    }
+    s + ".glb"
 }
 
-/// What a node's tile holds.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// What a node's tile (or a part of it) holds.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 enum Content {
     /// No active face.
     #[default]
     None,
     /// One content.
     Whole,
-    /// One content per octant that has faces (bit `o`).
-    Octants(u8),
+    /// Split into its eight octants.
+    Split(Box<[Content; 8]>),
 }
 
 /// File box (min, max) of node `index`'s voxels.
@@ -212,6 +217,30 @@ pub fn bottom_centre(lo: [f64; 3], hi: [f64; 3], up: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|a| (lo[a] + hi[a]) / 2.0 - u[a] * support)
 }
 
+/// The content of octant path `part`: `make(part)` sizes it and writes it when it is kept
+/// whole (at most [`MAX_TILE_BYTES`], or with a child node below it, which a finer split
+/// would not match, or a single voxel); otherwise it is split into its octants.
+fn split_part(
+    make: &mut dyn FnMut(&[u8]) -> Result<(u64, u64), RenderError>,
+    part: &[u8],
+    has_child: bool,
+) -> Result<Content, RenderError> {
+    let (quads, bytes) = make(part)?;
+    if quads == 0 {
+        return Ok(Content::None);
+    }
+    if bytes <= MAX_TILE_BYTES || has_child || part.len() == 8 {
+        return Ok(Content::Whole);
+    }
+    let mut sub: [Content; 8] = Default::default();
+    for o in 0..8u8 {
+        let mut p = part.to_vec();
+        p.push(o);
+        sub[o as usize] = split_part(make, &p, false)?;
+    }
+    Ok(Content::Split(Box::new(sub)))
+}
+
 /// Tiles in the tree under `t`, itself included.
 fn count_tiles(t: &Value) -> u64 {
     1 + t
@@ -228,6 +257,56 @@ struct Tree<'a> {
 }
 
 impl Tree<'_> {
+    /// The file box of octant path `part` of node `index`: the node's voxel box cut to it.
+    fn cell_box(&self, index: usize, part: &[u8]) -> ([f64; 3], [f64; 3]) {
+        let r = self.reader;
+        let e = r.nodes()[index];
+        let (mut lo, mut hi) = node_box(r, index);
+        let mut cell = [0u32; 3];
+        let mut size = 256u32;
+        for &o in part {
+            size /= 2;
+            for a in 0..3 {
+                cell[a] += size * (o as u32 >> a & 1);
+            }
+        }
+        let spec = r.spec();
+        let clo = spec.voxel_min_corner(e.level, e.pos(), [0; 3]);
+        let edge = spec.voxel_size_at(e.level);
+        for a in 0..3 {
+            lo[a] = lo[a].max(clo[a] + edge * cell[a] as f64);
+            hi[a] = hi[a].min(clo[a] + edge * (cell[a] + size) as f64);
+        }
+        (lo, hi)
+    }
+
+    /// The tile of a part without a child node (error 0): its content, or where it is split
+    /// a tile without content whose error is `wrapper_error` (so that it is always refined when
+    /// reached) over its octants' parts.
+    fn part_tile(&self, index: usize, part: &[u8], c: &Content, wrapper_error: f64) -> Value {
+        let (lo, hi) = self.cell_box(index, part);
+        match c {
+            Content::Split(sub) => {
+                let mut t = self.tile_json(lo, hi, wrapper_error);
+                let mut kids = Vec::new();
+                for o in 0..8u8 {
+                    if sub[o as usize] != Content::None {
+                        let mut p = part.to_vec();
+                        p.push(o);
+                        kids.push(self.part_tile(index, &p, &sub[o as usize], wrapper_error));
+                    }
+                }
+                t["children"] = Value::Array(kids);
+                t
+            }
+            _ => {
+                let mut t = self.tile_json(lo, hi, 0.0);
+                t["content"] = json!({"uri": tile_part_uri(self.reader, index, part)});
+                t
+            }
+        }
+    }
+
     /// A tile of file box `(lo, hi)`.
     fn tile_json(&self, lo: [f64; 3], hi: [f64; 3], error: f64) -> Value {
         let (flo, fhi) = (self.frame.map(lo), self.frame.map(hi));
@@ -266,27 +345,25 @@ impl Tree<'_> {
             }
         };
         let mut children = Vec::new();
-        if let Content::Octants(with_faces) = self.content[index] {
+        if let Content::Split(parts) = &self.content[index] {
             // the octant's box: the node's voxel box cut to that octant, grown by its child's
-            let spec = r.spec();
-            let mid = spec.voxel_min_corner(e.level, e.pos(), [128; 3]);
             for o in 0..8u8 {
                 let child = kids[o as usize].map(|c| self.tile(c, error));
-                if with_faces >> o & 1 == 0 && child.is_none() {
+                let part = &parts[o as usize];
+                if *part == Content::None && child.is_none() {
                     continue;
                 }
-                let side = |a: usize| o >> a & 1 == 1;
-                let mut olo: [f64; 3] =
-                    std::array::from_fn(|a| if side(a) { nlo[a].max(mid[a]) } else { nlo[a] });
-                let mut ohi: [f64; 3] =
-                    std::array::from_fn(|a| if side(a) { nhi[a] } else { nhi[a].min(mid[a]) });
-                if with_faces >> o & 1 == 0 {
+                let (mut olo, mut ohi) = self.cell_box(index, &[o]);
+                if *part == Content::None {
                     // no faces here: the child's box alone
                     (olo, ohi) = child.as_ref().expect("a child").1;
                 }
-                let mut t = self.tile_json(olo, ohi, if child.is_some() { error } else { 0.0 });
-                if with_faces >> o & 1 == 1 {
-                    t["content"] = json!({"uri": tile_part_uri(r, index, o)});
+                let mut t = match part {
+                    Content::Split(_) => self.part_tile(index, &[o], part, parent_error),
+                    _ => self.tile_json(olo, ohi, if child.is_some() { error } else { 0.0 }),
+                };
+                if *part == Content::Whole {
+                    t["content"] = json!({"uri": tile_part_uri(r, index, &[o])});
                 }
                 if let Some((ct, cb)) = child {
                     for a in 0..3 {
@@ -358,7 +435,7 @@ pub fn export_tileset_with(
         scale: opts.scale,
     };
     let names = material_names(reader);
-    let mut content = vec![Content::None; reader.nodes().len()];
+    let mut content: Vec<Content> = vec![Content::None; reader.nodes().len()];
     let mut s = TilesetSummary::default();
     let mut over = false;
     let mut write = |uri: String, c: &crate::TileContent, s: &mut TilesetSummary| {
@@ -384,7 +461,7 @@ pub fn export_tileset_with(
         if reader.nodes()[i].level < min_level {
             continue;
         }
-        let c = tile_content(reader, i, None, &frame, &names)?;
+        let c = tile_content(reader, i, &[], &frame, &names)?;
         if c.quads == 0 {
             s.voxels += c.voxels;
             continue;
@@ -395,15 +472,26 @@ pub fn export_tileset_with(
             continue;
         }
         drop(c);
-        let mut with_faces = 0u8;
+        let has_children =
+            reader.nodes()[i].level > min_level && reader.children(i).iter().any(Option::is_some);
+        let mut parts: [Content; 8] = Default::default();
         for o in 0..8u8 {
-            let c = tile_content(reader, i, Some(o), &frame, &names)?;
-            if c.quads > 0 {
-                with_faces |= 1 << o;
-                write(tile_part_uri(reader, i, o), &c, &mut s)?;
-            }
+            let child = has_children && reader.children(i)[o as usize].is_some();
+            parts[o as usize] = split_part(
+                &mut |p: &[u8]| {
+                    let c = tile_content(reader, i, p, &frame, &names)?;
+                    if c.quads > 0
+                        && (c.glb.len() as u64 <= MAX_TILE_BYTES || child || p.len() == 8)
+                    {
+                        write(tile_part_uri(reader, i, p), &c, &mut s)?;
+                    }
+                    Ok((c.quads, c.glb.len() as u64))
+                },
+                &[o],
+                child,
+            )?;
         }
-        content[i] = Content::Octants(with_faces);
+        content[i] = Content::Split(Box::new(parts));
     }
     let tree = Tree {
         reader,
