@@ -682,8 +682,8 @@ fn materials_are_feature_ids() {
     }
 }
 
-/// `--origin LON,LAT,HEIGHT --units mm`: the root transform is the east-north-up frame at that
-/// point (its translation the point's earth-centred coordinates, its up the ellipsoid's
+/// The same file gives the same tiles, byte for byte. `--origin LON,LAT,HEIGHT --units mm`:
+/// the root transform is the east-north-up frame at that point (its translation the point's earth-centred coordinates, its up the ellipsoid's
 /// normal there, which the model's up is turned onto), the model's bottom centre sits at the
 /// frame's origin, and every length is in metres; bad values are refused by name.
 #[test]
@@ -694,6 +694,21 @@ fn origin_and_units_place_the_tileset() {
     build_ok(&super::sample(), &file, &["-r", "512"], d);
     let r = Reader::open(&file).unwrap();
     ok(&voxlod(&["export", "s.voxlod", "--3d-tiles", "plain"], d));
+    // the same file gives the same bytes
+    ok(&voxlod(&["export", "s.voxlod", "--3d-tiles", "again"], d));
+    let files = walk(&d.join("plain"));
+    assert!(files.len() > 2);
+    for f in &files {
+        let again = d
+            .join("again")
+            .join(f.strip_prefix(d.join("plain")).unwrap());
+        assert_eq!(
+            std::fs::read(f).unwrap(),
+            std::fs::read(again).unwrap(),
+            "{f:?}"
+        );
+    }
+    assert_eq!(walk(&d.join("again")).len(), files.len());
     let said = ok(&voxlod(
         &[
             "export",
