@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Issue 32 §1, GPU part: the cost of GPU sets exact for the input's own coordinates. Builds each
+# The cost of GPU sets exact for the input's own coordinates (near-ties listed and decided on
+# the host; the voxelize crate's docs, "Exact in the input's own coordinates"). Builds each
 # input with `--backend gpu` (lavapipe on a machine without a GPU) with the binary before the
 # change and with this tree's, interleaved, and prints CPU seconds (user + sys), wall seconds,
 # the triangles decided on the host (`gpu_cpu_fallback_triangles`, per chunk), the chunks that

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # A sharded build timed task by task on one machine, for what a cluster of one node per task
-# would see (docs/BENCHMARKS.md, "Sharded build"): the plan, every map task, every shard, the
+# would see (docs/BENCHMARKS.md, "The sharded chain"): the plan, every map task, every shard, the
 # merge, one after another, each under `/usr/bin/time` with the load average before it and the
 # bytes it read from the input; the tasks' `--json` summaries kept; at the end the merged
 # file's SHA-256 and size against a one-machine build's (a `sha256sum` line and the size, as in

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Issue 32 §1: the cost of exact decisions in the input's own coordinates. Builds each input
-# with the main binary before the change and with this tree's, interleaved, `--backend cpu`,
+# The cost of exact decisions in the input's own coordinates (the voxelize crate's docs).
+# Builds each input with an old binary (OLD_BIN) and a new one (NEW_BIN), interleaved, `--backend cpu`,
 # and prints CPU seconds (user + sys), wall seconds and the voxel count of each build.
 # Usage: scripts/bench_world_exact.sh OLD_BIN NEW_BIN ROUNDS INPUT... (resolution 1024)
 set -euo pipefail

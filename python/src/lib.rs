@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 use numpy::{IntoPyArray, PyArrayMethods};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyException, PyKeyError};
+use pyo3::exceptions::{PyException, PyFileNotFoundError, PyKeyError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use voxlod_format::triangles::oct_decode;
@@ -23,8 +23,15 @@ create_exception!(
     "A voxlod file could not be read: its message names the file and what is wrong."
 );
 
+/// A reader error as `VoxlodError`; a file that does not exist as `FileNotFoundError`, which
+/// `voxlod/__init__.py` turns into `voxlod.VoxlodFileNotFoundError` (both at once).
 fn err(e: FormatError) -> PyErr {
-    VoxlodError::new_err(e.to_string())
+    match &e {
+        FormatError::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
+            PyFileNotFoundError::new_err(e.to_string())
+        }
+        _ => VoxlodError::new_err(e.to_string()),
+    }
 }
 
 /// A flat vector as an `rows × cols` numpy array.
@@ -61,6 +68,21 @@ impl Reader {
             ))
         })?;
         py.detach(|| read(&self.inner, index)).map_err(err)
+    }
+
+    /// `level` as a level of this file, or `ValueError` naming the file and the levels it has.
+    fn check_level(&self, level: i64) -> PyResult<u32> {
+        let levels = self.inner.spec().levels;
+        u32::try_from(level)
+            .ok()
+            .filter(|&l| l < levels)
+            .ok_or_else(|| {
+                PyValueError::new_err(format!(
+                    "{}: there is no level {level}: the file's levels are 0 (the leaves) to {} (the root)",
+                    self.inner.path().display(),
+                    levels.saturating_sub(1)
+                ))
+            })
     }
 }
 
@@ -155,6 +177,63 @@ impl Reader {
             .map(|i| self.inner.node_source_triangle_count(i))
             .collect::<Vec<u32>>();
         d.set_item("source_triangles", tris.into_pyarray(py))?;
+        Ok(d)
+    }
+
+    /// Every voxel of level `level` as one set of arrays: see `voxlod.Reader.level`.
+    fn level<'py>(&self, py: Python<'py>, level: i64) -> PyResult<Bound<'py, PyDict>> {
+        let level = self.check_level(level)?;
+        let nodes = self.inner.nodes();
+        let at_level: Vec<usize> = (0..nodes.len())
+            .filter(|&i| nodes[i].level == level)
+            .collect();
+        let total: usize = at_level
+            .iter()
+            .map(|&i| nodes[i].voxel_count as usize)
+            .sum();
+        let materials = self.inner.has_materials();
+        let r = &self.inner;
+        let cols = py
+            .detach(|| -> Result<_, FormatError> {
+                let mut pos = Vec::with_capacity(3 * total);
+                let mut normal = Vec::with_capacity(3 * total);
+                let mut color = Vec::with_capacity(4 * total);
+                let mut mask = Vec::with_capacity(total);
+                let mut node = Vec::with_capacity(total);
+                let mut material = Vec::with_capacity(if materials { total } else { 0 });
+                let mut buf = Vec::new();
+                for &i in &at_level {
+                    r.read_node_into(i, &mut buf)?;
+                    let e = &nodes[i];
+                    let origin = [e.x, e.y, e.z].map(|c| c * CHUNK);
+                    for v in &buf {
+                        let p = v.pos();
+                        pos.extend((0..3).map(|a| origin[a] + p[a] as u32));
+                        normal.extend(v.normal_f32());
+                        color.extend(v.rgba());
+                        mask.push(v.mask());
+                    }
+                    node.extend(std::iter::repeat_n(i as u32, buf.len()));
+                    if materials {
+                        match r.read_materials(i)? {
+                            Some(m) => material.extend(m),
+                            None => material.extend(std::iter::repeat_n(0, buf.len())),
+                        }
+                    }
+                }
+                Ok((pos, normal, color, mask, node, material))
+            })
+            .map_err(err)?;
+        let (pos, normal, color, mask, node, material) = cols;
+        let d = PyDict::new(py);
+        d.set_item("pos", table(py, pos, 3)?)?;
+        d.set_item("face_mask", mask.into_pyarray(py))?;
+        d.set_item("normal", table(py, normal, 3)?)?;
+        d.set_item("color", table(py, color, 4)?)?;
+        if materials {
+            d.set_item("material", material.into_pyarray(py))?;
+        }
+        d.set_item("node", node.into_pyarray(py))?;
         Ok(d)
     }
 
@@ -267,5 +346,6 @@ fn _voxlod(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Reader>()?;
     m.add("VoxlodError", m.py().get_type::<VoxlodError>())?;
     m.add("CHUNK", CHUNK)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -2,7 +2,7 @@
 # Builds the two peers of docs/BENCHMARKS.md into DEST:
 #   DEST/openvdb_surface  our harness around OpenVDB 10's mesh-to-volume (openvdb_surface.cpp
 #                         beside this script; Debian's libopenvdb-dev);
-#   DEST/obj2voxel        obj2voxel (MIT; github.com/Eisenwave/obj2voxel at commit 9fb8ae2 with
+#   DEST/obj2voxel        obj2voxel (MIT; github.com/Eisenwave/obj2voxel at commit 9fb8ae2 with  check-words: allow (the peer's pinned source)
 #                         its submodules), from a source tarball that is not part of this
 #                         repository: OBJ2VOXEL_SRC, default
 #                         ../shared/peers/src/obj2voxel-9fb8ae2.tar.gz (its top folder: obj2voxel/).

@@ -1,4 +1,4 @@
-//! Sharded builds on cluster schedulers (issues 16 and 30): the same four commands (`voxlod
+//! Sharded builds on cluster schedulers: the same four commands (`voxlod
 //! plan --parts`, `voxlod map --part I`, `voxlod build --plan --shard I`, `voxlod merge`) driven
 //! by Slurm and by Kubernetes.
 //!
@@ -79,7 +79,10 @@ fn slurm_ready(test: &str) -> bool {
     if under_ci() {
         panic!("{test}: CI=true needs the Slurm cluster of .ci/slurm-up.sh, but {why}");
     }
-    eprintln!("{test}: SKIPPED: no Slurm cluster here ({why}); `.ci/slurm-up.sh` starts one");
+    voxlod_testkit::skipped(
+        test,
+        &format!("no Slurm cluster here ({why}); `.ci/slurm-up.sh` starts one"),
+    );
     false
 }
 
@@ -321,7 +324,8 @@ fn manifest(name: &str) -> serde_json::Value {
     serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{name}: {e}"))
 }
 
-/// True if python3 with PyYAML runs; else "SKIPPED" and why, or under CI a failure.
+/// True if python3 with PyYAML runs; else a skip and why (`voxlod_testkit::skipped`), or under
+/// CI a failure.
 fn yaml_ready(test: &str) -> bool {
     let o = Command::new("python3").args(["-c", "import yaml"]).output();
     let why = match o {
@@ -332,7 +336,10 @@ fn yaml_ready(test: &str) -> bool {
     if under_ci() {
         panic!("{test}: CI=true but python3 with PyYAML is not available: {why}");
     }
-    eprintln!("{test}: SKIPPED: python3 with PyYAML is not available (pip install pyyaml): {why}");
+    voxlod_testkit::skipped(
+        test,
+        &format!("python3 with PyYAML is not available (pip install pyyaml): {why}"),
+    );
     false
 }
 

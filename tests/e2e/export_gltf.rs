@@ -1,4 +1,4 @@
-//! `voxlod export -o x.glb` (issue 31 §2) and the export size guard (§3).
+//! `voxlod export -o x.glb` and the export size guard.
 //!
 //! The GLB is checked three ways: the Khronos glTF validator (npm `gltf-validator`, run by node
 //! from `tests/node`, installed by `.ci/run`) reports no error and no warning; the `gltf`
@@ -205,7 +205,10 @@ fn khronos_report(glb: &Path) -> Option<serde_json::Value> {
             !voxlod_testkit::under_ci(),
             "the Khronos glTF validator is not installed (node and `npm ci` in tests/node: .ci/run does both)"
         );
-        eprintln!("skipped the Khronos glTF validator: not installed (run `npm ci` in tests/node)");
+        voxlod_testkit::skipped(
+            "export_gltf (the Khronos glTF validator)",
+            "not installed (run `npm ci` in tests/node)",
+        );
         return None;
     }
     let o = Command::new("node")
@@ -310,6 +313,31 @@ fn glb_export_is_the_ply_export_and_valid_gltf() {
     let o = voxlod(&["export", "bunny.voxlod", "-o", "x.gltf"], d);
     assert!(!o.status.success());
     assert!(text(&o).contains("name it .glb"), "{}", text(&o));
+    // a name of a format export does not write is refused, nothing is left under it
+    for (args, says) in [
+        (
+            &["-o", "x.obj"][..],
+            "must end in .ply (binary PLY) or .glb",
+        ),
+        (
+            &["-o", "x.OBJ"][..],
+            "must end in .ply (binary PLY) or .glb",
+        ),
+        (&["-o", "x"][..], "must end in .ply (binary PLY) or .glb"),
+        (
+            &["--source", "-o", "x.glb"][..],
+            "--source writes binary PLY",
+        ),
+    ] {
+        let o = voxlod(&[&["export", "bunny.voxlod"][..], args].concat(), d);
+        assert!(!o.status.success(), "{args:?}");
+        let out = text(&o);
+        assert!(
+            out.contains(says) && out.contains(args[args.len() - 1]),
+            "{out}"
+        );
+        assert!(!d.join(args[args.len() - 1]).exists(), "{args:?}");
+    }
     let o = voxlod(
         &["export", "bunny.voxlod", "--level", "1", "-o", "l.glb"],
         d,

@@ -1,4 +1,4 @@
-//! Fault tests (issue 17): what voxlod promises when outputs collide, inputs are damaged, files
+//! Fault tests: what voxlod promises when outputs collide, inputs are damaged, files
 //! change under a reader, or the output's disk is full or read-only. Each test made its
 //! defect happen before the fix; inputs are made here, not stored. docs/RELIABILITY.md lists
 //! the promises and names these tests.
@@ -487,8 +487,9 @@ fn unwritable_output_folder_fails_up_front() {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
         if std::fs::write(ro.join("probe"), b"").is_ok() {
-            eprintln!(
-                "unwritable_output_folder_fails_up_front: SKIPPED: cannot make a read-only folder"
+            voxlod_testkit::skipped(
+                "unwritable_output_folder_fails_up_front",
+                "cannot make a read-only folder",
             );
             return;
         }
@@ -570,8 +571,9 @@ fn full_output_disk_fails_early_and_keeps_the_work() {
     // room for the file, the lock file and a little more
     let size = format!("size={}k", bytes.len() / 1024 + 512);
     let Some(_mount) = Mount::new(&mnt, &size) else {
-        eprintln!(
-            "full_output_disk_fails_early_and_keeps_the_work: SKIPPED: mounting a tmpfs needs root"
+        voxlod_testkit::skipped(
+            "full_output_disk_fails_early_and_keeps_the_work",
+            "mounting a tmpfs needs root",
         );
         return;
     };
@@ -741,6 +743,25 @@ fn messages_name_the_problem() {
         d,
     );
     fails_with(&o, &["--resolution 300"]);
+    // a file that is no settings file (`/proc/self/environ`, a key file) is not echoed: the
+    // error says where and what, not the line
+    let secret = d.join("environ");
+    std::fs::write(&secret, "HOME=/root\0API_TOKEN=hunter2-secret\0").unwrap();
+    let o = voxlod(&["build", "-q", s(&sample()), "--config", s(&secret)], d);
+    let e = fails_with(&o, &["settings file", "environ", "line 1, column"]);
+    assert!(!e.contains("hunter2") && !e.contains("HOME=/root"), "{e}");
+    let o = voxlod(
+        &[
+            "build",
+            "-q",
+            s(&sample()),
+            "--config",
+            "/proc/self/environ",
+        ],
+        d,
+    );
+    let e = fails_with(&o, &["settings file /proc/self/environ"]);
+    assert!(!e.contains("PATH="), "{e}");
     // NaN tolerances are refused (clap's usage error: exit status 2)
     let f = d.join("f.voxlod");
     ok(&voxlod(
@@ -868,7 +889,7 @@ fn stale_work_folders_are_reported_and_cleaned() {
         .contains("no voxlod work folders"));
 }
 
-/// Issue 32 §4 "clean": a run killed while writing its output (here `gen`, SIGKILL while it
+/// `clean`: a run killed while writing its output (here `gen`, SIGKILL while it
 /// writes) leaves `.voxlod-lock-NAME` and `.voxlod-part-NAME-…` beside it; `clean --dry-run`
 /// lists them and keeps them, `clean` removes them (and nothing else), and those of an output
 /// whose lock a running process holds are listed as being written and kept.
@@ -1016,7 +1037,7 @@ fn a_killed_tiles_exports_staging_folder_is_cleaned() {
     assert!(hidden(d).is_empty(), "{:?}", hidden(d));
 }
 
-/// Messages still open after the first pass (issue 17, "Messages"): each names the file and
+/// More messages (docs/RELIABILITY.md, "Messages"): each names the file and
 /// the place, in words.
 #[test]
 fn more_messages_name_the_problem() {
@@ -1096,4 +1117,83 @@ fn more_messages_name_the_problem() {
         plan.contains("= base 64.00 MiB + LOD 128.00 MiB + "),
         "{plan}"
     );
+}
+
+/// A textured quad (OBJ) whose texture is a `side`² PNG of one colour: a small file whose
+/// decoded pyramid is large.
+fn big_texture_quad(dir: &Path, side: u32) -> PathBuf {
+    image::RgbaImage::from_pixel(side, side, image::Rgba([200, 30, 30, 255]))
+        .save(dir.join("big.png"))
+        .unwrap();
+    std::fs::write(dir.join("q.mtl"), "newmtl m\nKd 1 1 1\nmap_Kd big.png\n").unwrap();
+    let p = dir.join("q.obj");
+    std::fs::write(
+        &p,
+        "mtllib q.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+         usemtl m\nf 1/1 2/2 3/3 4/4\n",
+    )
+    .unwrap();
+    p
+}
+
+/// The temporary-disk estimate counts the texture tiles a build writes when its textures
+/// exceed their memory share (their size from the images' headers), and a build whose tiles
+/// cannot fit is refused before anything is decoded or written, naming them. A 2048² PNG of
+/// one colour (a few KiB) under `--memory 336MiB` (a 16 MiB texture share) writes a 21 MiB
+/// tile file.
+#[test]
+fn texture_tiles_are_in_the_temporary_disk_estimate() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let obj = big_texture_quad(d, 2048);
+    let build = |tmp: &Path, out: &str| {
+        voxlod(
+            &[
+                "build",
+                "--json",
+                s(&obj),
+                "-o",
+                s(&d.join(out)),
+                "-r",
+                "256",
+                "--memory",
+                "336MiB",
+                "--tmp",
+                s(tmp),
+            ],
+            d,
+        )
+    };
+    // the estimate names the tiles, and they are what the build writes
+    let tmp = d.join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let o = build(&tmp, "ok.voxlod");
+    let t = ok(&o);
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let written = summary["texture_cache"]["file_bytes"].as_u64().unwrap();
+    assert!(written > 20 << 20, "{}", summary["texture_cache"]);
+    let line = t
+        .lines()
+        .find(|l| l.starts_with("temporary disk: up to about"))
+        .unwrap_or_else(|| panic!("no estimate: {t}"));
+    let said = format!(
+        "and texture tiles {:.2} MiB",
+        written as f64 / (1u64 << 20) as f64
+    );
+    assert!(line.contains(&said), "{line} (wanted {said})");
+    // an 8 MiB file system: refused up front, naming the tiles; nothing left behind
+    let mnt = d.join("small");
+    let Some(_mount) = Mount::new(&mnt, "size=8m") else {
+        eprintln!(
+            "texture_tiles_are_in_the_temporary_disk_estimate: the full-disk part SKIPPED: mounting a tmpfs needs root"
+        );
+        return;
+    };
+    let t0 = Instant::now();
+    let o = build(&mnt, "no.voxlod");
+    let e = fails_with(&o, &["not enough disk space", "texture tiles", "--tmp"]);
+    assert!(!e.contains("writing the texture tiles"), "{e}");
+    assert!(t0.elapsed() < Duration::from_secs(20));
+    assert!(!d.join("no.voxlod").exists());
+    assert_eq!(std::fs::read_dir(&mnt).unwrap().count(), 0);
 }

@@ -13,7 +13,8 @@ struct ContractReport {
     /// (nearly cancelling normal sums; see the gpu crate docs)
     normal_outliers: usize,
     /// voxels (any level) in one file and not the other: both backends' sets are exact for the
-    /// input's world coordinates (docs/VOXELIZE.md), so 0; counted to show what differs if not
+    /// input's world coordinates (the voxelize crate's docs), so 0; counted to show what differs
+    /// if not
     set_differences: usize,
 }
 
@@ -151,8 +152,8 @@ fn gpu_backend_writes_the_same_file_as_cpu() {
 }
 
 /// GPU (lavapipe) against CPU on real meshes of very different triangle sizes at 256³: the same
-/// voxel sets at every level (both exact for the input's world coordinates; before issue 32 §1
-/// the GPU's were exact for the f32 grid coordinates and the dragon's differed in 2 voxels),
+/// voxel sets at every level (both exact for the input's world coordinates; sets exact only for
+/// the f32 grid coordinates would differ, in 2 voxels on the dragon),
 /// colours within one step, and normals within one step except in a small share of voxels ([`gpu_contract`]). Those are voxels where opposite-facing surfaces
 /// meet inside one voxel (double-sided walls), so the area-weighted normal nearly cancels and
 /// its direction is rounding noise (the GPU sums in 96-bit fixed point, the CPU in f32); bound:

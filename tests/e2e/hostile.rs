@@ -92,7 +92,7 @@ fn malformed_gltf_is_refused_with_the_rule() {
     let d = tempfile::tempdir().unwrap();
     // accessors of the quad: 0 POSITION, 1 TEXCOORD_0, 2 indices
     type Edit = fn(&mut serde_json::Value);
-    let cases: [(&str, Edit, &str); 9] = [
+    let cases: [(&str, Edit, &str); 12] = [
         (
             "float_indices.gltf",
             |v| v["accessors"][2]["componentType"] = 5126.into(),
@@ -142,6 +142,31 @@ fn malformed_gltf_is_refused_with_the_rule() {
                 v["nodes"] = serde_json::json!([{"mesh": 0}, {"children": [2]}, {"children": [1]}]);
             },
             "a cycle",
+        ),
+        (
+            // read three times over before the rule was checked
+            "repeated_roots.gltf",
+            |v| v["scenes"][0]["nodes"] = serde_json::json!([0, 0, 0]),
+            "lists node 0 twice; the root nodes of a scene must be unique",
+        ),
+        (
+            // five indices: one triangle and two indices that make none
+            "five_indices.gltf",
+            |v| v["accessors"][2]["count"] = 5.into(),
+            "mode TRIANGLES takes indices in threes (glTF 2.0, 3.7.2.1), but it has 5",
+        ),
+        (
+            // the index is the bits of the first vertex's z (0.5): past the 4 vertices, which
+            // the gltf crate's reader drops without a word
+            "sparse_past_count.gltf",
+            |v| {
+                v["accessors"][0]["sparse"] = serde_json::json!({
+                    "count": 1,
+                    "indices": {"bufferView": 0, "byteOffset": 8, "componentType": 5125},
+                    "values": {"bufferView": 0},
+                });
+            },
+            "sparse index 0 is 1056964608, but the accessor has 4 elements",
         ),
     ];
     for (name, edit, rule) in cases {
@@ -211,7 +236,10 @@ fn devices_and_fifos_are_refused_quickly() {
     let dir = d.path();
     let fifo = dir.join("fifo");
     if !mkfifo(&fifo) {
-        eprintln!("skipped: mkfifo is not available");
+        voxlod_testkit::skipped(
+            "hostile::devices_and_fifos_are_refused_quickly",
+            "mkfifo is not available",
+        );
         return;
     }
     let cwd = dir.to_str().unwrap();

@@ -162,7 +162,7 @@ fn run(args: &[&str], cwd: &Path) -> Output {
         .args(args)
         .current_dir(cwd)
         .output()
-        // says why: a spawn failure seen once (2026-12-02) printed no reason
+        // says why: a spawn failure without the error printed no reason
         .unwrap_or_else(|e| panic!("cannot run {BIN} {args:?} in {}: {e}", cwd.display()))
 }
 

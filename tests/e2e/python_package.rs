@@ -24,9 +24,13 @@ fn python_package_passes_its_tests() {
             "python_package: CI=true but the voxlod package or pytest is not installed \
              (python3 -m pip install ./python pytest): {why}"
         );
-        eprintln!(
-            "python_package: SKIPPED: the voxlod package or pytest is not installed \
-             (python3 -m pip install ./python pytest): {why}"
+        voxlod_testkit::skipped(
+            "python_package",
+            &format!(
+                "the voxlod package or pytest is not installed \
+                 (python3 -m pip install ./python pytest): {}",
+                why.trim()
+            ),
         );
         return;
     }

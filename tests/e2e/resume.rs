@@ -178,14 +178,14 @@ fn killed_build_leaves_no_output() {
     }
 }
 
-/// Issue 4: under a small memory budget the process's peak resident memory (its own
+/// Under a small memory budget the process's peak resident memory (its own
 /// getrusage accounting) stays below the budget, and the output equals an unconstrained
 /// build byte for byte. The input is a generated 1.2M-triangle mesh, under a budget of
 /// 352 MiB (the smallest a build takes is 336 MiB, at any grid): large enough that the scatter pass
 /// cannot hold its bins in its budgeted buffer (about 80 MiB for 100 MiB of binned triangles)
 /// and must flush on the way. (2M triangles under 512 MiB checked the same with about 20 %
 /// more CPU time; at 1024³ the two builds take 8.6 s against 20.7 s at 2048³, the scatter
-/// buffer still smaller than the bins: docs/BENCHMARKS.md, "Earlier measurements", "CI time:
+/// buffer still smaller than the bins: docs/journal/benchmarks-notebook.md, "CI time:
 /// dependencies at opt-level 1".)
 #[test]
 fn small_memory_budget_is_kept_and_changes_nothing() {

@@ -17,6 +17,13 @@ fn s(p: &Path) -> String {
     p.to_str().unwrap().to_string()
 }
 
+/// `v` written as the plan at `p` with its checksum made right (so that the checks behind
+/// the checksum run on the edit).
+pub(crate) fn write_sealed(p: &Path, v: &serde_json::Value) {
+    let mut plan: voxlod_pipeline::ShardPlan = serde_json::from_value(v.clone()).unwrap();
+    std::fs::write(p, plan.sealed_json()).unwrap();
+}
+
 /// The one-machine build's bytes.
 fn single(input: &Path, dir: &Path, settings: &[&str]) -> Vec<u8> {
     let out = dir.join("single.voxlod");
@@ -371,11 +378,18 @@ fn a_shard_refuses_an_input_whose_content_changed() {
     set_mtime(mtime);
     ok(&build_shard(&p, 0, &[]));
     assert!(std::fs::read(&shard0).unwrap() == good, "shard 0 differs");
-    // a plan whose per-chunk counts were edited
+    // a plan whose per-chunk counts were edited: its checksum no longer matches; with the
+    // checksum made right, the counts are checked
     let mut edited = v.clone();
     let c = edited["chunks"][0][1].as_u64().unwrap();
     edited["chunks"][0][1] = (c + 1).into();
     std::fs::write(&p, serde_json::to_vec_pretty(&edited).unwrap()).unwrap();
+    let e = err(build_shard(&p, 0, &[]));
+    assert!(
+        e.contains(&s(&p)) && e.contains("checksum does not match its content"),
+        "{e}"
+    );
+    write_sealed(&p, &edited);
     let e = err(build_shard(&p, 0, &[]));
     assert!(
         e.contains(&s(&p)) && e.contains("its chunks add up to"),
@@ -385,7 +399,7 @@ fn a_shard_refuses_an_input_whose_content_changed() {
     let mut edited = v.clone();
     let size = edited["grid"]["voxel_size"].as_f64().unwrap();
     edited["grid"]["voxel_size"] = (size * 1.01).into();
-    std::fs::write(&p, serde_json::to_vec_pretty(&edited).unwrap()).unwrap();
+    write_sealed(&p, &edited);
     let e = err(build_shard(&p, 0, &[]));
     assert!(
         e.contains(&format!("{}: its grid is origin (", s(&p)))
@@ -659,7 +673,7 @@ fn missing_or_stale_map_outputs_are_refused() {
     std::fs::write(&marker, good.replace(sha, &"0".repeat(64))).unwrap();
     let e = err(build_shard(&p, 1, &[]));
     assert!(
-        e.contains("part 2:") && e.contains("made for another plan"),
+        e.contains("part 2:") && e.contains("checksum does not match its content"),
         "{e}"
     );
     std::fs::write(&marker, &good).unwrap();
@@ -673,6 +687,18 @@ fn missing_or_stale_map_outputs_are_refused() {
         "{e}"
     );
     std::fs::write(&bins, &keep).unwrap();
+    // a marker whose min was edited to lie outside the plan's grid, which holds every vertex:
+    // refused as the marker's doing, not blamed on the input's vertices
+    let mut v: serde_json::Value = serde_json::from_str(&good).unwrap();
+    v["min"][0] = (-1e9).into();
+    std::fs::write(&marker, serde_json::to_string(&v).unwrap()).unwrap();
+    let e = err(build_shard(&p, 1, &[]));
+    assert!(
+        !e.contains("used by no triangle")
+            && (e.contains("part-IIII.json") || e.contains("part-0002.json")),
+        "{e}"
+    );
+    std::fs::write(&marker, &good).unwrap();
     for i in 0..2 {
         ok(&build_shard(&p, i, &[]));
     }

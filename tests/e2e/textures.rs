@@ -659,7 +659,7 @@ fn khr_texture_transform_is_applied() {
     all_red(&out, "KHR_texture_transform");
 }
 
-/// Issue 32 §2: a glTF made from the YCB banana's OBJ by an independent converter (Cesium's
+/// A glTF made from the YCB banana's OBJ by an independent converter (Cesium's
 /// `obj2gltf`, installed by `.ci/run` into `tests/converters/`) voxelizes as the OBJ does: the
 /// same voxels, colours within 2 units. obj2gltf writes `baseColorFactor` 1 when a material has
 /// a texture (it ignores `Kd` then), where an OBJ's texture multiplies `Kd` (0.639 in the
@@ -682,7 +682,10 @@ fn gltf_from_an_independent_converter_matches_its_obj() {
             std::env::var("CI").as_deref() != Ok("true"),
             "{why}; CI=true requires it"
         );
-        eprintln!("gltf_from_an_independent_converter_matches_its_obj: skipped: {why}");
+        voxlod_testkit::skipped(
+            "textures::gltf_from_an_independent_converter_matches_its_obj",
+            &why,
+        );
         return;
     }
     let d = tempfile::tempdir().unwrap();

@@ -1,4 +1,4 @@
-//! `voxlod export FILE --3d-tiles DIR` (issue 31 §1): an OGC 3D Tiles 1.1 tileset.
+//! `voxlod export FILE --3d-tiles DIR`: an OGC 3D Tiles 1.1 tileset.
 //!
 //! `tileset.json` is checked against the file's node index read independently: one tile per
 //! node of the cut with the same tree, a content URI per node with faces whose GLB holds
@@ -405,7 +405,10 @@ fn browser_tools() -> bool {
             !voxlod_testkit::under_ci(),
             "node packages (npm ci in tests/node) or {chromium} missing: .ci/run installs both"
         );
-        eprintln!("skipped the browser check: npm ci in tests/node and apt-get install chromium");
+        voxlod_testkit::skipped(
+            "tiles (the browser check)",
+            "npm ci in tests/node and apt-get install chromium",
+        );
     }
     there
 }
@@ -535,6 +538,41 @@ fn tileset_matches_the_octree_and_opens_in_three_js() {
     );
     assert!(!o.status.success());
     assert!(text(&o).contains("holds no tileset"), "{}", text(&o));
+    // a file the user keeps beside a tileset, or inside one of its level folders, is never
+    // removed, with --force either: refused, naming it, and the folder left as it was
+    let replace = |d: &Path| {
+        voxlod(
+            &[
+                "export",
+                "bunny.voxlod",
+                "--3d-tiles",
+                "coarse",
+                "--level",
+                "1",
+                "--force",
+            ],
+            d,
+        )
+    };
+    for (file, named) in [
+        ("coarse/index.html", "index.html"),
+        ("coarse/1/notes.txt", "notes.txt"),
+    ] {
+        std::fs::write(d.join(file), "mine").unwrap();
+        let (top, level1) = (listing(&d.join("coarse")), listing(&d.join("coarse/1")));
+        let o = replace(d);
+        let t = text(&o);
+        assert!(!o.status.success(), "{t}");
+        assert!(
+            t.contains(named) && t.contains("not part of a tileset"),
+            "{t}"
+        );
+        assert_eq!(listing(&d.join("coarse")), top);
+        assert_eq!(listing(&d.join("coarse/1")), level1);
+        assert_eq!(std::fs::read(d.join(file)).unwrap(), b"mine");
+        std::fs::remove_file(d.join(file)).unwrap();
+    }
+    ok(&replace(d));
 
     // the size guard: refused before a byte is written, naming the level that fits
     let before = listing(d);
@@ -666,6 +704,19 @@ fn materials_are_feature_ids() {
         ids.extend(tris.iter().map(|t| (t.0).2));
     }
     assert!(ids.len() >= 3, "material ids {ids:?}");
+    // a tileset with nodes split in parts (`X-Y-Z-o-o.glb`) is the tileset's own: replaced by
+    // --force
+    assert!(walk(&tiles).iter().any(|p| p
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .matches('-')
+        .count()
+        >= 4));
+    ok(&voxlod(
+        &["export", "sib.voxlod", "--3d-tiles", "tiles", "--force"],
+        d,
+    ));
     if browser_tools() {
         let any = walk(&tiles)
             .into_iter()

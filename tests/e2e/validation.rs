@@ -1,4 +1,4 @@
-//! One validation rule set for every reader (docs/FORMAT.md 11.2, issue 17 items 6 and 7):
+//! One validation rule set for every reader (docs/FORMAT.md 11.2):
 //! the same corrupted files go to the Rust `Reader` (open and read every node), `voxlod
 //! verify`, `voxlod inspect` (which only opens: manifest cases) and the Python reader
 //! (`scripts/voxlod_read.py --check`); all must reject each one, and all must accept the good

@@ -79,6 +79,6 @@ pub use writer::{temp_path, Writer};
 /// the compression time, level 19 6–21% smaller at 20–50×. On real octrees level 1 is as small
 /// as level 3 (Stanford dragon at 4096³, all 57M voxels re-encoded: 2.000 against 2.001 bytes
 /// per voxel) at 60 % of its compression time, and negative levels are 30–50 % larger for
-/// little more speed (docs/BENCHMARKS.md, "Earlier measurements": "LOD + write"), so the
+/// little more speed (docs/journal/benchmarks-notebook.md, "LOD + write"), so the
 /// default is 1.
 pub const DEFAULT_ZSTD_LEVEL: i32 = 1;

@@ -1,8 +1,8 @@
-//! The per-triangle exact fallback of the GPU voxelizer (issue 13, part 1): the triangles the
+//! The per-triangle exact fallback of the GPU voxelizer: the triangles the
 //! shaders could not certify are decided here, on the host, with the CPU's exact overlap test
 //! (`voxlod_voxelize::voxelize_triangle`: the f64 filter of Rauwendaal & Bailey's factored test
 //! with Shewchuk's adaptive predicates inside its bands; `voxelize_world_triangle` for
-//! triangles fed in world coordinates, exact for those, issue 32 §1), and their attribute
+//! triangles fed in world coordinates, exact for those), and their attribute
 //! contributions are computed as the shaders compute them (voxelize.wgsl `accumulate`). The
 //! flags the shaders need per triangle are computed here too: the certificates of dyadic
 //! coordinates ([`exact_flags`]) and what the move to the grid rounded ([`world_flags`]).
@@ -34,7 +34,8 @@ pub(crate) const HOST_FLAGS: u32 =
     TRI_EXACT_EDGES | TRI_EXACT_DEPTH | TRI_ROUNDED | TRI_TIES_BROKEN;
 
 /// What voxelize.wgsl must know of a triangle fed in world coordinates `world` whose f32 grid
-/// coordinates on `grid` are `g` (`grid.to_grid` of each vertex), issue 32 §1:
+/// coordinates on `grid` are `g` (`grid.to_grid` of each vertex), so that the sets are exact for
+/// the world values:
 /// * [`TRI_ROUNDED`] unless every grid coordinate `c` is exactly the image of its world value
 ///   `p`, `origin + c·voxel_size = p` (checked exactly: the product with a fused multiply-add,
 ///   the sum with Knuth's two-sum, both error terms zero; a nonzero term counts as rounded,
@@ -79,7 +80,7 @@ fn exact_image(p: f64, c: f64, o: f64, s: f64) -> bool {
     err == 0.0 && w == p
 }
 
-/// The certification of voxelize.wgsl (docs/VOXELIZE.md, "Certified on the GPU"): with every
+/// The certification of voxelize.wgsl (the crate docs, "Exactness"): with every
 /// coordinate a multiple of 2⁻q (q ≥ 0, the finest fraction bit of the f32 values) and
 /// `B = (max|v| + 2)·2^q`, f64 computes the edge functions and the normal exactly when
 /// `B < 2²⁴`, and the depth predicates too when `B < 2¹⁴`. Computed on the host, once per

@@ -54,7 +54,7 @@
 //! 2²⁹ times wider). Only a chunk with more listed triangles than the list holds is re-voxelized
 //! as a whole on the CPU (`voxlod_voxelize::ChunkVoxelizer`, same mode).
 //!
-//! **Exact for the input's own coordinates** (issue 32 §1).
+//! **Exact for the input's own coordinates** (the voxelize crate's docs say what that promises).
 //! [`GpuVoxelizer::voxelize_chunk_world`] and [`GpuVoxelizer::voxelize_chunk_streamed_world`]
 //! (what a build uses: its bins hold the input's world positions) take triangles in world
 //! coordinates of a [`voxlod_geom::Grid`] and give the set `ChunkVoxelizer::add_world` gives:

@@ -1,6 +1,7 @@
 //! glTF 2.0 (Khronos, "glTF 2.0 Specification", 2021): `.gltf` with external or data-URI
-//! buffers and images, and `.glb` with its binary chunk, read by the `gltf` crate (its JSON
-//! and accessor readers); buffers and images are loaded here.
+//! buffers and images, and `.glb` with its binary chunk: the JSON read and validated by the
+//! `gltf` crate; buffers and images loaded here, accessors decoded by `gltf_data` (with
+//! `KHR_mesh_quantization`'s component types and `EXT_meshopt_compression`'s views).
 //!
 //! Every mesh primitive of the default scene (else the first scene) is streamed in world
 //! coordinates: node transforms (matrix or TRS, nested) composed in f64; a transform whose
@@ -33,6 +34,8 @@ pub(crate) struct GltfSource {
     path: PathBuf,
     doc: gltf::Document,
     buffers: Vec<Vec<u8>>,
+    /// Per buffer view: its bytes decoded, if it is compressed (`gltf_data`).
+    decoded: Vec<Option<Vec<u8>>>,
     /// Per glTF material: the texture coordinate set of its base colour texture and its
     /// `KHR_texture_transform`, if the texture is usable.
     uv_set: Vec<Option<(u32, Option<UvTransform>)>>,
@@ -82,12 +85,24 @@ fn unescape(uri: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-fn load_buffers(path: &Path, g: &gltf::Gltf, scope: &Scope) -> Result<Vec<Vec<u8>>, IngestError> {
+fn load_buffers(
+    path: &Path,
+    doc: &gltf::Document,
+    mut blob: Option<Vec<u8>>,
+    scope: &Scope,
+    fallback: &[bool],
+) -> Result<Vec<Vec<u8>>, IngestError> {
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
-    for b in g.document.buffers() {
+    for b in doc.buffers() {
+        if fallback.get(b.index()).copied().unwrap_or(false) {
+            // EXT_meshopt_compression's fallback: read only through the decoded views
+            out.push(Vec::new());
+            continue;
+        }
         let data = match b.source() {
-            gltf::buffer::Source::Bin => g.blob.clone().ok_or_else(|| {
+            // the checks allow only the first buffer to be the binary chunk: moved, not copied
+            gltf::buffer::Source::Bin => blob.take().ok_or_else(|| {
                 bad(
                     path,
                     format!(
@@ -128,7 +143,10 @@ fn load_buffers(path: &Path, g: &gltf::Gltf, scope: &Scope) -> Result<Vec<Vec<u8
 }
 
 /// A `KHR_texture_transform` as the affine map `(u, v) ↦ (a·u + b·v + c, d·u + e·v + f)` in
-/// glTF's texture space: `T(offset) · R(rotation) · S(scale)`, the extension's matrix.
+/// glTF's texture space: `T(offset) · R(rotation) · S(scale)`, the extension's matrix. The
+/// rotation is `u' = cos·u + sin·v`, `v' = −sin·u + cos·v`: counter-clockwise as the image is
+/// seen (its `v` runs down), as the extension's prose and three.js's loader turn it; its GLSL
+/// listing read column-major turns the other way (docs/INGEST.md, "Texture coordinates").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct UvTransform([f64; 6]);
 
@@ -260,8 +278,200 @@ fn mul(a: &[[f64; 4]; 4], b: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
     m
 }
 
+/// The most vertex and index records one glTF file's scene may read, over all the instances
+/// of its primitives: about what a billion-triangle mesh reads. Nodes instancing a mesh and
+/// primitives sharing accessors multiply the records read without growing the file, so a few
+/// kilobytes could otherwise ask for hours of work.
+pub(crate) const MAX_INSTANCED_RECORDS: u64 = 1 << 32;
+
+/// Bytes of decoded attributes per vertex while a primitive is read: position and normal
+/// (12 bytes each), colour (16) and its bytes (4), texture coordinates (8).
+const DECODED_PER_VERTEX: u64 = 52;
+
+/// What the scene asks for, counted over every instance of every primitive.
+#[derive(Clone, Copy, Debug, Default)]
+struct Instanced {
+    /// Vertex records (one per attribute) and indices read.
+    records: u64,
+    /// Triangles made (TRIANGLES: a third of the indices; strips and fans: two fewer).
+    triangles: u64,
+}
+
+/// The scene's instanced work and the most bytes decoding one primitive holds.
+fn instanced_work(doc: &gltf::Document) -> (Instanced, u64) {
+    let (mut w, mut largest) = (Instanced::default(), 0u64);
+    for (node, _) in scene_nodes(doc) {
+        for p in node.mesh().iter().flat_map(|m| m.primitives()) {
+            if !matches!(
+                p.mode(),
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
+                continue;
+            }
+            let v = p
+                .get(&gltf::Semantic::Positions)
+                .map_or(0, |a| a.count() as u64);
+            let i = p.indices().map_or(v, |a| a.count() as u64);
+            w.records = w
+                .records
+                .saturating_add(v.saturating_mul(p.attributes().count() as u64) + i);
+            w.triangles += match p.mode() {
+                Mode::Triangles => i / 3,
+                _ => i.saturating_sub(2),
+            };
+            largest = largest.max(v * DECODED_PER_VERTEX + i * 4);
+        }
+    }
+    (w, largest)
+}
+
+/// Bytes the buffers and images read besides the file itself take: buffers named by URI (a
+/// data URI decodes to at most three quarters of its text), images copied out of buffer views
+/// or decoded from data URIs.
+fn referenced_bytes(doc: &gltf::Document) -> u64 {
+    let from_uri = |uri: &str| uri.len() as u64 / 4 * 3 + 3;
+    let buffers: u64 = doc
+        .buffers()
+        .map(|b| match b.source() {
+            gltf::buffer::Source::Bin => 0,
+            gltf::buffer::Source::Uri(u) if u.starts_with("data:") => {
+                (b.length() as u64).max(from_uri(u))
+            }
+            gltf::buffer::Source::Uri(_) => b.length() as u64,
+        })
+        .sum();
+    let images: u64 = doc
+        .images()
+        .map(|i| match i.source() {
+            gltf::image::Source::View { view, .. } => view.length() as u64,
+            gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => from_uri(uri),
+            gltf::image::Source::Uri { .. } => 0,
+        })
+        .sum();
+    buffers + images
+}
+
+/// The memory a glTF reader holds, bytes, counted against the caller's budget
+/// ([`crate::ReadOptions::memory`]) before each part is read.
+#[derive(Clone, Copy, Debug, Default)]
+struct Held {
+    /// The file read whole (a GLB's binary chunk stays as buffer 0).
+    file: u64,
+    /// Parsing the JSON document ([`crate::gltf_check::document_bound`]).
+    document: u64,
+    /// Buffers and images read besides the file ([`referenced_bytes`]).
+    buffers: u64,
+    /// Decoding the largest primitive.
+    decoding: u64,
+}
+
+/// `bytes` in MiB, for messages.
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
+}
+
+impl Held {
+    fn total(&self) -> u64 {
+        self.file + self.document + self.buffers + self.decoding
+    }
+
+    /// Refuses what does not fit `memory`, naming each part and the budget.
+    fn check(&self, path: &Path, memory: Option<u64>) -> Result<(), IngestError> {
+        let Some(m) = memory.filter(|&m| self.total() > m) else {
+            return Ok(());
+        };
+        let parts: Vec<String> = [
+            (self.file, "the file"),
+            (self.document, "parsing its JSON document"),
+            (self.buffers, "the buffers and images it names"),
+            (self.decoding, "decoding its largest primitive"),
+        ]
+        .iter()
+        .filter(|(b, _)| *b > 0)
+        .map(|(b, what)| format!("{what} {}", mib(*b)))
+        .collect();
+        Err(bad(
+            path,
+            format!(
+                "reading this glTF file needs up to {} of memory ({}), more than the {} the memory budget leaves for reading the input; nothing was read past that: raise --memory by at least {}",
+                mib(self.total()),
+                parts.join(", "),
+                mib(m),
+                mib(self.total() - m)
+            ),
+        ))
+    }
+}
+
+/// Sparse accessors' indices (glTF 2.0, 3.6.2.3): each less than the accessor's count and
+/// strictly increasing. The `gltf` crate's reader drops an index past the count silently, so
+/// a file breaking the rule would lose the values it substitutes without a word.
+fn sparse_indices(
+    doc: &gltf::Document,
+    buffers: &[Vec<u8>],
+    decoded: &[Option<Vec<u8>>],
+) -> Result<(), String> {
+    use gltf::accessor::sparse::IndexType;
+    for a in doc.accessors() {
+        let Some(sp) = a.sparse() else { continue };
+        let ix = sp.indices();
+        let view = ix.view();
+        let size = match ix.index_type() {
+            IndexType::U8 => 1,
+            IndexType::U16 => 2,
+            IndexType::U32 => 4,
+        };
+        // a meshopt-compressed view is read decoded, the others from their buffer
+        let (bytes, start) = match decoded.get(view.index()).and_then(Option::as_ref) {
+            Some(d) => (Some(d), ix.offset()),
+            None => (
+                buffers.get(view.buffer().index()),
+                view.offset() + ix.offset(),
+            ),
+        };
+        let data = bytes
+            .and_then(|b| b.get(start..start + sp.count() * size))
+            .ok_or_else(|| {
+                format!(
+                    "accessor {}: its sparse indices lie outside their buffer",
+                    a.index()
+                )
+            })?;
+        let mut last: Option<u64> = None;
+        for (k, c) in data.chunks_exact(size).enumerate() {
+            let x = c
+                .iter()
+                .rev()
+                .fold(0u64, |acc, &byte| (acc << 8) | byte as u64);
+            let rule = if x >= a.count() as u64 {
+                Some(format!(
+                    "is {x}, but the accessor has {} elements",
+                    a.count()
+                ))
+            } else if last.is_some_and(|l| x <= l) {
+                Some(format!("is {x}, not more than the index before it"))
+            } else {
+                None
+            };
+            if let Some(rule) = rule {
+                return Err(format!(
+                    "accessor {} sparse index {k} {rule}; sparse indices must be less than the accessor's count and strictly increasing (glTF 2.0, 3.6.2.3)",
+                    a.index()
+                ));
+            }
+            last = Some(x);
+        }
+    }
+    Ok(())
+}
+
 /// The extensions voxlod reads.
-const READ_EXTENSIONS: [&str; 1] = ["KHR_texture_transform"];
+const READ_EXTENSIONS: [&str; 4] = [
+    "KHR_texture_transform",
+    "KHR_mesh_quantization",
+    crate::gltf_data::MESHOPT[0],
+    crate::gltf_data::MESHOPT[1],
+];
 
 /// A panic of the `gltf` crate (which the checks should leave none of) as an error naming the
 /// file, so that no input ends the process.
@@ -275,48 +485,100 @@ fn caught<T>(path: &Path, f: impl FnOnce() -> Result<T, IngestError>) -> Result<
 }
 
 impl GltfSource {
-    pub fn open(path: &Path, scope: &Scope) -> Result<(GltfSource, MeshInfo), IngestError> {
-        caught(path, || Self::open_checked(path, scope))
+    pub fn open(
+        path: &Path,
+        scope: &Scope,
+        memory: Option<u64>,
+    ) -> Result<(GltfSource, MeshInfo), IngestError> {
+        caught(path, || Self::open_checked(path, scope, memory))
     }
 
-    fn open_checked(path: &Path, scope: &Scope) -> Result<(GltfSource, MeshInfo), IngestError> {
+    fn open_checked(
+        path: &Path,
+        scope: &Scope,
+        memory: Option<u64>,
+    ) -> Result<(GltfSource, MeshInfo), IngestError> {
+        let file_len = std::fs::metadata(path)
+            .map_err(|e| IngestError::io(path, e))?
+            .len();
+        let mut held = Held {
+            file: file_len,
+            ..Held::default()
+        };
+        held.check(path, memory)?;
         // The container and document checked, then the gltf crate's parse.
-        let bytes = voxlod_io::read_bounded(path, u64::MAX).map_err(|e| match e {
+        let mut bytes = voxlod_io::read_bounded(path, u64::MAX).map_err(|e| match e {
             voxlod_io::BoundError::Io(e) => IngestError::io(path, e),
             e => bad(path, e.to_string()),
         })?;
+        let binary = bytes.starts_with(b"glTF");
         let c = crate::gltf_check::container(&bytes).map_err(|m| bad(path, m))?;
+        held.document = crate::gltf_check::document_bound(c.json.as_bytes());
+        held.check(path, memory)?;
         crate::gltf_check::document(c.json, c.bin).map_err(|m| bad(path, m))?;
-        let g = gltf::Gltf::from_slice(&bytes)
-            .map_err(|e| bad(path, format!("not a valid glTF 2.0 file: {e}")))?;
-        if let Some(ext) = g
-            .document
-            .extensions_required()
-            .find(|e| !READ_EXTENSIONS.contains(e))
+        let meshopt = crate::gltf_data::Meshopt::parse(c.json).map_err(|m| bad(path, m))?;
+        let not_gltf = |e: gltf::Error| bad(path, format!("not a valid glTF 2.0 file: {e}"));
+        let mut root: gltf::json::Root = gltf::json::deserialize::from_slice(c.json.as_bytes())
+            .map_err(|e| not_gltf(gltf::Error::Deserialize(e)))?;
+        if let Some(ext) = root
+            .extensions_required
+            .iter()
+            .find(|e| !READ_EXTENSIONS.contains(&e.as_str()))
         {
             return Err(bad(
                 path,
                 format!("the file requires the extension {ext:?}, which voxlod does not read"),
             ));
         }
-        let buffers = load_buffers(path, &g, scope)?;
+        // every required extension is read here: the gltf crate's check of them (it knows
+        // none of KHR_mesh_quantization and meshopt's) is not needed
+        root.extensions_required.clear();
+        let doc = gltf::Document::from_json(root).map_err(not_gltf)?;
+        // the binary chunk becomes buffer 0 in place: the file's other bytes are dropped
+        let bin = c.bin.map(|b| {
+            let start = b.as_ptr() as usize - bytes.as_ptr() as usize;
+            (start, b.len())
+        });
+        let blob = bin.map(|(start, len)| {
+            bytes.truncate(start + len);
+            bytes.drain(..start);
+            bytes.shrink_to_fit();
+            bytes
+        });
+        held.buffers = referenced_bytes(&doc);
+        let (instanced, largest) = instanced_work(&doc);
+        held.decoding = largest;
+        held.check(path, memory)?;
+        if instanced.records > MAX_INSTANCED_RECORDS {
+            return Err(bad(
+                path,
+                format!(
+                    "the scene reads {} vertex and index records for {} triangles (its nodes instance meshes and primitives share accessors), more than the {} voxlod reads from one glTF file",
+                    instanced.records, instanced.triangles, MAX_INSTANCED_RECORDS
+                ),
+            ));
+        }
+        let buffers = load_buffers(path, &doc, blob, scope, &meshopt.fallback)?;
+        let decoded = meshopt.decode(&doc, &buffers).map_err(|m| bad(path, m))?;
+        sparse_indices(&doc, &buffers, &decoded).map_err(|m| bad(path, m))?;
         let mut warnings = Vec::new();
         let mut materials = vec![Material::default()];
         let mut uv_set = Vec::new();
-        for m in g.document.materials() {
+        for m in doc.materials() {
             let (e, set) = material(path, &m, &buffers, scope, &mut warnings);
             materials.push(e);
             uv_set.push(set);
         }
         let mut src = GltfSource {
             path: path.to_path_buf(),
-            doc: g.document,
+            doc,
             buffers,
+            decoded,
             uv_set,
             keep_materials: true,
         };
-        let (mut vertices, mut faces, mut has_normals, mut has_colors, mut has_uv) =
-            (0, 0, false, false, false);
+        let (mut vertices, mut has_normals, mut has_colors, mut has_uv) = (0, false, false, false);
+        let faces = instanced.triangles;
         let (mut skipped, mut no_uv) = (0, 0u64);
         for (node, _) in scene_nodes(&src.doc) {
             for p in node.mesh().iter().flat_map(|m| m.primitives()) {
@@ -331,7 +593,6 @@ impl GltfSource {
                     .get(&gltf::Semantic::Positions)
                     .map_or(0, |a| a.count() as u64);
                 vertices += n;
-                faces += p.indices().map_or(n, |a| a.count() as u64) / 3;
                 has_normals |= p.get(&gltf::Semantic::Normals).is_some();
                 has_colors |=
                     p.get(&gltf::Semantic::Colors(0)).is_some() || p.material().index().is_some();
@@ -376,7 +637,6 @@ impl GltfSource {
             ));
             materials.truncate(MAX_MATERIAL as usize + 1);
         }
-        let binary = bytes.starts_with(b"glTF");
         let info = MeshInfo {
             path: path.to_path_buf(),
             format: if binary { "glb" } else { "gltf" }.into(),
@@ -388,6 +648,7 @@ impl GltfSource {
             materials,
             warnings,
             up: Some([0.0, 1.0, 0.0]),
+            held: held.total(),
         };
         Ok((src, info))
     }
@@ -458,18 +719,24 @@ impl GltfSource {
             return Ok(()); // warned at open
         }
         let err = |m: String| bad(&self.path, format!("mesh primitive {}: {m}", p.index()));
-        let r = p.reader(|b| self.buffers.get(b.index()).map(|v| &v[..]));
+        let data = crate::gltf_data::Data {
+            buffers: &self.buffers,
+            decoded: &self.decoded,
+        };
         let (lin, cof, det) = linear_parts(world);
         let apply = |m: &[[f64; 3]; 3], v: [f32; 3], t: [f64; 3]| -> [f32; 3] {
             [0, 1, 2]
                 .map(|row| ((0..3).map(|c| m[c][row] * v[c] as f64).sum::<f64>() + t[row]) as f32)
         };
         let origin = [world[3][0], world[3][1], world[3][2]];
-        let pos: Vec<[f32; 3]> = r
-            .read_positions()
-            .ok_or_else(|| {
-                err("no POSITION attribute, or its accessor lies outside its buffer".into())
-            })?
+        let attribute = |sem: gltf::Semantic| p.get(&sem);
+        let pos: Vec<[f32; 3]> = data
+            .floats::<3>(
+                &attribute(gltf::Semantic::Positions)
+                    .ok_or_else(|| err("no POSITION attribute".into()))?,
+            )
+            .map_err(err)?
+            .into_iter()
             .map(|v| apply(&lin, v, origin))
             .collect();
         if let Some((i, _)) = pos
@@ -479,45 +746,38 @@ impl GltfSource {
         {
             return Err(err(format!("vertex {i} has a position that is not finite")));
         }
-        let nrm: Option<Vec<[f32; 3]>> = r
-            .read_normals()
-            .map(|n| n.map(|v| apply(&cof, v, [0.0; 3])).collect());
+        let nrm: Option<Vec<[f32; 3]>> = attribute(gltf::Semantic::Normals)
+            .map(|a| data.floats::<3>(&a))
+            .transpose()
+            .map_err(err)?
+            .map(|n| n.into_iter().map(|v| apply(&cof, v, [0.0; 3])).collect());
         let factor = p.material().pbr_metallic_roughness().base_color_factor();
         let colored = p.material().index().is_some() || p.get(&gltf::Semantic::Colors(0)).is_some();
-        let col: Option<Vec<[f32; 4]>> = r.read_colors(0).map(|c| c.into_rgba_f32().collect());
+        let col: Option<Vec<[f32; 4]>> = attribute(gltf::Semantic::Colors(0))
+            .map(|a| data.floats::<4>(&a))
+            .transpose()
+            .map_err(err)?;
         let uv_set = self.uv_of(p);
         // glTF's v runs down the image, voxlod's (OBJ's) up: v becomes 1 − v, after the
         // material's KHR_texture_transform
-        let uv: Option<Vec<[f32; 2]>> = uv_set
-            .and_then(|(s, t)| Some((r.read_tex_coords(s)?, t)))
-            .map(|(c, t)| {
-                c.into_f32()
-                    .map(|uv| t.map_or(uv, |t| t.apply(uv)))
-                    .map(|[u, v]| [u, 1.0 - v])
-                    .collect()
-            });
-        let n = pos.len();
-        let idx: Vec<u32> = match (r.read_indices(), p.indices()) {
-            (Some(i), _) => i.into_u32().collect(),
-            (None, None) => (0..n as u32).collect(),
-            (None, Some(_)) => {
-                return Err(err("the indices' accessor lies outside its buffer".into()))
-            }
+        let uv: Option<Vec<[f32; 2]>> = match uv_set {
+            Some((s, t)) => attribute(gltf::Semantic::TexCoords(s))
+                .map(|a| data.floats::<2>(&a))
+                .transpose()
+                .map_err(err)?
+                .map(|c| {
+                    c.into_iter()
+                        .map(|uv| t.map_or(uv, |t| t.apply(uv)))
+                        .map(|[u, v]| [u, 1.0 - v])
+                        .collect()
+                }),
+            None => None,
         };
-        // an attribute that is declared but cannot be read (its accessor outside its buffer)
-        for (sem, ok) in [
-            (gltf::Semantic::Normals, nrm.is_some()),
-            (gltf::Semantic::Colors(0), col.is_some()),
-        ] {
-            if p.get(&sem).is_some() && !ok {
-                return Err(err(format!("the {sem:?} accessor lies outside its buffer")));
-            }
-        }
-        if uv_set.is_some() && uv.is_none() {
-            return Err(err(
-                "the texture coordinates' accessor lies outside its buffer".into(),
-            ));
-        }
+        let n = pos.len();
+        let idx: Vec<u32> = match p.indices() {
+            Some(a) => data.indices(&a).map_err(err)?,
+            None => (0..n as u32).collect(),
+        };
         if let Some(i) = idx.iter().find(|&&i| i as usize >= n) {
             return Err(err(format!("index {i} is out of range ({n} vertices)")));
         }

@@ -113,6 +113,8 @@ const SHORT: u64 = 5122;
 const UNSIGNED_SHORT: u64 = 5123;
 const UNSIGNED_INT: u64 = 5125;
 const FLOAT: u64 = 5126;
+/// Primitive mode TRIANGLES, the default.
+const TRIANGLES: u64 = 4;
 
 fn component_name(c: u64) -> &'static str {
     match c {
@@ -244,7 +246,8 @@ pub(crate) fn document(json: &str, bin: Option<&[u8]>) -> Result<(), String> {
         ));
     }
     let optional = compressed(&used);
-    rules(&root, bin).map_err(|rule| match optional {
+    let quantized = used.iter().any(|e| e == "KHR_mesh_quantization");
+    rules(&root, bin, quantized).map_err(|rule| match optional {
         Some(ext) => format!(
             "the file uses {ext} (compressed geometry, which voxlod does not decode) and its \
              uncompressed fallback is broken; decompress the file first (for example with \
@@ -254,16 +257,26 @@ pub(crate) fn document(json: &str, bin: Option<&[u8]>) -> Result<(), String> {
     })
 }
 
-/// Geometry compression extensions (name, what they are): a file requiring one holds its
-/// vertices only in the compressed form.
-const COMPRESSION: [(&str, &str); 3] = [
-    ("KHR_draco_mesh_compression", "Draco"),
-    ("EXT_meshopt_compression", "meshoptimizer"),
-    ("KHR_meshopt_compression", "meshoptimizer"),
-];
+/// Geometry compression extensions voxlod does not decode (name, what they are): a file
+/// requiring one holds its vertices only in the compressed form. (meshoptimizer's,
+/// `EXT_meshopt_compression` and `KHR_meshopt_compression`, are decoded: `gltf_data`.)
+const COMPRESSION: [(&str, &str); 1] = [("KHR_draco_mesh_compression", "Draco")];
 
-/// The rules of [`document`] after the compression check.
-fn rules(root: &Value, bin: Option<&[u8]>) -> Result<(), String> {
+/// Whether buffer `b` is a fallback buffer of meshopt compression (no data of its own: its
+/// views are decoded from another buffer).
+fn meshopt_fallback(b: &Value) -> bool {
+    crate::gltf_data::MESHOPT.iter().any(|ext| {
+        b.get("extensions")
+            .and_then(|e| e.get(ext))
+            .and_then(|e| e.get("fallback"))
+            .and_then(Value::as_bool)
+            == Some(true)
+    })
+}
+
+/// The rules of [`document`] after the compression check; `quantized`: the file uses
+/// `KHR_mesh_quantization`, which widens the attribute table.
+fn rules(root: &Value, bin: Option<&[u8]>, quantized: bool) -> Result<(), String> {
     let d = Doc { v: root };
     let mut buffer_len = Vec::new();
     for (i, b) in d.list("buffers").iter().enumerate() {
@@ -273,7 +286,7 @@ fn rules(root: &Value, bin: Option<&[u8]>) -> Result<(), String> {
         if len == 0 {
             return Err(format!("{what}: byteLength must be at least 1"));
         }
-        if b.get("uri").is_none() {
+        if b.get("uri").is_none() && !meshopt_fallback(b) {
             // 4.4.3.3: only the first buffer may be the GLB's binary chunk, which may be up to
             // 3 bytes longer (padding)
             match bin {
@@ -353,7 +366,7 @@ fn rules(root: &Value, bin: Option<&[u8]>) -> Result<(), String> {
                             format!("{what}: attribute {name} names no accessor ({x})")
                         })? as usize;
                     let a = &accs[ai];
-                    attribute(name, a).map_err(|rule| {
+                    attribute(name, a, quantized).map_err(|rule| {
                         format!("{what}: attribute {name} (accessor {ai}): {rule}")
                     })?;
                     match count {
@@ -388,10 +401,20 @@ fn rules(root: &Value, bin: Option<&[u8]>) -> Result<(), String> {
                     return Err(format!("{what}: indices (accessor {ii}): {rule}"));
                 }
             }
-            if let Some(mode) = uint(p, "mode", &what)? {
-                if mode > 6 {
-                    return Err(format!("{what}: mode {mode} is not 0 to 6"));
-                }
+            let mode = uint(p, "mode", &what)?.unwrap_or(TRIANGLES);
+            if mode > 6 {
+                return Err(format!("{what}: mode {mode} is not 0 to 6"));
+            }
+            // 3.7.2.1: TRIANGLES takes its vertices in threes; a remainder is no triangle
+            let indices = index(p, "indices", &what, accs.len(), "accessor")?;
+            let vertices = match indices {
+                Some(ii) => Some(("indices", accs[ii].count)),
+                None => count.as_ref().map(|(_, n)| ("vertices", *n)),
+            };
+            if let Some((of, n)) = vertices.filter(|&(_, n)| mode == TRIANGLES && n % 3 != 0) {
+                return Err(format!(
+                    "{what}: mode TRIANGLES takes {of} in threes (glTF 2.0, 3.7.2.1), but it has {n}"
+                ));
             }
         }
     }
@@ -504,18 +527,31 @@ fn accessor(a: &Value, i: usize, views: &[(u64, Option<u64>)]) -> Result<Acc, St
     })
 }
 
-/// The attribute table of 3.7.2.1: `Err` says what `name` allows.
-fn attribute(name: &str, a: &Acc) -> Result<(), String> {
+/// The attribute table of 3.7.2.1, widened by `KHR_mesh_quantization`'s table when the file
+/// uses it (`quantized`): `Err` says what `name` allows.
+fn attribute(name: &str, a: &Acc, quantized: bool) -> Result<(), String> {
     let base = name.split('_').next().unwrap_or(name);
     let set = name.strip_prefix(base).and_then(|s| s.strip_prefix('_'));
-    // (types, float allowed, normalized u8/u16 allowed, plain u8/u16 allowed)
-    let (types, float, norm, plain): (&[&str], bool, bool, bool) = match (base, set) {
-        ("POSITION" | "NORMAL", None) => (&["VEC3"], true, false, false),
-        ("TANGENT", None) => (&["VEC4"], true, false, false),
-        ("TEXCOORD", Some(_)) => (&["VEC2"], true, true, false),
-        ("COLOR", Some(_)) => (&["VEC3", "VEC4"], true, true, false),
-        ("JOINTS", Some(_)) => (&["VEC4"], false, false, true),
-        ("WEIGHTS", Some(_)) => (&["VEC4"], true, true, false),
+    // types, and the integer components allowed: (normalized, not normalized)
+    const U8_16: &[u64] = &[UNSIGNED_BYTE, UNSIGNED_SHORT];
+    const ALL: &[u64] = &[BYTE, UNSIGNED_BYTE, SHORT, UNSIGNED_SHORT];
+    const SIGNED: &[u64] = &[BYTE, SHORT];
+    let q = quantized;
+    let (types, float, norm, plain): (&[&str], bool, &[u64], &[u64]) = match (base, set) {
+        ("POSITION", None) if q => (&["VEC3"], true, ALL, ALL),
+        ("POSITION", None) => (&["VEC3"], true, &[], &[]),
+        ("NORMAL", None) => (&["VEC3"], true, if q { SIGNED } else { &[] }, &[]),
+        ("TANGENT", None) => (&["VEC4"], true, if q { SIGNED } else { &[] }, &[]),
+        ("TEXCOORD", Some(_)) if q => (
+            &["VEC2"],
+            true,
+            ALL,
+            &[BYTE, UNSIGNED_BYTE, SHORT, UNSIGNED_SHORT],
+        ),
+        ("TEXCOORD", Some(_)) => (&["VEC2"], true, U8_16, &[]),
+        ("COLOR", Some(_)) => (&["VEC3", "VEC4"], true, U8_16, &[]),
+        ("JOINTS", Some(_)) => (&["VEC4"], false, &[], U8_16),
+        ("WEIGHTS", Some(_)) => (&["VEC4"], true, U8_16, &[]),
         // application-specific (`_NAME`) or unknown: not read, only its bounds checked
         _ => return Ok(()),
     };
@@ -525,24 +561,33 @@ fn attribute(name: &str, a: &Acc) -> Result<(), String> {
     let ok_type = types.contains(&a.ty.as_str());
     let ok_comp = match a.comp {
         FLOAT => float && !a.normalized,
-        UNSIGNED_BYTE | UNSIGNED_SHORT => (norm && a.normalized) || (plain && !a.normalized),
-        _ => false,
+        c if a.normalized => norm.contains(&c),
+        c => plain.contains(&c),
     };
     if ok_type && ok_comp {
         return Ok(());
     }
+    let names = |list: &[u64]| {
+        let n: Vec<&str> = list.iter().map(|&c| component_name(c)).collect();
+        n.join(" or ")
+    };
     let mut comps = Vec::new();
     if float {
-        comps.push("FLOAT");
+        comps.push("FLOAT".to_string());
     }
-    if norm {
-        comps.push("UNSIGNED_BYTE or UNSIGNED_SHORT normalized");
+    if !norm.is_empty() {
+        comps.push(format!("{} normalized", names(norm)));
     }
-    if plain {
-        comps.push("UNSIGNED_BYTE or UNSIGNED_SHORT");
+    if !plain.is_empty() {
+        comps.push(names(plain));
     }
+    let hint = if quantized || matches!(base, "COLOR" | "JOINTS" | "WEIGHTS") {
+        ""
+    } else {
+        " (integer components need the file to use KHR_mesh_quantization)"
+    };
     Err(format!(
-        "it is {}{} {}; {base} must be {} of {}",
+        "it is {}{} {}; {base} must be {} of {}{hint}",
         if a.normalized { "normalized " } else { "" },
         component_name(a.comp),
         a.ty,
@@ -602,11 +647,18 @@ fn nodes(d: &Doc) -> Result<(), String> {
     }
     for (s, scene) in d.list("scenes").iter().enumerate() {
         let list = scene.get("nodes").and_then(Value::as_array);
+        // 3.5.2: a scene's nodes are unique; a root listed twice would be read twice
+        let mut listed = vec![false; n];
         for x in list.map_or(&[][..], Vec::as_slice) {
             let i =
                 x.as_u64().filter(|&c| c < n as u64).ok_or_else(|| {
                     format!("scene {s}: node {x} names no node (the file has {n})")
                 })? as usize;
+            if std::mem::replace(&mut listed[i], true) {
+                return Err(format!(
+                    "scene {s} lists node {i} twice; the root nodes of a scene must be unique (glTF 2.0, 3.5.2)"
+                ));
+            }
             if let Some(p) = parent[i] {
                 return Err(format!(
                     "scene {s} lists node {i}, a child of node {p}; a scene lists root nodes only"
@@ -615,6 +667,97 @@ fn nodes(d: &Doc) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// The tokens of a JSON text that its parsed forms allocate for.
+#[derive(Debug, Default, PartialEq)]
+struct Tokens {
+    objects: u64,
+    arrays: u64,
+    /// Object members (`:`).
+    members: u64,
+    /// Separators (`,`): with `arrays`, a bound of the array elements.
+    commas: u64,
+    strings: u64,
+    string_bytes: u64,
+}
+
+fn tokens(json: &[u8]) -> Tokens {
+    let mut t = Tokens::default();
+    let (mut in_string, mut escaped) = (false, false);
+    for &b in json {
+        if in_string {
+            match (escaped, b) {
+                (true, _) => escaped = false,
+                (false, b'\\') => escaped = true,
+                (false, b'"') => in_string = false,
+                _ => t.string_bytes += 1,
+            }
+            continue;
+        }
+        match b {
+            b'"' => {
+                in_string = true;
+                t.strings += 1;
+            }
+            b'{' => t.objects += 1,
+            b'[' => t.arrays += 1,
+            b':' => t.members += 1,
+            b',' => t.commas += 1,
+            _ => {}
+        }
+    }
+    t
+}
+
+/// The most bytes a parsed element of the `gltf` crate's document takes inline (its largest
+/// object type: every `{` may be one).
+fn largest_object() -> u64 {
+    use gltf::json;
+    [
+        std::mem::size_of::<json::Node>(),
+        std::mem::size_of::<json::Accessor>(),
+        std::mem::size_of::<json::Mesh>(),
+        std::mem::size_of::<json::mesh::Primitive>(),
+        std::mem::size_of::<json::Material>(),
+        std::mem::size_of::<json::Texture>(),
+        std::mem::size_of::<json::Image>(),
+        std::mem::size_of::<json::Buffer>(),
+        std::mem::size_of::<json::buffer::View>(),
+        std::mem::size_of::<json::Scene>(),
+        std::mem::size_of::<json::texture::Sampler>(),
+        std::mem::size_of::<json::Camera>(),
+        std::mem::size_of::<json::Skin>(),
+        std::mem::size_of::<json::Animation>(),
+        std::mem::size_of::<json::animation::Channel>(),
+        std::mem::size_of::<json::animation::Sampler>(),
+        std::mem::size_of::<json::accessor::sparse::Sparse>(),
+    ]
+    .into_iter()
+    .max()
+    .unwrap_or(0) as u64
+}
+
+/// An upper bound of the memory that parsing the glTF JSON text `json` takes, beside the text
+/// itself: the checks' `serde_json` tree ([`document`]) and then the `gltf` crate's document,
+/// one after the other, each bounded by the text's tokens. A tree value is 32 bytes and an
+/// array's vector grows by doubling (at most 3 values' room per element while it moves), an
+/// object is a B-tree of at most 640 bytes a node, at least 5 members a node past its first,
+/// a string its bytes and an allocation's rounding; the crate's document holds at most one of
+/// its objects per `{` and no more in its vectors and maps than the tree does, and the reader lists
+/// each node once with its transform. A 50 MB chain of
+/// a million nodes is bounded at about 1.5 GB, so it is refused under a budget that cannot
+/// hold it instead of being parsed past it.
+pub(crate) fn document_bound(json: &[u8]) -> u64 {
+    let t = tokens(json);
+    let tree = 96 * (t.commas + t.arrays + 1)
+        + 640 * t.objects
+        + 256 * t.members
+        + t.string_bytes
+        + 32 * t.strings;
+    // the reader's list of the scene's nodes with their world transforms, one per node
+    let nodes = std::mem::size_of::<(gltf::Node, [[f64; 4]; 4])>() as u64;
+    tree + (largest_object() + nodes) * t.objects
 }
 
 #[cfg(test)]
@@ -724,6 +867,45 @@ mod tests {
             NODE,
         );
         assert!(e.contains("COLOR must be VEC3 or VEC4"), "{e}");
+    }
+
+    #[test]
+    fn quantization_widens_the_attribute_table() {
+        let acc = |comp: u32, ty: &str, norm: bool| {
+            format!(
+                r#"{{"bufferView":0,"componentType":{comp},"count":3,"type":"{ty}","normalized":{norm}}}"#
+            )
+        };
+        let with =
+            |d: String| d.replacen('{', r#"{"extensionsUsed":["KHR_mesh_quantization"],"#, 1);
+        // (attribute, accessor, allowed with KHR_mesh_quantization)
+        for (name, a, ok) in [
+            ("POSITION", acc(5122, "VEC3", false), true),
+            ("POSITION", acc(5120, "VEC3", true), true),
+            ("POSITION", acc(5123, "VEC3", false), true),
+            ("POSITION", acc(5125, "VEC3", false), false),
+            ("NORMAL", acc(5120, "VEC3", true), true),
+            ("NORMAL", acc(5122, "VEC3", true), true),
+            ("NORMAL", acc(5122, "VEC3", false), false),
+            ("NORMAL", acc(5121, "VEC3", true), false),
+            ("TEXCOORD_0", acc(5122, "VEC2", false), true),
+            ("TEXCOORD_0", acc(5120, "VEC2", true), true),
+            ("TEXCOORD_0", acc(5122, "VEC3", false), false),
+            ("COLOR_0", acc(5120, "VEC4", true), false),
+        ] {
+            let d = doc(
+                &format!("[{POS},{a}]"),
+                VIEW,
+                &format!(r#"{{"attributes":{{"POSITION":0,"{name}":1}}}}"#)
+                    .replace(r#""POSITION":0,"POSITION":1"#, r#""POSITION":1"#),
+                NODE,
+            );
+            // without the extension, none of these integer attributes is allowed
+            let e = document(&d, Some(&[0; 64])).unwrap_err();
+            assert!(e.contains(name.split('_').next().unwrap()), "{name}: {e}");
+            let got = document(&with(d), Some(&[0; 64]));
+            assert_eq!(got.is_ok(), ok, "{name} {a}: {got:?}");
+        }
     }
 
     #[test]

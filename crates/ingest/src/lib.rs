@@ -61,6 +61,7 @@ mod bounds;
 mod error;
 mod gltf;
 mod gltf_check;
+mod gltf_data;
 mod map_guard;
 mod obj;
 mod ply;
@@ -113,6 +114,11 @@ pub struct MeshInfo {
     /// The up axis the format defines, if it defines one (glTF: `+Y`); the build's manifest
     /// gives it to `render` as `input.up`.
     pub up: Option<[f32; 3]>,
+    /// Bytes of memory the reader holds from opening to streaming, at most (the file, its
+    /// parsed document, its buffers and the decoding of one primitive, for glTF); counted
+    /// against [`ReadOptions::memory`] before they are read. 0 for the other formats, which
+    /// map the file or hold O(vertices) ([`MeshSource::stream`]).
+    pub held: u64,
 }
 
 /// How [`MeshSource::open_with`] reads the files a mesh refers to (OBJ `mtllib` and `map_Kd`,
@@ -124,6 +130,10 @@ pub struct ReadOptions {
     /// these; otherwise it is refused (a warning for a texture or MTL, an error for a glTF
     /// buffer) with a message that names it and says how to allow it.
     pub allow: Vec<PathBuf>,
+    /// The most memory the reader may hold ([`MeshInfo::held`]), if bounded: a glTF file whose
+    /// document, buffers or decoding would need more is refused before that part is read,
+    /// naming each part and the limit.
+    pub memory: Option<u64>,
 }
 
 /// Counts of one [`MeshSource::stream`] run.
@@ -220,6 +230,13 @@ fn detect(path: &Path, head: &[u8], len: u64) -> Result<Format, IngestError> {
     ))
 }
 
+/// An upper bound of the memory that parsing a glTF JSON text takes beside the text (the
+/// checks' tree, then the `gltf` crate's document), bytes: the part of [`MeshInfo::held`]
+/// counted for the document before it is parsed.
+pub fn gltf_document_bound(json: &[u8]) -> u64 {
+    gltf_check::document_bound(json)
+}
+
 impl MeshSource {
     /// Opens a mesh: detects the format by extension (and magic bytes) and reads the header
     /// (PLY), the counts (OBJ: one pass over the file) or the facet count (binary STL). Files
@@ -274,7 +291,7 @@ impl MeshSource {
                 (Reader::Obj(s), i)
             }
             Format::Gltf => {
-                let (s, i) = gltf::GltfSource::open(path, &scope)?;
+                let (s, i) = gltf::GltfSource::open(path, &scope, opts.memory)?;
                 (Reader::Gltf(Box::new(s)), i)
             }
             Format::Stl => {
@@ -373,6 +390,34 @@ impl MeshSource {
     pub fn face_parts(&self, n: u64) -> Option<Vec<FacePart>> {
         match &self.reader {
             Reader::Ply(p) => p.face_parts(n),
+            Reader::Obj(_) | Reader::Gltf(_) | Reader::Stl(_) => None,
+        }
+    }
+
+    /// What part `part` of [`MeshSource::face_parts`] reads besides its face records: the
+    /// indices of the pages of `page` bytes (a power of two; counted from byte 0 of the file, up to the first
+    /// face record) that hold the file's header and the elements before the vertex list, or a
+    /// vertex record that one of the part's face records names (an index out of range names
+    /// none: the stream reports it). `faces` is handed the part's face record bytes, in order,
+    /// as they are read. `None` for an input that cannot be cut into parts.
+    pub fn part_footprint(
+        &self,
+        part: &FacePart,
+        page: u64,
+        faces: &mut dyn FnMut(&[u8]),
+    ) -> Option<Vec<u64>> {
+        match &self.reader {
+            Reader::Ply(p) => p.part_footprint(part, page, faces),
+            Reader::Obj(_) | Reader::Gltf(_) | Reader::Stl(_) => None,
+        }
+    }
+
+    /// The whole file's bytes as mapped, for a memory-mapped binary PLY (the input of
+    /// [`MeshSource::face_parts`]); `None` otherwise. Touching them makes them resident:
+    /// [`MeshSource::release_pages`] after.
+    pub fn mapped_bytes(&self) -> Option<&[u8]> {
+        match &self.reader {
+            Reader::Ply(p) => p.mapped_bytes(),
             Reader::Obj(_) | Reader::Gltf(_) | Reader::Stl(_) => None,
         }
     }

@@ -422,6 +422,7 @@ impl ObjSource {
             materials,
             warnings,
             up: None,
+            held: 0,
         };
         Ok((
             ObjSource {

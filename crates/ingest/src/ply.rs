@@ -132,6 +132,7 @@ impl PlySource {
             materials: table.materials,
             warnings,
             up: None,
+            held: 0,
         };
         Ok((src, info))
     }
@@ -404,6 +405,125 @@ impl PlySource {
                 })
                 .collect(),
         )
+    }
+
+    /// What part `part` of [`PlySource::face_parts`] reads besides its face records: the
+    /// indices of the pages of `page` bytes (a power of two) (counted from byte 0 of the file, up to the first
+    /// face record) that hold the header and the elements before the vertex list, or a vertex
+    /// record one of the part's face records names. `faces` is handed the part's face record
+    /// bytes, in order. `None` if the file cannot be cut into parts.
+    pub fn part_footprint(
+        &self,
+        part: &FacePart,
+        page: u64,
+        faces: &mut dyn FnMut(&[u8]),
+    ) -> Option<Vec<u64>> {
+        use crate::ply_header::Kind;
+        assert!(page.is_power_of_two(), "pages of a power of two bytes");
+        let (ei, list, size, off) = self.fixed_faces()?;
+        let data: &[u8] = self.map.as_ref()?;
+        let el = &self.header.elements[ei];
+        let l = &self.header.layout;
+        let vel = &self.header.elements[l.vertex];
+        let stride = vel.fixed_size()? as u64;
+        let voff = self.offsets[l.vertex]? as u64;
+        let Kind::List { count, item } = el.props[list].kind else {
+            return None;
+        };
+        // where the three vertex indices of a record start
+        let first: usize = el.props[..list]
+            .iter()
+            .map(|p| match p.kind {
+                Kind::Scalar(s) => s.size(),
+                Kind::List { .. } => 0,
+            })
+            .sum::<usize>()
+            + count.size();
+        let be = self.header.encoding == Encoding::BinaryBe;
+        let pages = (off as u64).div_ceil(page) as usize;
+        let shift = page.trailing_zeros();
+        let mut used = vec![0u64; pages.div_ceil(64)];
+        let mut set = |k: u64| used[k as usize / 64] |= 1 << (k % 64);
+        // the header and the elements before the vertex list
+        if voff > 0 {
+            for k in 0..=((voff - 1) >> shift) {
+                set(k);
+            }
+        }
+        let (nv, isz) = (vel.count, item.size());
+        let value = |b: &[u8]| -> Option<u64> {
+            let mut w = [0u8; 8];
+            if be {
+                w[8 - isz..].copy_from_slice(b);
+                w.reverse();
+            } else {
+                w[..isz].copy_from_slice(b);
+            }
+            let raw = u64::from_le_bytes(w);
+            let v = match item {
+                Scalar::I8 => raw as u8 as i8 as i64,
+                Scalar::I16 => raw as u16 as i16 as i64,
+                Scalar::I32 => raw as u32 as i32 as i64,
+                Scalar::U8 | Scalar::U16 | Scalar::U32 => raw as i64,
+                Scalar::F32 => f32::from_bits(raw as u32) as i64,
+                Scalar::F64 => f64::from_bits(raw) as i64,
+            };
+            // an index out of range is the decoder's error to report, not a page to check
+            u64::try_from(v).ok().filter(|&v| v < nv)
+        };
+        // the pages of vertex `v`'s record (one, or two when it straddles a border); a run of
+        // faces mostly names vertices of the page named last
+        let mut last = u64::MAX;
+        let mut mark = |v: u64| {
+            let a = voff + v * stride;
+            let (p, q) = (a >> shift, (a + stride - 1) >> shift);
+            if p != last {
+                set(p);
+                last = p;
+            }
+            if q != p {
+                set(q);
+            }
+        };
+        // plain little-endian 32-bit indices (what scanners write) without the general decode
+        let plain_le = !be && matches!(item, Scalar::I32 | Scalar::U32);
+        // in blocks of whole records, the map's pages released after each
+        let block = ((16u64 << 20) / size as u64).max(1) as usize * size;
+        let (start, end) = (part.bytes[0] as usize, part.bytes[1] as usize);
+        debug_assert_eq!((start - off) % size, 0, "a part starts at a record");
+        let mut at = start;
+        while at < end {
+            let to = (at + block).min(end);
+            let bytes = &data[at..to];
+            faces(bytes);
+            for r in bytes.chunks_exact(size) {
+                for k in 0..3 {
+                    let i = first + k * isz;
+                    let v = if plain_le {
+                        let v = u32::from_le_bytes([r[i], r[i + 1], r[i + 2], r[i + 3]]) as u64;
+                        let negative = item == Scalar::I32 && v > i32::MAX as u64;
+                        (!negative && v < nv).then_some(v)
+                    } else {
+                        value(&r[i..i + isz])
+                    };
+                    if let Some(v) = v {
+                        mark(v);
+                    }
+                }
+            }
+            self.release_pages();
+            at = to;
+        }
+        Some(
+            (0..pages as u64)
+                .filter(|&k| used[k as usize / 64] & (1 << (k % 64)) != 0)
+                .collect(),
+        )
+    }
+
+    /// The file's bytes, for a memory-mapped input.
+    pub fn mapped_bytes(&self) -> Option<&[u8]> {
+        self.map.as_deref()
     }
 
     /// Streams the triangles of one part of [`PlySource::face_parts`] only.

@@ -68,6 +68,7 @@ impl StlSource {
             materials: Vec::new(),
             warnings: Vec::new(),
             up: None,
+            held: 0,
         };
         if is_ascii_stl(head, len) {
             return Ok((

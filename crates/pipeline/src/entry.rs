@@ -12,7 +12,8 @@ use crate::context::Scope;
 use crate::runner::{Job, Runner};
 use crate::settings::BuildSettings;
 use crate::shard::plan_file::{
-    Fingerprint, LoadedPlan, PlanInput, PlanSummary, ShardPlan, PLAN_FORMAT, PLAN_VERSION,
+    hex64, Fingerprint, LoadedPlan, PlanInput, PlanPages, PlanSummary, ShardPlan, PLAN_FORMAT,
+    PLAN_VERSION,
 };
 use crate::shard::{content_hash, split};
 use crate::stages;
@@ -161,7 +162,7 @@ pub fn plan(
         .fingerprint
         .clone()
         .expect("a plan's runner takes the input's fingerprint");
-    let p = ShardPlan {
+    let mut p = ShardPlan {
         format: PLAN_FORMAT.into(),
         version: PLAN_VERSION,
         tool_version: env!("CARGO_PKG_VERSION").into(),
@@ -182,9 +183,10 @@ pub fn plan(
         split_level,
         shards: ranges.clone(),
         balance: balance.clone(),
+        checksum: String::new(),
     };
     drop(ctx);
-    let text = serde_json::to_vec_pretty(&p).context("serializing the plan")?;
+    let text = p.sealed_json();
     runner.guard.write_whole(&text)?;
     let t0 = runner.t0;
     runner.finish(&mut Vec::new())?;
@@ -239,6 +241,108 @@ fn plan_parts(
     let windows = SAMPLE_WINDOWS.min(count);
     let w = (count / (windows.max(1) * SAMPLE_FRACTION)).max(1);
     let mut counts = voxlod_tile::ChunkCounts::new(&grid)?;
+    // beside the sample, on a thread of its own: the XXH3-64 of every page before the face
+    // records and of every part's face records, which the map tasks check what they read
+    // against (an input changed between two map tasks, whatever it keeps)
+    let page = PlanPages::page_bytes_for(off);
+    let mut ends: Vec<u64> = (1..=off.div_ceil(page))
+        .map(|k| (k * page).min(off))
+        .collect();
+    let npages = ends.len();
+    ends.extend(cut.iter().map(|c| c.bytes[1]));
+    let (sample, hashes) = std::thread::scope(|sc| {
+        let hashes = sc.spawn(|| content_hash::xxh3_of_segments(input, &ends, ctx.interrupt));
+        let r = sample_windows(&ctx, &mut counts, (first, end, off, size), windows, w);
+        let h = hashes
+            .join()
+            .unwrap_or_else(|p| std::panic::resume_unwind(p));
+        (r, h)
+    });
+    let sampled = sample?;
+    let Some(hashes) = hashes? else {
+        return Err(ctx.interrupted().into());
+    };
+    // each sampled chunk's count scaled to all records (at least 1); unsampled chunks weigh 0
+    let leaves: Vec<(u64, u64)> = counts
+        .layout()
+        .iter()
+        .map(|c| (c.morton, (c.count * count).div_ceil(sampled.max(1)).max(1)))
+        .collect();
+    let levels = grid.levels();
+    let (split_level, ranges, balance) = split::choose_split(&leaves, levels, shards as usize);
+    let mut warnings = ctx.warnings.clone();
+    warnings.extend(split::balance_warning(shards, split_level, &balance));
+    let fingerprint = runner
+        .mesh()
+        .fingerprint
+        .clone()
+        .expect("a plan's runner takes the input's fingerprint");
+    let parts: Vec<PlanPart> = cut
+        .iter()
+        .zip(&hashes[npages..])
+        .enumerate()
+        .map(|(i, (c, &h))| PlanPart {
+            index: i as u32,
+            records: c.records,
+            bytes: c.bytes,
+            faces_xxh3: h,
+        })
+        .collect();
+    let mut plan_input = PlanInput::of(input, fingerprint, None)?;
+    plan_input.pages = Some(PlanPages {
+        page_bytes: page,
+        xxh3: hashes[..npages].iter().map(|&h| hex64(h)).collect(),
+    });
+    let mut p = ShardPlan {
+        format: PLAN_FORMAT.into(),
+        version: PLAN_VERSION,
+        tool_version: env!("CARGO_PKG_VERSION").into(),
+        input: plan_input,
+        settings: s.clone(),
+        grid: grid.into(),
+        ingest: None,
+        chunks: leaves.iter().map(|&(m, c)| [m, c]).collect(),
+        parts,
+        levels,
+        // the counts are the map outputs' (`merge` sets them)
+        manifest: stages::lod_write::manifest_fields(&ctx, &grid, 0, 0),
+        channels: stages::lod_write::channels(&ctx),
+        split_level,
+        shards: ranges.clone(),
+        balance: balance.clone(),
+        checksum: String::new(),
+    };
+    drop(ctx);
+    let text = p.sealed_json();
+    runner.guard.write_whole(&text)?;
+    let t0 = runner.t0;
+    let nparts = p.parts.len() as u32;
+    runner.finish(&mut Vec::new())?;
+    Ok(PlanSummary {
+        plan: plan_path.to_path_buf(),
+        triangles: count,
+        chunks: leaves.len() as u64,
+        split_level,
+        shards: ranges,
+        parts: nparts,
+        sampled_triangles: Some(sampled),
+        seconds: t0.elapsed().as_secs_f64(),
+        balance,
+        warnings,
+    })
+}
+
+/// The plan's sample: `windows` evenly spaced windows of `w` face records over the records
+/// `first..end` (record `r` at byte `off + (r − first) · size`), their triangles counted per
+/// chunk into `counts`; returns the face records decoded.
+fn sample_windows(
+    ctx: &BuildContext,
+    counts: &mut voxlod_tile::ChunkCounts,
+    (first, end, off, size): (u64, u64, u64, u64),
+    windows: u64,
+    w: u64,
+) -> Result<u64> {
+    let count = end - first;
     let mut sampled = 0u64;
     let bar = crate::progress::Bar::items(ctx.progress, "sample", windows);
     // the windows are scattered: without readahead each reads its own pages only
@@ -271,66 +375,7 @@ fn plan_parts(
     }
     ctx.source.advise_random(false);
     bar.finish();
-    // each sampled chunk's count scaled to all records (at least 1); unsampled chunks weigh 0
-    let leaves: Vec<(u64, u64)> = counts
-        .layout()
-        .iter()
-        .map(|c| (c.morton, (c.count * count).div_ceil(sampled.max(1)).max(1)))
-        .collect();
-    let levels = grid.levels();
-    let (split_level, ranges, balance) = split::choose_split(&leaves, levels, shards as usize);
-    let mut warnings = ctx.warnings.clone();
-    warnings.extend(split::balance_warning(shards, split_level, &balance));
-    let fingerprint = runner
-        .mesh()
-        .fingerprint
-        .clone()
-        .expect("a plan's runner takes the input's fingerprint");
-    let parts: Vec<PlanPart> = cut
-        .iter()
-        .enumerate()
-        .map(|(i, c)| PlanPart {
-            index: i as u32,
-            records: c.records,
-            bytes: c.bytes,
-        })
-        .collect();
-    let p = ShardPlan {
-        format: PLAN_FORMAT.into(),
-        version: PLAN_VERSION,
-        tool_version: env!("CARGO_PKG_VERSION").into(),
-        input: PlanInput::of(input, fingerprint, None)?,
-        settings: s.clone(),
-        grid: grid.into(),
-        ingest: None,
-        chunks: leaves.iter().map(|&(m, c)| [m, c]).collect(),
-        parts,
-        levels,
-        // the counts are the map outputs' (`merge` sets them)
-        manifest: stages::lod_write::manifest_fields(&ctx, &grid, 0, 0),
-        channels: stages::lod_write::channels(&ctx),
-        split_level,
-        shards: ranges.clone(),
-        balance: balance.clone(),
-    };
-    drop(ctx);
-    let text = serde_json::to_vec_pretty(&p).context("serializing the plan")?;
-    runner.guard.write_whole(&text)?;
-    let t0 = runner.t0;
-    let nparts = p.parts.len() as u32;
-    runner.finish(&mut Vec::new())?;
-    Ok(PlanSummary {
-        plan: plan_path.to_path_buf(),
-        triangles: count,
-        chunks: leaves.len() as u64,
-        split_level,
-        shards: ranges,
-        parts: nparts,
-        sampled_triangles: Some(sampled),
-        seconds: t0.elapsed().as_secs_f64(),
-        balance,
-        warnings,
-    })
+    Ok(sampled)
 }
 
 /// The summary of a finished build from its stages' artifacts.

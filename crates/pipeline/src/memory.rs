@@ -22,9 +22,15 @@ pub const BASE_BYTES: u64 = 64 << 20;
 /// The largest buffer of a run scatter (`voxlod_tile::RunScatter`: the ingest pass's bins and
 /// the map tasks'). Each run is sorted by chunk and written whole, so a larger buffer only adds
 /// first-touch page faults and cache misses, and a smaller one more pieces. Measured on gen 1e8
-/// at 2048³ (docs/BENCHMARKS.md): a 16 MiB buffer instead of the 1 GiB share of a 2 GiB budget
-/// takes about 2 CPU-s less in the one-machine build and 0.25 CPU-s less per map task.
+/// at 2048³ (docs/journal/benchmarks-experiments.md, "Sharded build with a map phase"): a
+/// 16 MiB buffer instead of the 1 GiB share of a 2 GiB budget takes about 2 CPU-s less in the
+/// one-machine build and 0.25 CPU-s less per map task.
 pub const RUN_BUFFER_MAX: u64 = 16 << 20;
+
+/// Memory an input's reader holds ([`voxlod_ingest::MeshInfo::held`]: a glTF file's document
+/// and buffers) that is counted within the base, as the read buffers of the other formats are.
+/// A reader holding more has the excess planned beside the stages ([`MemoryPlan::with_input`]).
+pub const INPUT_IN_BASE: u64 = 8 << 20;
 
 /// How the budget is spent.
 #[derive(Clone, Copy, Debug, Serialize)]
@@ -42,6 +48,9 @@ pub struct MemoryPlan {
     /// pyramids whole when they fit [`MemoryPlan::texture_share`], otherwise a tile cache of
     /// that share ([`MemoryPlan::with_textures`]).
     pub textures: u64,
+    /// Memory the input's reader holds beyond [`INPUT_IN_BASE`], for the whole build (0 for a
+    /// mapped or streamed input).
+    pub input: u64,
 }
 
 impl MemoryPlan {
@@ -72,7 +81,39 @@ impl MemoryPlan {
             voxelizers,
             planned,
             textures: 0,
+            input: 0,
         })
+    }
+
+    /// What the input's reader may hold ([`voxlod_ingest::ReadOptions::memory`]): what the
+    /// least plan (one chunk voxelizer, a 16 MiB scatter buffer) leaves of the budget, and
+    /// [`INPUT_IN_BASE`] within the base.
+    pub fn input_share(&self) -> u64 {
+        let least = BASE_BYTES + LOD_BYTES + VOXELIZER_BYTES + (16 << 20);
+        self.budget.saturating_sub(least) + INPUT_IN_BASE
+    }
+
+    /// The plan with a reader holding `held` bytes for the whole build: what exceeds
+    /// [`INPUT_IN_BASE`] is taken from the budget before it is split (fewer chunk voxelizers,
+    /// a smaller scatter buffer); an error if even the least plan no longer fits.
+    pub fn with_input(self, held: u64, threads: usize) -> Result<MemoryPlan> {
+        let input = held.saturating_sub(INPUT_IN_BASE);
+        if input == 0 {
+            return Ok(self);
+        }
+        if input > self.input_share() - INPUT_IN_BASE {
+            bail!(
+                "memory budget {}: reading the input holds {}, and the build needs {} beside it",
+                format_size(self.budget),
+                format_size(held),
+                format_size(self.budget - self.input_share() + INPUT_IN_BASE)
+            );
+        }
+        let mut p = MemoryPlan::new(self.budget - input, threads)?;
+        p.budget = self.budget;
+        p.input = input;
+        p.planned += input;
+        Ok(p)
     }
 
     /// The buffer of a run scatter: the scatter buffer, at most [`RUN_BUFFER_MAX`].
@@ -84,7 +125,7 @@ impl MemoryPlan {
     /// stage and the chunk voxelizers (at least 16 MiB, as [`MemoryPlan::new`] keeps 16 MiB
     /// beside the voxelizers). The scatter buffer is gone by then.
     pub fn texture_share(&self) -> u64 {
-        self.budget - BASE_BYTES - LOD_BYTES - self.voxelizers as u64 * VOXELIZER_BYTES
+        self.budget - self.input - BASE_BYTES - LOD_BYTES - self.voxelizers as u64 * VOXELIZER_BYTES
     }
 
     /// The plan with `decoded` bytes of decoded textures: held whole if they fit the texture
@@ -92,7 +133,7 @@ impl MemoryPlan {
     pub fn with_textures(mut self, decoded: u64) -> MemoryPlan {
         self.textures = decoded.min(self.texture_share());
         let voxelize = self.voxelizers as u64 * VOXELIZER_BYTES + self.textures;
-        self.planned = BASE_BYTES + LOD_BYTES + voxelize.max(self.scatter_buffer);
+        self.planned = BASE_BYTES + LOD_BYTES + self.input + voxelize.max(self.scatter_buffer);
         self
     }
 
@@ -121,8 +162,13 @@ impl MemoryPlan {
                     format!("after it {voxelize}"),
                 )
             };
+        let input = if self.input > 0 {
+            format!(" + input reader {}", format_size(self.input))
+        } else {
+            String::new()
+        };
         format!(
-            "memory plan: {} of {} budget = base {} + LOD {} + {shared} (in the same memory, {other})",
+            "memory plan: {} of {} budget = base {} + LOD {}{input} + {shared} (in the same memory, {other})",
             format_size(self.planned),
             format_size(self.budget),
             format_size(BASE_BYTES),
@@ -161,6 +207,14 @@ mod tests {
                         .describe()
                         .contains(&format!("+ textures {}", format_size(t.textures))));
                 }
+                // an input reader's memory is planned beside the stages, inside the budget
+                for held in [1u64 << 20, p.input_share() / 2, p.input_share()] {
+                    let q = p.with_input(held, threads).unwrap();
+                    assert!(q.planned <= budget, "{q:?}");
+                    assert_eq!(q.input, held.saturating_sub(INPUT_IN_BASE));
+                    assert!(q.with_textures(64 << 30).planned <= budget);
+                }
+                assert!(p.with_input(p.input_share() + 1, threads).is_err());
                 let d = p.describe();
                 assert!(
                     d.contains(&format!(

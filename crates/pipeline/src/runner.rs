@@ -98,7 +98,7 @@ impl Runner {
                 eprintln!("warning: {w}");
             }
         }
-        let memory = MemoryPlan::new(s.memory, threads)?;
+        let mut memory = MemoryPlan::new(s.memory, threads)?;
         // The output is checked (not a folder, not the input, not another kind of file,
         // writable folder with some space) and locked before any work starts.
         let (guard, mesh) = match job {
@@ -112,7 +112,12 @@ impl Runner {
                     Scope::Plan => Some(Fingerprint::of(input)?),
                     Scope::Whole | Scope::Shard(_) => None,
                 };
-                let source = MeshSource::open_with(input, &s.read_options())?;
+                // the reader refuses what it cannot hold beside the least plan; what it holds
+                // is planned for the whole build
+                let mut opts = s.read_options();
+                opts.memory = Some(memory.input_share());
+                let source = MeshSource::open_with(input, &opts)?;
+                memory = memory.with_input(source.info().held, threads)?;
                 let tmp_parent = s.tmp_dir.as_deref().unwrap_or(output_dir(output));
                 let key = WorkDir::key(input, s, scope.shard())?;
                 let (work, resumed) = WorkDir::open(tmp_parent, output, &key)?;

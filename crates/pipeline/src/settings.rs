@@ -58,6 +58,7 @@ impl BuildSettings {
     pub fn read_options(&self) -> voxlod_ingest::ReadOptions {
         voxlod_ingest::ReadOptions {
             allow: self.allow_paths.clone(),
+            memory: None,
         }
     }
 }

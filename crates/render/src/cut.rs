@@ -23,7 +23,7 @@
 //!
 //! **Source geometry.** A leaf whose error still exceeds the threshold is where the voxels no
 //! longer hold the pixel error: [`CutNode::over`] marks those leaves, and `render` draws them
-//! from their stored source triangles (issue 15, `crate::source_draw`) when the file has them.
+//! from their stored source triangles (`crate::source_draw`) when the file has them.
 
 use glam::{DVec3, DVec4};
 use voxlod_format::{Aabb, Reader};

@@ -508,14 +508,18 @@ pub fn export_glb_with(
         ..json::Node::default()
     });
     let bin = doc.bin;
-    let head = glb_head(&doc.finish(vec![top])?, bin)?;
+    let json_chunk = doc.finish(vec![top])?;
+    // the size is told before the header is made: a GLB past 4 GiB is refused by the caller's
+    // size guard, which names the level that fits
     let summary = ExportSummary {
         voxels,
         quads,
         vertices: 4 * quads,
-        bytes: head.len() as u64 + bin,
+        bytes: 12 + 8 + json_chunk.len() as u64 + if bin > 0 { 8 + bin } else { 0 },
     };
     before_write(&summary)?;
+    let head = glb_head(&json_chunk, bin)?;
+    debug_assert_eq!(head.len() as u64 + bin, summary.bytes);
 
     // pass 2: the bytes, node by node in the same order
     let io = |op| RenderError::io(op, path);

@@ -27,7 +27,8 @@ pub struct Picture {
     pub voxels: u64,
     /// Faces sent to the GPU (active faces turned towards the eye).
     pub faces_drawn: u64,
-    /// Leaves drawn from their source triangles instead of their voxels (issue 15).
+    /// Leaves drawn from their source triangles instead of their voxels (`--source-geometry`
+    /// files).
     pub source_leaves: u64,
     /// Source triangles drawn.
     pub source_triangles: u64,

@@ -1,4 +1,4 @@
-// Source triangles of the leaves whose voxels are coarser than the pixel error (issue 15):
+// Source triangles of the leaves whose voxels are coarser than the pixel error:
 // an indexed triangle list in the same camera, depth buffer and light as the voxel faces
 // (shader.wgsl). A vertex without a stored normal (zero) is shaded with the face normal,
 // from the screen-space derivatives of the position, turned towards the eye.

@@ -13,6 +13,8 @@
 //!   written independently of `voxlod-ingest`, so tests can check the real reader against it.
 //! * [`suite`]: the check that every test file of a crate's one test binary (`tests/all/`) is
 //!   declared in its `main.rs`.
+//! * [`skipped`] ([`skips`]): a skip said where it is seen: the test binary's output ends with
+//!   the list of tests that skipped something, after the runner's summary line.
 //!
 //! It depends on nothing but `voxlod-io` (which depends on nothing but `std`), so any crate
 //! can take it as a dev-dependency without a cycle.
@@ -32,10 +34,12 @@
 pub mod gltf;
 pub mod mesh;
 mod rng;
+pub mod skips;
 pub mod suite;
 pub mod textured;
 
 pub use rng::Rng;
+pub use skips::skipped;
 
 use std::path::{Path, PathBuf};
 
@@ -52,9 +56,10 @@ pub fn under_ci() -> bool {
     std::env::var("CI").is_ok_and(|v| v == "true")
 }
 
-/// The shared real test meshes (`../shared/data/meshes` beside the clone), or `None` after
-/// printing "`test`: SKIPPED …" when this clone has none. Under CI (`CI=true`) a missing folder
-/// is a failure (a panic naming the test), never a silent skip.
+/// The shared real test meshes (`../shared/data/meshes` beside the clone), or `None` when this
+/// clone has none, after [`skipped`] said so (the test binary's output then ends with the list
+/// of skipping tests). Under CI (`CI=true`) a missing folder is a failure (a panic naming the
+/// test), never a skip.
 pub fn shared_meshes(test: &str) -> Option<PathBuf> {
     let p = repo_root().join("../shared/data/meshes");
     if p.is_dir() {
@@ -66,9 +71,12 @@ pub fn shared_meshes(test: &str) -> Option<PathBuf> {
             p.display()
         );
     }
-    eprintln!(
-        "{test}: SKIPPED: {} is not beside this clone (the real-mesh part did not run)",
-        p.display()
+    skipped(
+        test,
+        &format!(
+            "{} is not beside this clone (the real-mesh part did not run)",
+            p.display()
+        ),
     );
     None
 }
@@ -87,7 +95,7 @@ pub fn shared_mesh(test: &str, rel: &str) -> Option<PathBuf> {
 }
 
 /// True if `python3` with numpy and zstandard (what `scripts/voxlod_read.py` needs) runs.
-/// Otherwise prints "`test`: SKIPPED …" and returns false, or under CI (`CI=true`, which
+/// Otherwise says so with [`skipped`] and returns false, or under CI (`CI=true`, which
 /// installs them) fails with a panic naming the test.
 pub fn python_ready(test: &str) -> bool {
     let o = std::process::Command::new("python3")
@@ -101,9 +109,13 @@ pub fn python_ready(test: &str) -> bool {
     if under_ci() {
         panic!("{test}: CI=true but python3 with numpy and zstandard is not available: {why}");
     }
-    eprintln!(
-        "{test}: SKIPPED: python3 with numpy and zstandard is not available \
-         (pip install numpy zstandard): {why}"
+    skipped(
+        test,
+        &format!(
+            "python3 with numpy and zstandard is not available (pip install numpy zstandard): \
+             {}",
+            why.trim()
+        ),
     );
     false
 }

@@ -37,6 +37,13 @@ pub(crate) fn level_tiles(w: u32, h: u32) -> (u32, u32) {
     (w.div_ceil(TILE), h.div_ceil(TILE))
 }
 
+/// Bytes of a tile file holding the pyramids of textures of `sizes`: their tiles, an entry
+/// each and the tail.
+pub(crate) fn file_bytes(sizes: &[(u32, u32)]) -> u64 {
+    let tiles: u64 = sizes.iter().map(|&(w, h)| pyramid_tiles(w, h)).sum();
+    tiles * TILE_BYTES + sizes.len() as u64 * ENTRY_BYTES + TAIL_BYTES
+}
+
 /// Tiles of the whole pyramid of a `w × h` texture.
 pub(crate) fn pyramid_tiles(w: u32, h: u32) -> u64 {
     level_sizes(w, h)

@@ -210,7 +210,44 @@ fn mib(bytes: u64) -> String {
     format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
 }
 
+/// Bytes of the decoded pyramids of textures of `sizes` (those whose header was read).
+fn decoded_bytes(sizes: &[Option<(u32, u32)>]) -> u64 {
+    sizes
+        .iter()
+        .flatten()
+        .map(|&(w, h)| pyramid_bytes(w, h))
+        .sum()
+}
+
+/// True if textures of `sizes` are held whole within `share`: their pyramids and, beside
+/// them, the whole decoding of the largest image (its texels and their RGBA8 copy: a 16384²
+/// PNG is 1 GiB of RGBA8 before its pyramid).
+fn held_whole(sizes: &[Option<(u32, u32)>], share: u64) -> bool {
+    let decoding: u64 = sizes
+        .iter()
+        .flatten()
+        .map(|&(w, h)| 2 * w as u64 * h as u64 * 4)
+        .max()
+        .unwrap_or(0);
+    decoded_bytes(sizes) + decoding <= share
+}
+
 impl TextureSet {
+    /// The size of the tile file [`TextureSet::load_within`] writes for `materials` within
+    /// `share` bytes, from the images' headers (nothing is decoded): 0 when the textures are
+    /// held whole, else their pyramids' tiles, which is the most it writes (a texture that
+    /// turns out unreadable writes fewer). A build counts it in its temporary disk before any
+    /// texture is decoded.
+    pub fn tile_file_bytes(materials: &[Material], share: u64) -> u64 {
+        let (sources, _) = distinct_sources(materials);
+        let sizes: Vec<Option<(u32, u32)>> = sources.iter().map(|s| s.probe().ok()).collect();
+        if held_whole(&sizes, share) {
+            return 0;
+        }
+        let read: Vec<(u32, u32)> = sizes.into_iter().flatten().collect();
+        crate::tile_file::file_bytes(&read)
+    }
+
     /// The textures of `materials` within `share` bytes (≥ [`MIN_CAPACITY`]): whole in memory
     /// if their decoded pyramids fit, otherwise through a tile cache of `share` bytes over the
     /// tile file `tile_file` (reused if complete, else written; see the module docs). A
@@ -224,24 +261,12 @@ impl TextureSet {
         assert!(share >= MIN_CAPACITY, "a texture share of {share} bytes");
         let (sources, of_material) = distinct_sources(materials);
         let mut warnings = Vec::new();
-        let mut sizes = Vec::with_capacity(sources.len());
-        for s in &sources {
-            sizes.push(s.probe().map_err(|e| warnings.push(s.warning(&e))).ok());
-        }
-        let decoded: u64 = sizes
+        let sizes: Vec<Option<(u32, u32)>> = sources
             .iter()
-            .flatten()
-            .map(|&(w, h)| pyramid_bytes(w, h))
-            .sum();
-        // held whole, each image is decoded whole too: its texels and their RGBA8 copy beside
-        // the pyramids already loaded (a 16384² PNG is 1 GiB of RGBA8 before its pyramid)
-        let decoding: u64 = sizes
-            .iter()
-            .flatten()
-            .map(|&(w, h)| 2 * w as u64 * h as u64 * 4)
-            .max()
-            .unwrap_or(0);
-        if decoded + decoding <= share {
+            .map(|s| s.probe().map_err(|e| warnings.push(s.warning(&e))).ok())
+            .collect();
+        let decoded = decoded_bytes(&sizes);
+        if held_whole(&sizes, share) {
             return Ok(TextureSet::load(materials));
         }
         let probed: Vec<usize> = (0..sources.len()).filter(|&i| sizes[i].is_some()).collect();

@@ -121,7 +121,11 @@ fn tiles_sample_as_the_whole_textures() {
     let share = 2 * MIN_CAPACITY;
     assert!(whole.bytes() as u64 >= 4 * share, "{}", whole.bytes());
     let file = d.path().join("textures.tiles");
+    // the size the estimate gives from the headers is the size written
+    let estimate = TextureSet::tile_file_bytes(&materials, share);
     let set = tiled(&materials, share, &file);
+    assert_eq!(estimate, std::fs::metadata(&file).unwrap().len());
+    assert_eq!(estimate, set.tiles().unwrap().file_bytes);
     assert_eq!(set.warnings.len(), 1, "{:?}", set.warnings);
     assert!(
         set.warnings[0].contains("missing.png"),
@@ -152,6 +156,10 @@ fn tiles_sample_as_the_whole_textures() {
     let decoding = 2 * 517 * 300 * 4;
     let big = TextureSet::load_within(&materials, whole.bytes() as u64 + decoding, &file).unwrap();
     assert!(big.tiles().is_none() && !big.get(1).unwrap().is_tiled());
+    assert_eq!(
+        TextureSet::tile_file_bytes(&materials, whole.bytes() as u64 + decoding),
+        0
+    );
     let near = TextureSet::load_within(&materials, whole.bytes() as u64, &file).unwrap();
     assert!(near.tiles().is_some());
 }
@@ -212,7 +220,7 @@ fn unwritable_tile_file_is_an_error_naming_it() {
     assert!(e.contains("no such folder/textures.tiles"), "{e}");
 }
 
-/// Issue 32 §4 "memory budget": a texture whose decoded image alone exceeds the share is
+/// The memory budget: a texture whose decoded image alone exceeds the share is
 /// decoded row by row when it is a PNG (here 4096² RGB: 64 MiB of RGBA8, 128 MiB with the
 /// whole-image path's copy, under a 16 MiB share) with the texels of the whole decode; the same
 /// image as JPEG cannot be decoded by rows and is refused with a warning that says how much

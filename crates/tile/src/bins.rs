@@ -588,6 +588,10 @@ pub struct Bins {
     pieces: Vec<Vec<[u64; 3]>>,
     /// Length of the file; for bins read in place, the bytes of their pieces.
     bytes: u64,
+    /// Per chunk (same order), the CRC-32 of each of its pieces, when they were taken
+    /// ([`crate::RunScatter::create_with_piece_crcs`], [`Bins::open_in_place`]): then each
+    /// piece read is checked against its own.
+    pub(crate) crcs: Option<Vec<Vec<u32>>>,
 }
 
 /// One file of a [`Bins`]: its bytes are `base..base + len` of the pieces' offsets.
@@ -664,15 +668,17 @@ impl Bins {
 
     /// Bins of blocks read in place from `files` (other writers' finished bins files, opened by
     /// the caller, e.g. a sharded build's map outputs; each read here only where a piece lies):
-    /// per chunk its pieces as `(file index, [byte offset in that file, bytes, triangles])`, in
-    /// input order. Each piece must lie inside its file and the pieces must add up to each
-    /// chunk's count; a chunk's `start` is set to its first piece. [`Bins::remove`] leaves the
-    /// files alone.
+    /// per chunk its pieces as `(file index, [byte offset in that file, bytes, triangles],
+    /// CRC-32 of the piece's bytes)`, in input order. Each piece must lie inside its file and
+    /// the pieces must add up to each chunk's count; a chunk's `start` is set to its first
+    /// piece. Reading a chunk checks each piece's bytes against its CRC-32 (a piece changed
+    /// since it was written is a [`TileError::BadBins`] naming its file). [`Bins::remove`]
+    /// leaves the files alone.
     pub fn open_in_place(
         files: Vec<(PathBuf, File)>,
         mut chunks: Vec<ChunkBin>,
         layout: RecordLayout,
-        pieces: Vec<Vec<(usize, [u64; 3])>>,
+        pieces: Vec<Vec<(usize, [u64; 3], u32)>>,
     ) -> Result<Bins, TileError> {
         assert!(
             !files.is_empty(),
@@ -698,10 +704,12 @@ impl Bins {
             });
         }
         let mut flat = Vec::with_capacity(pieces.len());
+        let mut crcs = Vec::with_capacity(pieces.len());
         let mut bytes = 0u64;
         for (c, ps) in chunks.iter_mut().zip(pieces) {
             let mut out = Vec::with_capacity(ps.len());
-            for (k, [off, n, count]) in ps {
+            crcs.push(ps.iter().map(|p| p.2).collect());
+            for (k, [off, n, count], _) in ps {
                 let Some(f) = opened.get(k) else {
                     return Err(TileError::BadBins {
                         path: opened[0].path.clone(),
@@ -745,6 +753,7 @@ impl Bins {
             index_bytes: 0,
             pieces,
             bytes,
+            crcs: Some(crcs),
         })
     }
 
@@ -771,7 +780,13 @@ impl Bins {
             index_bytes,
             pieces,
             bytes,
+            crcs: None,
         }
+    }
+
+    /// Each chunk's pieces' CRC-32 (same order as [`Bins::pieces`]), if they were taken.
+    pub fn piece_crcs(&self) -> Option<&[Vec<u32>]> {
+        self.crcs.as_deref()
     }
 
     /// Bytes of one face index for bins of face indices; `None` for bins of blocks.
@@ -874,24 +889,51 @@ impl Bins {
             }
         };
         let mut done = 0u64;
-        for &[start, bytes, count] in &self.pieces[i] {
+        for (p, &[start, bytes, count]) in self.pieces[i].iter().enumerate() {
             let (mut at, end, mut got) = (start, start + bytes, 0u64);
+            let want_crc = self.crcs.as_ref().map(|c| c[i][p]);
+            let mut crc = crc32fast::Hasher::new();
+            // a piece whose bytes changed since they were written: named as such (whatever
+            // its decoding found first), once the rest of it has been read into the checksum
+            let changed = |at: u64, crc: crc32fast::Hasher, e: TileError| {
+                match want_crc {
+                Some(want) => match self.crc_from(at, end, crc) {
+                    Ok(got) if got != want => bad(
+                        start,
+                        format!(
+                            "the piece's CRC-32 is {got:08x}, {want:08x} when it was written (changed or damaged since)"
+                        ),
+                    ),
+                    Ok(_) => e,
+                    Err(io) => io,
+                },
+                None => e,
+            }
+            };
             while at < end {
                 let mut h = [0u8; BLOCK_HEADER];
                 self.read_at(&mut h, at)?;
-                let head = BlockHeader::parse(&h).map_err(|e| bad(at, e))?;
+                let head = match BlockHeader::parse(&h) {
+                    Ok(head) => head,
+                    Err(e) => return Err(changed(at, crc, bad(at, e))),
+                };
                 let n = head.body_bytes(self.layout);
                 let next = at + (BLOCK_HEADER + n) as u64;
                 if next > end {
-                    return Err(bad(
-                        at,
-                        format!("a block of {n} bytes past its piece's end"),
-                    ));
+                    let e = bad(at, format!("a block of {n} bytes past its piece's end"));
+                    return Err(changed(at, crc, e));
+                }
+                if want_crc.is_some() {
+                    crc.update(&h);
                 }
                 body.resize(n, 0);
                 self.read_at(&mut body, at + BLOCK_HEADER as u64)?;
-                head.decode(self.layout, &body, &mut tris)
-                    .map_err(|e| bad(at, e))?;
+                if want_crc.is_some() {
+                    crc.update(&body);
+                }
+                if let Err(e) = head.decode(self.layout, &body, &mut tris) {
+                    return Err(changed(next, crc, bad(at, e)));
+                }
                 got += head.triangles as u64;
                 at = next;
                 if tris.len() >= cap {
@@ -901,6 +943,17 @@ impl Bins {
                         from += cap;
                     }
                     tris.drain(..from);
+                }
+            }
+            if let Some(want) = want_crc {
+                let got = crc.finalize();
+                if got != want {
+                    return Err(bad(
+                        start,
+                        format!(
+                            "the piece's CRC-32 is {got:08x}, {want:08x} when it was written (changed or damaged since)"
+                        ),
+                    ));
                 }
             }
             if got != count {
@@ -918,6 +971,23 @@ impl Bins {
             f(&tris)?;
         }
         Ok(())
+    }
+
+    /// `crc` (the CRC-32 of a piece's bytes before `at`) continued over the bytes `at..end`.
+    fn crc_from(
+        &self,
+        mut at: u64,
+        end: u64,
+        mut crc: crc32fast::Hasher,
+    ) -> Result<u32, TileError> {
+        let mut buf = vec![0u8; (end - at).min(1 << 20) as usize];
+        while at < end {
+            let n = ((end - at) as usize).min(buf.len());
+            self.read_at(&mut buf[..n], at)?;
+            crc.update(&buf[..n]);
+            at += n as u64;
+        }
+        Ok(crc.finalize())
     }
 
     /// Chunk `i`'s triangles from bins of face indices: the indices of up to `batch` triangles
@@ -1180,12 +1250,17 @@ mod tests {
                 .map(|p| (p.clone(), File::open(p).unwrap()))
                 .collect()
         };
+        // each piece's CRC-32, from the bytes in its file (these bins were not written with them)
+        let crc = |k: usize, p: [u64; 3]| {
+            let bytes = std::fs::read(&paths[k]).unwrap();
+            crc32fast::hash(&bytes[p[0] as usize..(p[0] + p[1]) as usize])
+        };
         let (mut chunks, mut pieces) = (Vec::new(), Vec::new());
         for c in full.chunks() {
-            let mut ps: Vec<(usize, [u64; 3])> = Vec::new();
+            let mut ps: Vec<(usize, [u64; 3], u32)> = Vec::new();
             for (k, h) in halves.iter().enumerate() {
                 if let Some(j) = h.chunks().iter().position(|d| d.morton == c.morton) {
-                    ps.extend(h.pieces()[j].iter().map(|&p| (k, p)));
+                    ps.extend(h.pieces()[j].iter().map(|&p| (k, p, crc(k, p))));
                 }
             }
             // `start` is set from the first piece
@@ -1208,9 +1283,33 @@ mod tests {
         }
         in_place.remove().unwrap();
         assert!(paths.iter().all(|f| f.is_file()));
+        // one bit flipped in a piece of the second file (same length): reading a chunk with
+        // that piece is refused naming the file and the checksum, whichever bit it is
+        let i = (0..pieces.len())
+            .find(|&i| pieces[i].iter().any(|p| p.0 == 1))
+            .unwrap();
+        let (_, p, _) = *pieces[i].iter().find(|p| p.0 == 1).unwrap();
+        let keep = std::fs::read(&paths[1]).unwrap();
+        for at in [p[0], p[0] + 3, p[0] + 17, p[0] + p[1] / 2, p[0] + p[1] - 1] {
+            let mut b = keep.clone();
+            b[at as usize] ^= 0x10;
+            std::fs::write(&paths[1], &b).unwrap();
+            let bins = Bins::open_in_place(open(), chunks.clone(), layout, pieces.clone()).unwrap();
+            let e = bins.read_chunk(i, 100, &mut |_| Ok(())).unwrap_err();
+            let text = e.to_string();
+            assert!(
+                text.contains(&paths[1].display().to_string()) && text.contains("CRC-32"),
+                "byte {at}: {text}"
+            );
+        }
+        std::fs::write(&paths[1], &keep).unwrap();
         // a piece past the end of its file (the first, and the last), and one of a third file
         let (len0, len1) = (halves[0].bytes(), halves[1].bytes());
-        for bad in [(0, [len0 - 4, 8, 1]), (1, [len1 - 4, 8, 1]), (2, [0, 8, 1])] {
+        for bad in [
+            (0, [len0 - 4, 8, 1], 0),
+            (1, [len1 - 4, 8, 1], 0),
+            (2, [0, 8, 1], 0),
+        ] {
             let mut ps = pieces.clone();
             ps[0] = vec![bad];
             let mut cs = chunks.clone();

@@ -91,6 +91,8 @@ struct Writer {
     encoder: BlockEncoder,
     /// Blocks not yet written to the file (they start at `written`).
     out: Vec<u8>,
+    /// With [`RunScatter::with_piece_crcs`]: per Morton rank, the CRC-32 of each of its pieces.
+    crcs: Option<Vec<Vec<u32>>>,
 }
 
 impl RunScatter {
@@ -104,7 +106,19 @@ impl RunScatter {
         layout: RecordLayout,
         buffer_bytes: u64,
     ) -> Result<RunScatter, TileError> {
-        Self::create_as(grid, path, layout, 0, buffer_bytes)
+        Self::create_as(grid, path, layout, 0, buffer_bytes, false)
+    }
+
+    /// [`RunScatter::create`] that also takes the CRC-32 of every piece as it is written
+    /// ([`Bins::piece_crcs`]): for bins another process reads (a sharded build's map outputs),
+    /// which [`Bins::open_in_place`] then checks piece by piece as it reads them.
+    pub fn create_with_piece_crcs(
+        grid: &Grid,
+        path: &Path,
+        layout: RecordLayout,
+        buffer_bytes: u64,
+    ) -> Result<RunScatter, TileError> {
+        Self::create_as(grid, path, layout, 0, buffer_bytes, true)
     }
 
     /// [`RunScatter::create`] for bins of face indices of `index_bytes` (4 or 8) bytes each
@@ -117,7 +131,7 @@ impl RunScatter {
         buffer_bytes: u64,
     ) -> Result<RunScatter, TileError> {
         assert!(matches!(index_bytes, 4 | 8), "u32 or u64 face indices");
-        Self::create_as(grid, path, layout, index_bytes, buffer_bytes)
+        Self::create_as(grid, path, layout, index_bytes, buffer_bytes, false)
     }
 
     fn create_as(
@@ -126,6 +140,7 @@ impl RunScatter {
         layout: RecordLayout,
         index_bytes: usize,
         buffer_bytes: u64,
+        piece_crcs: bool,
     ) -> Result<RunScatter, TileError> {
         let n = grid.chunks_per_axis();
         let total = (n as u64).pow(3);
@@ -167,6 +182,7 @@ impl RunScatter {
             perm: Vec::new(),
             encoder: BlockEncoder::new(layout),
             out: Vec::new(),
+            crcs: piece_crcs.then(|| vec![Vec::new(); total as usize]),
         };
         let (to_writer, runs) = std::sync::mpsc::sync_channel::<Run>(1);
         let (back, from_writer) = std::sync::mpsc::channel::<Run>();
@@ -311,9 +327,13 @@ impl RunScatter {
             by_rank[r as usize] = li as u32;
         }
         let (mut chunks, mut pieces) = (Vec::new(), Vec::new());
+        let mut crcs = w.crcs.as_ref().map(|_| Vec::new());
         for (r, ps) in w.pieces.into_iter().enumerate() {
             if ps.is_empty() {
                 continue;
+            }
+            if let (Some(out), Some(all)) = (&mut crcs, &w.crcs) {
+                out.push(all[r].clone());
             }
             let li = by_rank[r];
             let coord = [li % n, li / n % n, li / (n * n)];
@@ -325,7 +345,7 @@ impl RunScatter {
             });
             pieces.push(ps);
         }
-        Ok(Bins::from_runs(
+        let mut bins = Bins::from_runs(
             w.path,
             w.file,
             chunks,
@@ -333,7 +353,9 @@ impl RunScatter {
             self.index_bytes,
             pieces,
             w.written,
-        ))
+        );
+        bins.crcs = crcs;
+        Ok(bins)
     }
 }
 
@@ -398,6 +420,9 @@ impl Writer {
             }
             let bytes = (self.out.len() - at) as u64;
             self.pieces[r].push([self.written + at as u64, bytes, perm.len() as u64]);
+            if let Some(crcs) = &mut self.crcs {
+                crcs[r].push(crc32fast::hash(&self.out[at..]));
+            }
             first = end;
             if self.out.len() >= OUT_BYTES {
                 self.flush()?;
@@ -537,6 +562,27 @@ mod tests {
             )
             .unwrap();
             assert_eq!(read_all(&again, 1000), read_all(&bins, 1000));
+            assert!(bins.piece_crcs().is_none());
+            // with the pieces' CRC-32: the same file, and each CRC that of its piece's bytes
+            let checked = dir.path().join(format!("bins-crc-{buffer}"));
+            let mut rs =
+                RunScatter::create_with_piece_crcs(&grid, &checked, layout, buffer).unwrap();
+            for b in tris.chunks(333) {
+                rs.push_keyed(b, &keys.of_world(b)).unwrap();
+            }
+            let with = rs.finish().unwrap();
+            let bytes = std::fs::read(&checked).unwrap();
+            assert!(bytes == std::fs::read(&path).unwrap());
+            assert_eq!(with.pieces(), bins.pieces());
+            let crcs = with.piece_crcs().unwrap();
+            assert_eq!(crcs.len(), with.pieces().len());
+            for (ps, cs) in with.pieces().iter().zip(crcs) {
+                let want: Vec<u32> = ps
+                    .iter()
+                    .map(|p| crc32fast::hash(&bytes[p[0] as usize..(p[0] + p[1]) as usize]))
+                    .collect();
+                assert_eq!(cs, &want);
+            }
         }
     }
 

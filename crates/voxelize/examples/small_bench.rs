@@ -1,6 +1,6 @@
 //! The chunk voxelizer alone on a scan's triangles in world coordinates, as the build feeds it
 //! (`ChunkVoxelizer::add_world`, chunk by chunk, in input order): for profiling and timing the
-//! small-triangle path (issue 30 §1) without ingest, bins and the octree.
+//! small-triangle path (`small.rs`) without ingest, bins and the octree.
 //!
 //! `small_bench dump INPUT OUT N RES` keeps the first `N` triangles of `INPUT` (their world
 //! positions, colours and flags) and the grid the build fits to the whole input at `RES`³

@@ -62,7 +62,18 @@
 //! 0..255)` with round half away from zero. Voxels are sorted by `morton8` of their in-chunk
 //! position.
 //!
-//! That is the definition, in exact arithmetic. [`ChunkVoxelizer`] evaluates it as follows, and
+//! That is the definition, in exact arithmetic on the triangles as [`ChunkVoxelizer`] is given
+//! them: corners in grid coordinates as f32 (`Grid::to_grid` of the input's positions, each
+//! coordinate rounded to f32 once), vertex normals, colours and texture coordinates as read.
+//! The overlap test is exact for the input's own (world) numbers where the caller passes them
+//! (`add_world`); the attributes are not: against the input's own positions each grid
+//! coordinate has moved by at most ε ≤ 2⁻²⁴·R voxel (half an f32 unit in the last place, R the
+//! grid's resolution), so to first order a contribution's face normal turns by at most
+//! `√3·ε·(|e1|+|e2|)/A` radians (edges and area of the triangle in voxels), its weight changes
+//! by at most `√3·ε·P` (`P` the perimeter of its part inside the voxel), and the voxel's mean
+//! normal turns by at most `(Σ w·θ + 2·Σ Δw)/|N|`: far below one normal step for triangles
+//! much larger than ε, up to several steps for slivers and triangles much smaller than a voxel
+//! (docs/FORMAT.md section 6 states the same). [`ChunkVoxelizer`] evaluates it as follows, and
 //! its records are within one quantization step of the exact ones (normal: one 10-bit step per
 //! component; colour: one unit per channel) except where the normals of a voxel's
 //! contributions nearly cancel (`|N|/W` below about `1.06e-4·(K+2)`, opposite faces in one
@@ -115,6 +126,85 @@
 //! noise, so it can differ (with the earlier f64 sums, where `|N|/W < 1e-8`: 202 of 3.4 M
 //! records of the conference room at 1024³, conservative; 31,186 of 8.0 M of Munich at 2048³,
 //! conservative, 14,367 of 6.9 M thin); colours and voxel sets never differ.
+//!
+//! # Exact in the input's own coordinates
+//!
+//! **The promise.** [`ChunkVoxelizer::add_world`] (what a build calls) marks, in conservative
+//! mode, exactly the voxels whose closed box `[origin + i·s, origin + (i+1)·s]` (per axis, real
+//! arithmetic) meets the closed triangle, and in thin mode exactly the voxels of the thin
+//! definition ([`overlap`]) on that box, where `origin` and `s` (the voxel size) are the f64
+//! numbers of the file's header and the vertices are the f32 positions read. Binary PLY
+//! `float`, STL and glTF `FLOAT` positions are those numbers exactly; PLY `double` and decimal
+//! text are rounded to the nearest f32 when read, glTF node transforms are applied in f64 and
+//! rounded to f32, and the promise holds for those f32 values. No rounding of the grid
+//! transform adds or drops a voxel; a triangle collinear in those coordinates marks nothing.
+//!
+//! **The structure.** The scan runs on f32 grid coordinates `g̃ = f32((p − origin)/s)`
+//! (`Grid::to_grid`) with the f64 filter of [`TriSetup`]; a decision outside the filter's band
+//! is the exact one, a decision inside it is taken again on the world values ([`world`]:
+//! Shewchuk's predicates when every voxel corner `origin + c·s` is an f64, big integers
+//! otherwise). The bands, with `u = 2⁻⁵³`, `M` the triangle's largest coordinate magnitude
+//! plus 2, `E` its extent and `A_k` the magnitude of the products of normal component `k`:
+//! * f64 rounding (a forward error analysis in [`TriSetup::new`]): `8u·(|ne₀|+|ne₁|)·(2M+1)`
+//!   for an edge function, `16u·Σ_k A_k·(2M+2)` for the plane, `5u·A_k` for the sign of a
+//!   normal component;
+//! * the f32 rounding of the grid coordinates: `g̃` is within `η = 2⁻²³·M + 2⁻¹⁴⁰` of the exact
+//!   `(p − origin)/s`, and each band is widened by what `η` can do to its predicate
+//!   ([`world::Perturbation`]: `8η(E+η)` for a normal component, `8η(E+1)` for an edge
+//!   function, `3dn(E+2) + 2η(Σ|n| + 3dn)` for the plane).
+//!
+//! `to_grid` is monotone and keeps integers below 2²⁴, so only a closed-box end that `g̃` puts
+//! exactly on an integer can be one voxel off; it is settled on the world value. In the band
+//! the edge tests try every corner of the cell's square (or diamond), since `g̃`'s edge
+//! direction can have a zero component the exact one has not. The small-triangle path
+//! (`small`) is taken only when each of its decisions is outside its band; the
+//! scanline ([`scanline`]) widens its margins by the same band. The GPU voxelizer (crates/gpu,
+//! "Exactness") evaluates the same bands in its shaders and lists the triangles with a decision
+//! inside one, which the host decides with [`voxelize_world_triangle`]: the same sets.
+//!
+//! **Why not an exact grid.** A voxel size of few significant bits with the origin a multiple
+//! of its last bit would still leave `(p − origin)/s` inexact in f32 near the world origin
+//! (where f32 positions have finer ulps than the grid coordinates), and it would move every
+//! voxel boundary; deciding the rare near-ties on the world values changes only the voxels
+//! whose exact answer differs.
+//!
+//! # Precision of the attributes
+//!
+//! The f32 sums are within `γ_{K+2}·Σ|terms|` (above), so without textures a colour stays
+//! within one unit of the exact mean for up to 4,094 contributions per voxel and a normal
+//! within one 10-bit step wherever `|N|/W ≥ 1.06e-4·(K+2)`. With textures the sums are in
+//! linear light and the mean is sRGB-encoded, whose slope is at most 12.92 (near black): one
+//! step for up to about 1,200 contributions. A voxel skipped by [`single`] carries its
+//! triangle's face normal and colour: the same colour as the clipped path, and the same normal
+//! except where `511·n_j/|n|` lies within about 1e-4 of a rounding half (one step). A small
+//! triangle's contributions are summed before the general path's in the same voxel, another
+//! f32 order within the same bound.
+//!
+//! # How it is tested
+//!
+//! Every voxel set is compared with a reference written from the definitions in big-integer
+//! arithmetic (13 separating axes for conservative, the diamond for thin), never from the code
+//! under test, on adversarial triangles (vertices on voxel corners, edges and faces nudged by
+//! ulps, planes rounded through a corner, slivers, dominant-axis near-ties, coordinates up to
+//! 2²³ and down to subnormal) and on real meshes; the attributes against f64 references:
+//! * `tests/all/exact.rs`: `chunk_voxelizer_sets_equal_the_reference`,
+//!   `adversarial_triangles_near_the_origin`, `tiny_and_subnormal_coordinates`,
+//!   `stanford_bunny_exact` and the other real meshes, `small_triangles_sets_equal_the_reference`
+//!   (0 missed, 0 added);
+//! * `tests/all/world_exact.rs`: `real_meshes_are_exact_in_world_coordinates`,
+//!   `near_ties_are_decided_on_the_input` (a reference from the world f32 positions and the
+//!   header's f64 grid, never from `to_grid`; 3,000 triangles within 3 ulps of voxel corners,
+//!   edges and faces of a grid with an inexact origin and size);
+//! * `tests/all/attributes.rs`: the f32 sums within the bound against the f64 reference
+//!   ([`clipped_area`], sub-triangle barycentrics), random triangles and the npm bunny;
+//! * `tests/all/column.rs`: the column fast paths against general clipping (below 1e-12
+//!   relative), and whole chunks with the fast paths on and off;
+//! * `tests/all/single.rs`: the skip changes only single-contribution voxels of flat
+//!   triangles, within the bound, and nothing past the deferral limit;
+//! * `tests/all/small.rs`: the small path's records within one step of the path off, and every
+//!   voxel's summed weight against an f64 sum of [`clipped_area`];
+//! * crates/gpu `tests/all/exactness.rs`, `world.rs`, `fallback.rs`: the GPU's sets equal these
+//!   in f64 and f32, uncertain triangles listed and decided on the host.
 //!
 //! # Example
 //!
@@ -265,8 +355,8 @@ pub enum Method {
     Sat,
     /// The projected scanline of Zhang et al. ([`scanline::scan`]): the same voxels, found by
     /// settling interval ends. The default: never slower than `Sat` in our measurements, up
-    /// to 1.2× faster on triangles spanning many voxels (docs/BENCHMARKS.md, "Earlier
-    /// measurements", the scanline voxelizer).
+    /// to 1.2× faster on triangles spanning many voxels (docs/journal/benchmarks-notebook.md,
+    /// "Projected scanline voxelizer").
     #[default]
     Scanline,
     /// The paper's integer-only variant ([`scanline::scan_ilv`]): approximate, conservative

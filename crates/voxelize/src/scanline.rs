@@ -63,8 +63,8 @@
 //! dragon at 512³, `tests/scanline.rs`, which asserts below 15 %) it misses 12–13 % of the
 //! voxels and adds 13–14 % others: the counts differ by under 1 %, which is the paper's
 //! "error" (Table 3), but the sets do not. Conservative mode only, and no faster here than the
-//! exact method (measured: docs/BENCHMARKS.md, "Earlier measurements", the scanline
-//! voxelizer).
+//! exact method (measured: docs/journal/benchmarks-notebook.md, "Projected scanline
+//! voxelizer").
 
 use crate::overlap::TriSetup;
 use crate::Mode;
@@ -85,7 +85,7 @@ const MIN_RUN: i32 = 3;
 
 /// Triangles whose window spans fewer columns than this in x or y go to [`TriSetup::scan`]
 /// (the same voxels): on them the slice setup costs more than it saves (measured:
-/// docs/BENCHMARKS.md, "Earlier measurements", the scanline voxelizer).
+/// docs/journal/benchmarks-notebook.md, "Projected scanline voxelizer").
 const SMALL: i32 = 32;
 
 /// A dominant-projection edge `a·x + b·y + c ≥ 0` as a bound on the columns y of slice x:

@@ -178,8 +178,8 @@ pub(crate) fn interior(v: &[[f32; 3]; 3], lo: [i32; 3], hi: [i32; 3]) -> Option<
 /// With `world` (the input's own f32 positions, of which `v` is `Grid::to_grid`; see
 /// [`crate::world`]) the triangle is also refused unless every decision of the set is certain
 /// for the exact grid coordinates of `world`, i.e. outside its rounding bound plus the
-/// [`Perturbation`] of `v` (the filter of `world::small_certain` before issue 30, computed here
-/// from the same numbers as the set): no end of the voxel range on an integer, no zero edge
+/// [`Perturbation`] of `v` (the filter a separate `small_certain` pass would apply, computed
+/// here from the same numbers as the set, so they are computed once): no end of the voxel range on an integer, no zero edge
 /// difference in `v` that is not one in `world`, every normal component and every `orient2d` /
 /// `orient3d` value at the grid point outside its band. Those certain f64 signs then decide the
 /// set (they are the exact signs, so the exact predicates are not called).
@@ -469,7 +469,7 @@ fn octants(s: &Signs, n: [f64; 3], split: [bool; 3], count: usize) -> u8 {
 /// the swizzled triangle `out.sv` cut by the split planes `x_k = p_k`, swizzled axis 0 first,
 /// both sides of each cut kept ([`Poly::split_into`]: the first cut into two small arrays,
 /// the second into nodes 3–6 of `out.polys`, the third into nodes 7–14); then, in the order
-/// lower side before upper side (main's recursion), each part whose candidate (bits over
+/// lower side before upper side (the order of a recursive cut), each part whose candidate (bits over
 /// `first`) the triangle meets becomes a [`Piece`] with its area (`scale = |n|/|n_z|`) and,
 /// unless `out.area_only`, its centroid ([`Poly::area_centroid`]).
 fn cut(
@@ -663,13 +663,14 @@ mod tests {
         v
     }
 
-    /// The small path against main's (`crate::small_reference`, commit d25491b): on triangles
+    /// The small path against the reference path (`crate::small_reference`: robust predicates,
+    /// recursive cuts of the generic `Poly`, a separate certainty filter): on triangles
     /// at and near the grid planes of voxel corners, given in world coordinates of grids whose
-    /// corners are not exact (`add_world`: `split` with the world positions against main's
-    /// `split` and `world::small_certain`) and in grid coordinates (`add`), for flat and
+    /// corners are not exact (`add_world`: `split` with the world positions against the
+    /// reference's `split` and `small_certain`) and in grid coordinates (`add`), for flat and
     /// interpolated attributes: the same decision (small or not, interior or not), and for a
     /// small triangle the same normal, swizzled vertices, voxels, weights and centroids bit for
-    /// bit. [`interior`] takes exactly the triangles main's `split` took as interior. Coverage
+    /// bit. [`interior`] takes exactly the triangles the reference's `split` takes as interior. Coverage
     /// of every case (interior, one, two and three split axes, refused by the set's range, by
     /// the world filter) is asserted.
     #[test]

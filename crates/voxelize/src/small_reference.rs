@@ -1,5 +1,4 @@
-//! The small-triangle path as main had it before issue 30 §1 (commit d25491b), kept verbatim
-//! for the tests only: [`split`] with its robust predicates and recursive cuts of the generic
+//! A plainer small-triangle path, kept for the tests only as the reference of [`crate::small`]: [`split`] with its robust predicates and recursive cuts of the generic
 //! [`Poly`], and `world::small_certain`, the filter that decided which small triangles of an
 //! `add_world` are certain. [`crate::small`] must give the same decisions and the same
 //! pieces bit for bit (its unit tests compare them on triangles at and near grid planes).

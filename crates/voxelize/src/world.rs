@@ -1,4 +1,5 @@
-//! Exact overlap decisions in the input's own coordinates (issue 32 §1).
+//! Exact overlap decisions in the input's own coordinates (the promise is in the crate docs,
+//! "Exact in the input's own coordinates").
 //!
 //! The scan runs on f32 grid coordinates `g̃ = f32((p − origin) / voxel_size)` (`Grid::to_grid`),
 //! a perturbation of the exact grid coordinates `g = (p − origin) / voxel_size` of the input's

@@ -18,6 +18,7 @@ mod gen_blocks;
 mod inspect;
 mod json;
 mod render;
+mod serve;
 mod shard;
 mod verify;
 mod view;
@@ -69,6 +70,9 @@ enum Command {
     /// path to PNGs (--fly, headless) or a window.
     #[command(after_help = view::EXAMPLES)]
     View(view::ViewArgs),
+    /// Serve the browser viewer and an octree file over HTTP (range requests) on this machine.
+    #[command(after_help = serve::EXAMPLES)]
+    Serve(serve::ServeArgs),
     /// List and remove stale work folders of killed builds (`.voxlod-work-*`) in a folder.
     #[command(after_help = EXAMPLES_CLEAN)]
     Clean(clean::CleanArgs),
@@ -313,6 +317,7 @@ fn main() -> ExitCode {
         Command::Render(a) => render::run(a),
         Command::Export(a) => export::run(a),
         Command::View(a) => view::run(a),
+        Command::Serve(a) => serve::run(a),
         Command::Clean(a) => clean::run(a),
         Command::Plan(a) => shard::run_plan(a),
         Command::Map(a) => shard::run_map(a),
@@ -333,7 +338,21 @@ fn load_config(path: &Path) -> Result<BuildSettings> {
         .with_context(|| format!("reading settings file {}", path.display()))?;
     let text = String::from_utf8(bytes)
         .with_context(|| format!("settings file {} is not UTF-8 text", path.display()))?;
-    toml::from_str(&text).with_context(|| format!("settings file {}", path.display()))
+    // the parser's own message quotes the offending line: only where and what is said, so a
+    // file that is not a settings file (`/proc/self/environ`) is not echoed to the terminal
+    toml::from_str(&text).map_err(|e| {
+        let at = e.span().map_or(String::new(), |s| {
+            let before = &text[..s.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+            format!(" at line {line}, column {column}")
+        });
+        anyhow::anyhow!(
+            "settings file {}{at}: {}",
+            path.display(),
+            e.message().trim_end()
+        )
+    })
 }
 
 /// The settings of `build` and `plan`: the settings file's (or the defaults), each flag given

@@ -1,5 +1,5 @@
 //! Seeded mutation fuzzing of the octree reader, bounded to a few seconds so it runs in CI
-//! (issue 17, "a fuzz target per parser"). A small valid file (512³, two levels, made here) is
+//! (a fuzz target per parser). A small valid file (512³, two levels, made here) is
 //! mutated three ways: raw bytes (bit flips, truncation, insertion, deletion, big 4- and
 //! 8-byte fields), the same with the header, index and manifest checksums recomputed (so the
 //! structural checks behind them run), and a node's decompressed block mutated and

@@ -1,4 +1,4 @@
-//! The GPU voxelizer's sets against the exact CPU sets (issue 13, part 1), on the adversarial
+//! The GPU voxelizer's sets against the exact CPU sets, on the adversarial
 //! triangles of `crates/voxelize/tests/all/exact.rs` (the same generator, included by path): there
 //! `ChunkVoxelizer`'s sets are proven equal to a big-integer reference, so here the CPU set is
 //! the exact set. Each triangle is voxelized alone, so that a triangle the shaders list (a

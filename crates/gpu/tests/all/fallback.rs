@@ -1,4 +1,4 @@
-//! The GPU voxelizer's fallback for decisions the shaders cannot certify (issue 13, part 1):
+//! The GPU voxelizer's fallback for decisions the shaders cannot certify:
 //! per triangle, not per chunk, and none where the shaders can certify ties themselves.
 //!
 //! * A block world (boxes whose faces lie on voxel planes, every coordinate on a dyadic grid):

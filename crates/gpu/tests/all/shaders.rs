@@ -120,7 +120,10 @@ fn crate_shaders_are_the_repository_shaders() {
     let repo = krate.join("../../shaders");
     if !repo.is_dir() {
         // a packaged crate: only its own copy exists
-        eprintln!("no repository shaders/ beside the crate: skipped");
+        voxlod_testkit::skipped(
+            "shaders::crate_shaders_are_the_repository_shaders",
+            "no repository shaders/ beside the crate (a packaged crate)",
+        );
         return;
     }
     let files = |dir: &std::path::Path| {

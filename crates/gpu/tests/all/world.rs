@@ -1,4 +1,4 @@
-//! The GPU voxelizer's sets exact for the input's own coordinates (issue 32 §1): triangles fed in
+//! The GPU voxelizer's sets exact for the input's own coordinates: triangles fed in
 //! world coordinates (`voxelize_chunk_world`, what a build feeds from its bins) give the voxels of
 //! the exact reference of `crates/voxelize/tests/all/common/world_ref.rs` (included by path: it
 //! starts from the world f32 numbers and the grid's f64 origin and voxel size, big integers
@@ -8,7 +8,7 @@
 //! within a few f32 ulps of voxel corners, edges and faces on a grid whose origin and voxel
 //! size are not binary fractions, so that the f32 grid coordinates (`Grid::to_grid`) decide
 //! some voxels differently from the exact ones. That is asserted too: the same triangles moved
-//! to the grid first (`voxelize_chunk`, the GPU path before this) miss or add voxels.
+//! to the grid first (`voxelize_chunk`, the path for triangles given in grid coordinates) miss or add voxels.
 //! A block world on a dyadic grid (every grid coordinate the exact image of its world value)
 //! keeps the shaders' own certificates: nothing is listed.
 //!

@@ -1,5 +1,5 @@
 //! Seeded mutation fuzzing of every mesh parser, bounded to a few seconds so it runs in CI
-//! (issue 17, "a fuzz target per parser"). Small valid inputs, made here, are mutated — bit
+//! (a fuzz target per parser). Small valid inputs, made here, are mutated — bit
 //! flips, truncations, inserted and deleted bytes, duplicated spans, and "big counts" (a
 //! number or a 4-byte field replaced by a huge value) — and each mutant is opened and streamed
 //! in-process. Whatever the bytes, the parser must return (no panic, caught with

@@ -9,6 +9,8 @@ mod common;
 mod cross_format;
 mod fuzz;
 mod gltf;
+mod gltf_compressed;
+mod gltf_document;
 mod malformed;
 mod parallel_faces;
 mod parts;

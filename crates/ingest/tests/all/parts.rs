@@ -151,3 +151,65 @@ fn parts_of_a_real_mesh() {
     assert_eq!(st, want_st);
     assert!(got == want, "16 parts of the dragon differ from one stream");
 }
+
+/// `part_footprint` against a brute force from the mesh's own indices (the formula of
+/// `parallel_faces::mesh`): for plain and general records in both byte orders and pages of
+/// 256 and 4096 bytes, each part's pages are those of the header and of every vertex record
+/// its faces name, and its face record bytes are handed over exactly, in order.
+#[test]
+fn part_footprints_are_the_pages_of_the_vertices_their_faces_name() {
+    let dir = TempDir::new("footprint");
+    let side = 400u64;
+    let n = 50_000u64;
+    let indices = |f: u64| -> [u64; 3] {
+        let i = (f / 2) % ((side - 1) * (side - 1));
+        let (x, y) = (i % (side - 1), i / (side - 1));
+        let v = y * side + x;
+        let mut idx = if f % 2 == 0 {
+            [v, v + 1, v + side]
+        } else {
+            [v + 1, v + side + 1, v + side]
+        };
+        if f % 997 == 5 {
+            idx[2] = idx[0];
+        }
+        if f % 1009 == 7 {
+            idx = [v, v + 1, v + 2];
+        }
+        idx
+    };
+    for plain in [false, true] {
+        let els = mesh(n as usize, plain, None, None);
+        for enc in ["binary_little_endian", "binary_big_endian"] {
+            let data = ply(enc, &els);
+            let path = dir.write(&format!("fp_{plain}_{enc}.ply"), data.clone());
+            let src = MeshSource::open(&path).unwrap();
+            let parts = src.face_parts(5).unwrap();
+            let voff = data.windows(11).position(|w| w == b"end_header\n").unwrap() as u64 + 11;
+            let stride = (parts[0].bytes[0] - voff) / (side * side);
+            for page in [256u64, 4096] {
+                for p in &parts {
+                    let mut want = std::collections::BTreeSet::new();
+                    want.extend(0..=(voff - 1) / page);
+                    for f in p.records[0]..p.records[1] {
+                        for v in indices(f) {
+                            let a = voff + v * stride;
+                            want.insert(a / page);
+                            want.insert((a + stride - 1) / page);
+                        }
+                    }
+                    let mut seen = Vec::new();
+                    let got = src
+                        .part_footprint(p, page, &mut |b| seen.extend_from_slice(b))
+                        .unwrap();
+                    assert_eq!(
+                        got,
+                        want.into_iter().collect::<Vec<_>>(),
+                        "plain {plain} {enc} page {page} part {p:?}"
+                    );
+                    assert!(seen == data[p.bytes[0] as usize..p.bytes[1] as usize]);
+                }
+            }
+        }
+    }
+}

@@ -136,7 +136,7 @@ fn shared(test: &str) -> Option<PathBuf> {
     if std::env::var("CI").is_ok_and(|v| v == "true") {
         panic!("{test}: ../shared/data/meshes is missing, and CI=true requires it");
     }
-    eprintln!("{test}: SKIPPED: ../shared/data/meshes is not beside this clone");
+    voxlod_testkit::skipped(test, "../shared/data/meshes is not beside this clone");
     None
 }
 

@@ -1,6 +1,6 @@
 //! A memory-mapped input (binary PLY, binary STL) truncated while it is streamed ends the
 //! process with a message naming the file and exit status `TRUNCATED_EXIT`, not a bare
-//! SIGBUS (issue 17, "inputs still memory-mapped"). The test re-runs its own binary as a
+//! SIGBUS (an input is still memory-mapped while it is read). The test re-runs its own binary as a
 //! child that streams a mesh and truncates it from the first batch's callback, so the rest of
 //! the read touches pages past the new end of the file — exactly what `truncate` from another
 //! program does to a running build.

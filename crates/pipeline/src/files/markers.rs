@@ -41,8 +41,8 @@ pub(crate) struct BinsMarker {
     chunks: Vec<[u64; 5]>,
     #[serde(default)]
     pieces: Vec<Vec<[u64; 3]>>,
-    /// The records hold world coordinates (since issue 32; older bins hold grid coordinates
-    /// and are written again).
+    /// The records hold world coordinates (bins of an older work format hold grid coordinates:
+    /// without this flag they are not trusted and are written again).
     #[serde(default)]
     world: bool,
     /// 0: the pieces hold blocks of triangle records; 4 or 8: the face records of the

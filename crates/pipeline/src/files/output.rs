@@ -45,6 +45,9 @@ pub enum OutputKind {
     Plan,
     /// A shard of a sharded build (`build --plan --shard`).
     Shard,
+    /// A map task's output (`map --part I`: `part-IIII.bins`, `part-IIII.json`), whose name the
+    /// tool chooses beside the plan: replaced whatever is there (it has no magic of its own).
+    MapOutput,
 }
 
 impl OutputKind {
@@ -57,6 +60,7 @@ impl OutputKind {
             OutputKind::Glb => "a glTF binary",
             OutputKind::Plan => "a voxlod plan",
             OutputKind::Shard => "a voxlod shard",
+            OutputKind::MapOutput => "a voxlod map output",
         }
     }
 
@@ -448,6 +452,9 @@ fn leftover_name(file: &str) -> Option<String> {
     if let Some(name) = file.strip_prefix(".voxlod-lock-") {
         return (!name.is_empty()).then(|| name.to_string());
     }
+    if let Some(name) = legacy_map_leftover(file) {
+        return Some(name);
+    }
     // .voxlod-part-NAME-PID-HEXTIME (NAME may itself contain '-')
     let rest = file.strip_prefix(".voxlod-part-")?;
     let mut it = rest.rsplitn(3, '-');
@@ -458,6 +465,24 @@ fn leftover_name(file: &str) -> Option<String> {
         && !time.is_empty()
         && time.bytes().all(|b| b.is_ascii_hexdigit());
     ok.then(|| name.to_string())
+}
+
+/// The map output a file left by a map task of an earlier voxlod belongs to, if it is one:
+/// `part-IIII.bins.PID.partial` (its bins being written) or `part-IIII.json.tmp` (its marker
+/// being written), which a killed task of those versions left beside the plan.
+pub(crate) fn legacy_map_leftover(file: &str) -> Option<String> {
+    let part = |name: &str, ext: &str| {
+        name.strip_prefix("part-")
+            .and_then(|r| r.strip_suffix(ext))
+            .is_some_and(|d| d.len() >= 4 && d.bytes().all(|b| b.is_ascii_digit()))
+    };
+    if let Some(name) = file.strip_suffix(".tmp") {
+        return part(name, ".json").then(|| name.to_string());
+    }
+    let rest = file.strip_suffix(".partial")?;
+    let (name, pid) = rest.rsplit_once('.')?;
+    (part(name, ".bins") && !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| name.to_string())
 }
 
 /// The leftovers of outputs in `dir` (see [`OutputLeftovers`]), grouped by output name, each
@@ -521,13 +546,13 @@ pub fn remove_output_leftovers(dir: &Path, name: &str) -> Result<u64> {
         ),
         Err(LockError::Io(e)) => bail!("locking {}: {}", lock_path.display(), os_text(&e)),
     };
-    let prefix = format!(".voxlod-part-{name}-");
     let mut bytes = 0;
     let entries = std::fs::read_dir(dir)
         .map_err(|e| anyhow::anyhow!("{}: cannot list it: {}", dir.display(), os_text(&e)))?;
     for e in entries.flatten() {
         let file = e.file_name().to_string_lossy().into_owned();
-        if file.starts_with(&prefix) && leftover_name(&file).as_deref() == Some(name) {
+        // the staged parts (and an earlier map task's files), not the lock: that goes last
+        if !file.starts_with(".voxlod-lock-") && leftover_name(&file).as_deref() == Some(name) {
             let len = entry_bytes(&e.path());
             let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
             let removed = if is_dir {
@@ -558,6 +583,7 @@ fn ext(kind: OutputKind) -> &'static str {
         OutputKind::Glb => "glb",
         OutputKind::Plan => "json",
         OutputKind::Shard => "vlshard",
+        OutputKind::MapOutput => "bins",
     }
 }
 
@@ -707,16 +733,35 @@ mod tests {
         w("a-b.ply", 10);
         w(".voxlod-part-e.ply-x-ff", 10);
         w(".voxlod-partial", 10);
+        w("part-0001.bins", 10);
+        w("part-x.bins.12.partial", 10);
+        w("part-0001.bins.12x.partial", 10);
+        w("plan.json.tmp", 10);
+        // a map task of an earlier version killed while writing part 1's bins, another its
+        // marker
+        w("part-0001.bins.4242.partial", 200);
+        w("part-0002.json.tmp", 20);
         let found = find_output_leftovers(d).unwrap();
         let names: Vec<_> = found
             .iter()
             .map(|l| (l.name.as_str(), l.files.len()))
             .collect();
-        assert_eq!(names, vec![("a-b.ply", 2), ("c.png", 2), ("d.voxlod", 1)]);
+        assert_eq!(
+            names,
+            vec![
+                ("a-b.ply", 2),
+                ("c.png", 2),
+                ("d.voxlod", 1),
+                ("part-0001.bins", 1),
+                ("part-0002.json", 1)
+            ]
+        );
         assert_eq!(found[0].in_use_by, None);
         assert_eq!(found[1].in_use_by, Some(Some(std::process::id())));
         assert_eq!(found[2].in_use_by, None);
         assert!(found[0].bytes >= 1000 && found[2].bytes == 300);
+        assert!(remove_output_leftovers(d, "part-0001.bins").unwrap() >= 200);
+        assert!(remove_output_leftovers(d, "part-0002.json").unwrap() >= 20);
         // the probe created no lock file for "d.voxlod"
         assert!(!d.join(".voxlod-lock-d.voxlod").exists());
 
@@ -727,7 +772,15 @@ mod tests {
         let left = find_output_leftovers(d).unwrap();
         assert_eq!(left.len(), 1, "{left:?}");
         assert_eq!(left[0].name, "c.png");
-        for f in ["a-b.ply", ".voxlod-part-e.ply-x-ff", ".voxlod-partial"] {
+        for f in [
+            "a-b.ply",
+            ".voxlod-part-e.ply-x-ff",
+            ".voxlod-partial",
+            "part-0001.bins",
+            "part-x.bins.12.partial",
+            "part-0001.bins.12x.partial",
+            "plan.json.tmp",
+        ] {
             assert!(d.join(f).exists(), "{f} was removed");
         }
         drop(held);

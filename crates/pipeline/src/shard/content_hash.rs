@@ -43,6 +43,48 @@ pub(crate) fn xxh3_of_file(path: &Path, stop: &AtomicBool) -> Result<Option<u64>
     }
 }
 
+/// XXH3-64 of each segment of the file at `path` that `ends` cut from its start (segment `i`
+/// is `[ends[i-1], ends[i])`, the first from byte 0; `ends` increasing), read in order in one
+/// pass; `None` if `stop` was set before the end. A file shorter than the last end is an error.
+pub(crate) fn xxh3_of_segments(
+    path: &Path,
+    ends: &[u64],
+    stop: &AtomicBool,
+) -> Result<Option<Vec<u64>>, StageError> {
+    let mut f = voxlod_io::open_regular(path).map_err(|e| match e {
+        voxlod_io::BoundError::Io(e) => StageError::io("opening", path)(e),
+        e => StageError::io("opening", path)(std::io::Error::other(e.to_string())),
+    })?;
+    let mut out = Vec::with_capacity(ends.len());
+    let mut h = Xxh3Default::new();
+    let mut buf = vec![0u8; BLOCK];
+    let mut at = 0u64;
+    for &end in ends {
+        while at < end {
+            if stop.load(Ordering::Relaxed) {
+                return Ok(None);
+            }
+            let want = (end - at).min(BLOCK as u64) as usize;
+            let n = match f.read(&mut buf[..want]) {
+                Ok(0) => {
+                    return Err(StageError::io("reading", path)(std::io::Error::new(
+                        std::io::ErrorKind::UnexpectedEof,
+                        format!("the file ends at byte {at}, before {end} (it changed while read)"),
+                    )))
+                }
+                Ok(n) => n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(StageError::io("reading", path)(e)),
+            };
+            h.update(&buf[..n]);
+            at += n as u64;
+        }
+        out.push(h.digest());
+        h.reset();
+    }
+    Ok(Some(out))
+}
+
 /// Runs `pass` while [`xxh3_of_file`] of `path` runs on a thread of its own; returns both
 /// results. The checksum runs to the end of the file even if the pass fails (the caller
 /// explains a failed pass by a changed input, if it changed), unless `interrupt` is set
@@ -113,5 +155,15 @@ mod tests {
         assert_eq!(xxh3_of_file(&p, &AtomicBool::new(true)).unwrap(), None);
         let (r, h) = beside(&p, &go, || 7);
         assert_eq!((r, h.unwrap()), (7, Some(want)));
+        // segments: each the one-shot XXH3 of its bytes, block borders anywhere
+        let ends = [0, 5, BLOCK as u64 + 3, BLOCK as u64 + 3, bytes.len() as u64];
+        let got = xxh3_of_segments(&p, &ends, &go).unwrap().unwrap();
+        let mut from = 0;
+        for (e, g) in ends.iter().zip(&got) {
+            let e = *e as usize;
+            assert_eq!(*g, xxhash_rust::xxh3::xxh3_64(&bytes[from..e]), "up to {e}");
+            from = e;
+        }
+        assert!(xxh3_of_segments(&p, &[bytes.len() as u64 + 1], &go).is_err());
     }
 }

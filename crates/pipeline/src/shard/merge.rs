@@ -125,7 +125,7 @@ pub fn merge(
     let mut manifest = p.manifest.clone();
     if !p.parts.is_empty() {
         let hex = voxlod_io::hex(&plan.sha256);
-        let markers = super::map_part::load_markers(&plan.path, &hex, &p.parts)?;
+        let markers = super::map_part::load_markers(&plan.path, &hex, &p.parts, &p.grid.into())?;
         let (triangles, degenerate, _) = super::map_part::totals(&markers);
         manifest["input"]["triangles"] = triangles.into();
         manifest["input"]["degenerate_skipped"] = degenerate.into();

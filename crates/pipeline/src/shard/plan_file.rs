@@ -27,8 +27,11 @@ pub const PLAN_FORMAT: &str = "voxlod-plan";
 /// ingest pass's findings (`ingest`) and the per-chunk counts (`chunks`), so that a shard reads
 /// the input once. 3: `parts` (the map tasks' face records), with which the plan reads no
 /// faces (no `ingest`, no `content_xxh3`; `chunks` estimated from a sample). 4: a shard holds a
-/// list of Morton `ranges` (the split's LPT assignment), not one range.
-pub const PLAN_VERSION: u32 = 4;
+/// list of Morton `ranges` (the split's LPT assignment), not one range. 5: with parts, the
+/// XXH3-64 of each part's face records (`parts[].faces_xxh3`) and of the pages before the
+/// faces (`input.pages`), which the map tasks check the bytes they read against; the plan's
+/// own `checksum`.
+pub const PLAN_VERSION: u32 = 5;
 /// Bytes hashed at each end of the input for its fingerprint.
 const FINGERPRINT_SPAN: u64 = 1 << 20;
 
@@ -98,6 +101,54 @@ pub struct PlanInput {
     /// parts, which reads only the input's vertex list and a sample of its faces.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub content_xxh3: Option<String>,
+    /// With parts: the XXH3-64 of every page of the bytes before the face records (the
+    /// header, the vertex list); each map task checks the pages it reads against them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pages: Option<PlanPages>,
+}
+
+/// The bytes before the face records of a plan with parts, page by page: `[k·page_bytes,
+/// (k+1)·page_bytes)` for every `k`, the last page ending at the first face record.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlanPages {
+    /// Bytes of a page: a power of two, at least 1 MiB, so that there are at most
+    /// [`MAX_PAGES`] pages (or the bytes fit 1 MiB pages).
+    pub page_bytes: u64,
+    /// XXH3-64 of each page, 16 hex digits.
+    pub xxh3: Vec<String>,
+}
+
+/// The most pages a plan lists for the bytes before the faces (above 4 GiB of them, pages
+/// grow beyond 1 MiB).
+pub const MAX_PAGES: u64 = 4096;
+
+impl PlanPages {
+    /// The page size for `bytes` before the face records: the smallest power of two of at
+    /// least 1 MiB that cuts them into at most [`MAX_PAGES`] pages.
+    pub fn page_bytes_for(bytes: u64) -> u64 {
+        bytes.div_ceil(MAX_PAGES).next_power_of_two().max(1 << 20)
+    }
+}
+
+/// A u64 as 16 lower-case hex digits in JSON (XXH3-64 values: a JSON number would lose
+/// digits in readers that hold numbers as doubles).
+pub(crate) mod hex_u64 {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &u64, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&super::hex64(*v))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+        let t = String::deserialize(d)?;
+        if t.len() != 16 || !t.bytes().all(|b| b.is_ascii_hexdigit()) {
+            return Err(serde::de::Error::custom(format!(
+                "{t:?} is not 16 hex digits"
+            )));
+        }
+        u64::from_str_radix(&t, 16).map_err(serde::de::Error::custom)
+    }
 }
 
 impl PlanInput {
@@ -114,6 +165,7 @@ impl PlanInput {
             path,
             fingerprint,
             content_xxh3: xxh3.map(hex64),
+            pages: None,
         })
     }
 }
@@ -146,6 +198,9 @@ pub struct PlanPart {
     pub records: [u64; 2],
     /// Their byte range in the input.
     pub bytes: [u64; 2],
+    /// XXH3-64 of those bytes when planned (16 hex digits in the file).
+    #[serde(with = "hex_u64")]
+    pub faces_xxh3: u64,
 }
 
 impl PlanPart {
@@ -229,6 +284,26 @@ pub struct ShardPlan {
     pub shards: Vec<ShardRange>,
     /// How even they are.
     pub balance: Balance,
+    /// Hex SHA-256 of the plan's JSON as `plan` writes it (pretty-printed, keys in this order)
+    /// with this field empty: an edited plan is refused, so every shard and map task builds
+    /// what was planned.
+    pub checksum: String,
+}
+
+impl ShardPlan {
+    /// The SHA-256 of the plan with `checksum` empty, serialized as it is written.
+    fn own_sha256(&self) -> String {
+        let mut p = self.clone();
+        p.checksum.clear();
+        let text = serde_json::to_vec_pretty(&p).expect("a plan serializes");
+        voxlod_io::hex(&Sha256::digest(&text))
+    }
+
+    /// The plan's file bytes: its JSON, pretty-printed, with `checksum` set.
+    pub fn sealed_json(&mut self) -> Vec<u8> {
+        self.checksum = self.own_sha256();
+        serde_json::to_vec_pretty(self).expect("a plan serializes")
+    }
 }
 
 /// The grid (`voxlod_geom::Grid`) as the plan stores it.
@@ -295,6 +370,12 @@ impl LoadedPlan {
                 plan.version
             );
         }
+        if plan.checksum != plan.own_sha256() {
+            bail!(
+                "{}: its checksum does not match its content (edited or damaged since it was planned): plan again",
+                path.display()
+            );
+        }
         if plan.tool_version != env!("CARGO_PKG_VERSION") {
             bail!(
                 "{}: planned by voxlod {}, this is {}: plan again with this version (the bytes may differ)",
@@ -332,10 +413,22 @@ impl LoadedPlan {
         }) && plan
             .parts
             .windows(2)
-            .all(|w| w[0].records[1] == w[1].records[0]);
-        if !parts_ok || plan.parts.is_empty() == plan.ingest.is_none() {
+            .all(|w| w[0].records[1] == w[1].records[0] && w[0].bytes[1] == w[1].bytes[0]);
+        let pages_ok = match (&plan.input.pages, plan.parts.first()) {
+            (None, None) => true,
+            (Some(pg), Some(first)) => {
+                pg.page_bytes == PlanPages::page_bytes_for(first.bytes[0])
+                    && pg.xxh3.len() as u64 == first.bytes[0].div_ceil(pg.page_bytes)
+                    && pg
+                        .xxh3
+                        .iter()
+                        .all(|h| h.len() == 16 && h.bytes().all(|b| b.is_ascii_hexdigit()))
+            }
+            _ => false,
+        };
+        if !parts_ok || !pages_ok || plan.parts.is_empty() == plan.ingest.is_none() {
             bail!(
-                "{}: its parts are not consecutive face records in order, or it has both or neither of parts and the ingest pass's findings (edited by hand?)",
+                "{}: its parts are not consecutive face records in order, its pages before the faces do not match them, or it has both or neither of parts and the ingest pass's findings (edited by hand?)",
                 path.display()
             );
         }

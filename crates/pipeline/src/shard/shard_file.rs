@@ -21,7 +21,8 @@ pub const MAGIC: &[u8; 8] = b"VLSHARD\0";
 pub const SHARD_VERSION: u32 = 1;
 /// Bytes of the header.
 const HEADER_SIZE: u64 = 128;
-/// At most this many channels (the octree has two kinds today).
+/// At most this many channels (the format defines fewer: room for new kinds without a new
+/// shard file version).
 const MAX_CHANNELS: usize = 4;
 /// Bytes of one channel entry.
 const CHANNEL_ENTRY: usize = 24;

@@ -235,7 +235,12 @@ fn from_parts(
     layout: RecordLayout,
 ) -> Result<Ingested, StageError> {
     use crate::shard::map_part;
-    let markers = map_part::load_markers(&scope.plan_path, &scope.plan_sha256_hex, &scope.parts)?;
+    let markers = map_part::load_markers(
+        &scope.plan_path,
+        &scope.plan_sha256_hex,
+        &scope.parts,
+        &scope.grid,
+    )?;
     let (triangles, degenerate, tb) = map_part::totals(&markers);
     let plan = scope.plan_path.display();
     let Some(tb) = tb else {
@@ -245,10 +250,22 @@ fn from_parts(
     let grid = Grid::fit(&tb, ctx.settings.resolution)
         .with_context(|| format!("{plan}: fitting the grid to the map outputs' bounds"))?;
     if grid != scope.grid {
-        return Err(anyhow::anyhow!(
-            "{}: some vertices are used by no triangle and lie outside the triangles' bounds, so the grid {plan} fitted to the vertex list is not the grid of a one-machine build: plan it without --parts",
-            ctx.input.display()
-        )
+        // the plan's grid holds every vertex: bounds reaching outside it are no vertex's, so
+        // only a marker's own numbers can have put them there
+        let g = &scope.grid;
+        let edge = g.voxel_size * g.resolution as f64;
+        let outside = (0..3).any(|a| tb.min[a] < g.origin[a] || tb.max[a] > g.origin[a] + edge);
+        return Err(if outside {
+            anyhow::anyhow!(
+                "{plan}: the map outputs' bounds (the min and max of their markers, part-IIII.json) reach outside the plan's grid, which holds every vertex of {}: a marker was edited or damaged; run the map tasks again",
+                ctx.input.display()
+            )
+        } else {
+            anyhow::anyhow!(
+                "{}: the map outputs' bounds (the min and max of their markers, part-IIII.json) give another grid than the one {plan} fitted to the vertex list: either some vertices are used by no triangle and lie outside the triangles' bounds (plan it without --parts), or a marker was edited or damaged (run the map tasks again)",
+                ctx.input.display()
+            )
+        }
         .into());
     }
     let warnings: Vec<String> = (degenerate > 0)
@@ -326,15 +343,28 @@ fn check_temp_disk(
     // the spool: two estimates' records; the bins: 1.5 entries per estimate (straddles)
     let spool = spooled as u64 * rec;
     let entry = bins as u64 * entry;
-    let temp_disk = est_triangles * (2 * spool + 3 * entry) / 2;
-    let min_disk = min_triangles * (spool + entry);
+    // the textures' tile file, when their pyramids exceed their share of the plan: its size is
+    // known from the images' headers and it is written whole, so it counts in the least too
+    let info = ctx.source.info();
+    let tiles = if bins && info.has_texcoords {
+        voxlod_texture::TextureSet::tile_file_bytes(&info.materials, ctx.memory.texture_share())
+    } else {
+        0
+    };
+    let temp_disk = est_triangles * (2 * spool + 3 * entry) / 2 + tiles;
+    let min_disk = min_triangles * (spool + entry) + tiles;
     let work = ctx.work.path();
     let Some(free) = crate::system::free_disk(work) else {
         return Ok(temp_disk);
     };
     if ctx.progress {
+        let textures = if tiles > 0 {
+            format!(", and texture tiles {}", format_size(tiles))
+        } else {
+            String::new()
+        };
         eprintln!(
-            "temporary disk: up to about {} in {} ({} free; {}-byte {}{})",
+            "temporary disk: up to about {} in {} ({} free; {}-byte {}{}{textures})",
             format_size(temp_disk),
             work.display(),
             format_size(free),
@@ -353,9 +383,14 @@ fn check_temp_disk(
     }
     if min_disk > free {
         return Err(StageError::TempDisk(format!(
-            "not enough disk space for the temporary files: at least {} needed in {}, {} free (choose another folder with --tmp)",
+            "not enough disk space for the temporary files: at least {} needed in {}{}, {} free (choose another folder with --tmp)",
             format_size(min_disk),
             work.display(),
+            if tiles > 0 {
+                format!(" (texture tiles {} of it)", format_size(tiles))
+            } else {
+                String::new()
+            },
             format_size(free)
         )));
     }

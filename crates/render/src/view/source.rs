@@ -1,4 +1,4 @@
-//! A leaf's source triangles as one entry of the viewer's cache (issue 15; Chajdas, Reitinger &
+//! A leaf's source triangles as one entry of the viewer's cache (Chajdas, Reitinger &
 //! Westermann, "Scalable rendering for very large meshes", WSCG 2014, section 4: "if the
 //! camera moves close enough to an octree leaf that the voxel resolution is no longer
 //! sufficient to maintain the pixel error guarantee, the leaf node is replaced by the actual

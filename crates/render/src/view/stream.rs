@@ -12,7 +12,7 @@
 //! (back-face culling per voxel face: a face with outward direction +a can be seen only from
 //! `eye[a]` above its plane). The CPU holds only the node being uploaded.
 //!
-//! **Source triangles** (section 4 of the paper, issue 15). In a file that stores them, a leaf
+//! **Source triangles** (section 4 of the paper). In a file that stores them, a leaf
 //! of the cut whose voxels still project above the threshold ([`cut::CutNode::over`], the rule
 //! `render` draws by) is wanted as a second kind of entry: its source triangles
 //! (`source.rs`), requested after the voxel nodes, counted in the same byte budget, evicted by

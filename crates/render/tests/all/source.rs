@@ -1,4 +1,4 @@
-//! Source triangles in `render` (issue 15): the npm bunny built with and without
+//! Source triangles in `render`: the npm bunny built with and without
 //! `--source-geometry`. Close up, the cut leaves marked `over` (counted from `cut::select`) are
 //! drawn from their triangles: the picture is not blank, has the voxels' silhouette (the
 //! triangles lie inside the voxels they made), and differs from the voxel pictures. From afar

@@ -1,4 +1,4 @@
-//! The stored attributes of source triangles as `render` draws them (issue 15): a made-up PLY
+//! The stored attributes of source triangles as `render` draws them: a made-up PLY
 //! of two triangles with vertex normals that are not their face normal, a distinct vertex
 //! colour per triangle and a per-face material, built with `--source-geometry` at 256³ (one
 //! leaf, which a close-up puts over the pixel error). Pixels inside each triangle are compared

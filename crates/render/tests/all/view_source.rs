@@ -1,4 +1,4 @@
-//! The streaming viewer with source triangles (issue 15), flown from afar to a close-up and
+//! The streaming viewer with source triangles, flown from afar to a close-up and
 //! held there while the stream catches up: the npm bunny built with `--source-geometry` at
 //! 512³, and a made-up dense sphere whose triangles outweigh its voxels (so they take several
 //! frames under the upload limit while its voxels stay drawn). Checked every frame against

@@ -11,6 +11,7 @@ mod clip;
 mod column;
 mod common;
 mod exact;
+mod f32_grid_bound;
 #[path = "common/grid.rs"]
 mod grid;
 mod materials;

@@ -348,6 +348,6 @@ fn ilv_error_is_within_the_documented_bound() {
 }
 
 /// The bounds the module docs of `scanline` state: measured 12–13 % missed and 13–14 % added
-/// here (docs/BENCHMARKS.md, "Earlier measurements", the scanline voxelizer).
+/// here (docs/journal/benchmarks-notebook.md, "Projected scanline voxelizer").
 const ILV_MISSED_PCT: f64 = 15.0;
 const ILV_ADDED_PCT: f64 = 15.0;

@@ -1,4 +1,4 @@
-//! Overlap decisions exact in the input's own coordinates (issue 32 §1), against a reference
+//! Overlap decisions exact in the input's own coordinates, against a reference
 //! that starts from the input's numbers: the world f32 vertices as read and the grid's origin
 //! and voxel size as the file states them (f64). It never uses the project's transform
 //! (`Grid::to_grid`): a voxel `i` is the world box `[origin + i·s, origin + (i+1)·s]` (per axis,

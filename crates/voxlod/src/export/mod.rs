@@ -24,7 +24,8 @@ pub struct ExportArgs {
     /// The level to export (0 = finest).
     #[arg(short, long, default_value_t = 0)]
     level: u32,
-    /// Output file: `.glb` writes glTF 2.0 binary, any other name binary PLY.
+    /// Output file: `.ply` writes binary PLY, `.glb` glTF 2.0 binary (with --source: `.ply`);
+    /// any other name is refused (the format is chosen by it).
     #[arg(short, long, required_unless_present = "tiles")]
     output: Option<PathBuf>,
     /// Write an OGC 3D Tiles 1.1 tileset into this new folder instead: `tileset.json` and one
@@ -108,18 +109,28 @@ fn output_dir(output: &Path) -> PathBuf {
     }
 }
 
-/// What `-o` asks for, from its extension.
-fn output_kind(output: &Path) -> Result<OutputKind> {
+/// What `-o` asks for, from its extension (any case): `.ply` binary PLY, `.glb` glTF binary
+/// (not with `--source`); any other name is refused rather than written in a format it does
+/// not name.
+fn output_kind(output: &Path, source: bool) -> Result<OutputKind> {
     let ext = output
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
     match ext.as_deref() {
-        Some("glb") => Ok(OutputKind::Glb),
-        Some("gltf") => anyhow::bail!(
+        Some("ply") => Ok(OutputKind::Ply),
+        Some("glb") if !source => Ok(OutputKind::Glb),
+        Some("gltf") if !source => anyhow::bail!(
             "{}: write glTF as one binary file: name it .glb (a .gltf with a separate .bin is not written)",
             output.display()
         ),
-        _ => Ok(OutputKind::Ply),
+        _ if source => anyhow::bail!(
+            "{}: --source writes binary PLY: the output's name must end in .ply",
+            output.display()
+        ),
+        _ => anyhow::bail!(
+            "{}: the output's name must end in .ply (binary PLY) or .glb (glTF 2.0 binary): the format is chosen by it",
+            output.display()
+        ),
     }
 }
 
@@ -192,18 +203,30 @@ pub fn run(a: ExportArgs) -> Result<()> {
     let output = a.output.clone().expect("clap: -o or --3d-tiles");
     // the output is checked (not the input, not another kind of file) and locked first, and
     // written under a temporary name: an interrupted export leaves no partial file
-    let kind = if a.source {
-        OutputKind::Ply
-    } else {
-        output_kind(&output)?
+    let kind = match output_kind(&output, a.source) {
+        Ok(k) => k,
+        Err(e) => {
+            // a name that is the input itself is the graver mistake: the guard says so first
+            drop(OutputGuard::acquire(
+                &output,
+                &[&a.file],
+                OutputKind::Ply,
+                false,
+            )?);
+            return Err(e);
+        }
     };
     let guard = OutputGuard::acquire(&output, &[&a.file], kind, a.force)?;
     let r = Reader::open(&a.file)?;
-    let limit = SizeLimit::for_dir(a.max_size, &output_dir(&output));
+    let mut limit = SizeLimit::for_dir(a.max_size, &output_dir(&output));
+    if kind == OutputKind::Glb {
+        // a GLB's lengths are 32-bit: past that, refused by the guard naming the level that fits
+        limit = limit.with_format_cap(u32::MAX as u64, "the 4 GiB a GLB can hold");
+    }
     if a.source {
         return run_source(&a, &output, &r, &guard, &limit);
     }
-    // the size is known before anything is written: refused when too big (issue 31 §3), else
+    // the size is known before anything is written: refused when too big, else
     // said first (a fine level of a big model is gigabytes), without a prompt, as
     // command-line tools that write files do
     let mut before = |s: &voxlod_render::ExportSummary| {

@@ -1,4 +1,4 @@
-//! Export never fills a disk by surprise (issue 31 §3): the size of an export is known before
+//! Export never fills a disk by surprise: the size of an export is known before
 //! its first byte is written (PLY and GLB count their faces first, a 3D Tiles tileset sums its
 //! tiles), and an export larger than the free space of the output's file system, or than
 //! 4 GiB unless `--max-size` allows more, is refused with the size, the limit, and the
@@ -21,6 +21,8 @@ pub struct SizeLimit {
     pub max_size: Option<u64>,
     /// Free bytes on the output's file system, if known.
     pub free: Option<u64>,
+    /// The most the output's format can hold, and how to name it (a GLB: 4 GiB).
+    pub format_cap: Option<(u64, &'static str)>,
 }
 
 impl SizeLimit {
@@ -29,7 +31,14 @@ impl SizeLimit {
         SizeLimit {
             max_size,
             free: voxlod_pipeline::free_disk(dir),
+            format_cap: None,
         }
+    }
+
+    /// The limits with the output format's own cap (`bytes`, named `named`).
+    pub fn with_format_cap(mut self, bytes: u64, named: &'static str) -> SizeLimit {
+        self.format_cap = Some((bytes, named));
+        self
     }
 
     /// The smaller limit and how to name it.
@@ -43,6 +52,10 @@ impl SizeLimit {
                     format_size(DEFAULT_MAX_SIZE)
                 ),
             ),
+        };
+        let cap = match self.format_cap {
+            Some((b, named)) if b < cap.0 => (b, named.to_string()),
+            _ => cap,
         };
         match self.free {
             Some(f) if f < cap.0 => (
@@ -79,6 +92,8 @@ impl SizeLimit {
         };
         let more = if self.free.is_some_and(|f| f <= limit) {
             "free space on that file system"
+        } else if self.format_cap.is_some_and(|(b, _)| b == limit) {
+            "write a PLY instead (-o NAME.ply), which has no such cap"
         } else {
             "allow more with --max-size SIZE"
         };
@@ -115,6 +130,7 @@ mod tests {
         let l = SizeLimit {
             max_size: Some(1000),
             free: None,
+            format_cap: None,
         };
         assert!(l.check("x", 1000, 0, 4, &|_| 0).is_ok());
         let e = l
@@ -133,6 +149,7 @@ mod tests {
         let l = SizeLimit {
             max_size: None,
             free: Some(100),
+            format_cap: None,
         };
         let e = l.check("o", 101, 1, 2, &|_| 0).unwrap_err().to_string();
         assert!(e.contains("free on the output's file system"), "{e}");
@@ -140,8 +157,25 @@ mod tests {
         let l = SizeLimit {
             max_size: None,
             free: None,
+            format_cap: None,
         };
         assert!(l.check("o", DEFAULT_MAX_SIZE, 0, 1, &|_| 0).is_ok());
         assert!(l.check("o", DEFAULT_MAX_SIZE + 1, 0, 1, &|_| 0).is_err());
+        // a GLB's 4 GiB cap, even with a larger --max-size: named, with the level that fits
+        let glb = SizeLimit {
+            max_size: Some(20 << 30),
+            free: None,
+            format_cap: None,
+        }
+        .with_format_cap(u32::MAX as u64, "the 4 GiB a GLB can hold");
+        let e = glb
+            .check("o.glb", 6 << 30, 0, 3, &|l| (6u64 << 30) >> (2 * l))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("more than the 4 GiB a GLB can hold"), "{e}");
+        assert!(e.contains("Level 1 is the coarsest that fits"), "{e}");
+        assert!(e.contains("write a PLY instead"), "{e}");
+        assert!(glb.check("o.glb", 4 << 30, 0, 3, &|_| 0).is_err());
+        assert!(glb.check("o.glb", (4 << 30) - 1, 0, 3, &|_| 0).is_ok());
     }
 }

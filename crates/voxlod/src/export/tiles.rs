@@ -43,6 +43,14 @@ fn check_target(dir: &Path, force: bool) -> Result<()> {
     if !force {
         bail!("{shown}: holds a tileset already; --force replaces it");
     }
+    // the whole folder is exchanged for the new tileset: with --force too, only a folder
+    // holding nothing but a tileset's own files is replaced
+    if let Some(other) = foreign_entry(dir)? {
+        bail!(
+            "{shown}: holds {}, which is not part of a tileset voxlod writes; even with --force only a folder holding nothing but tileset.json and its level folders is replaced: move it out or name another folder",
+            other.display()
+        );
+    }
     Ok(())
 }
 
@@ -54,6 +62,57 @@ pub struct Placement {
     pub origin: Option<[f64; 3]>,
     /// Metres per file unit.
     pub scale: f64,
+}
+
+/// True if `name` is a decimal number (a level folder).
+fn is_number(name: &str) -> bool {
+    !name.is_empty() && name.bytes().all(|b| b.is_ascii_digit())
+}
+
+/// True if `name` is a tile of a level folder: `X-Y-Z.glb`, or a part of a node split for size
+/// `X-Y-Z-o1-….glb` (up to eight octant digits 0..=7).
+fn is_tile(name: &str) -> bool {
+    name.strip_suffix(".glb").is_some_and(|n| {
+        let parts: Vec<&str> = n.split('-').collect();
+        (3..=11).contains(&parts.len())
+            && parts.iter().all(|p| is_number(p))
+            && parts[3..]
+                .iter()
+                .all(|p| p.len() == 1 && p.as_bytes()[0] <= b'7')
+    })
+}
+
+/// The first entry of `dir` that a tileset does not write (`tileset.json`, level folders `L`
+/// of tiles `X-Y-Z.glb`), if any.
+fn foreign_entry(dir: &Path) -> Result<Option<PathBuf>> {
+    let list = |d: &Path| -> Result<Vec<(String, std::fs::FileType)>> {
+        let mut out = Vec::new();
+        for e in std::fs::read_dir(d).with_context(|| format!("{}: cannot list", d.display()))? {
+            let e = e.with_context(|| format!("{}: cannot list", d.display()))?;
+            let t = e
+                .file_type()
+                .with_context(|| format!("{}: cannot list", d.display()))?;
+            out.push((e.file_name().to_string_lossy().into_owned(), t));
+        }
+        out.sort_by(|a, b| a.0.cmp(&b.0));
+        Ok(out)
+    };
+    for (name, t) in list(dir)? {
+        let at = dir.join(&name);
+        match name.as_str() {
+            "tileset.json" if t.is_file() => {}
+            n if is_number(n) && t.is_dir() => {
+                if let Some((tile, _)) = list(&at)?
+                    .into_iter()
+                    .find(|(tile, tt)| !(tt.is_file() && is_tile(tile)))
+                {
+                    return Ok(Some(at.join(tile)));
+                }
+            }
+            _ => return Ok(Some(at)),
+        }
+    }
+    Ok(None)
 }
 
 pub fn run(

@@ -1,4 +1,4 @@
-//! The exact reference of `world_exact.rs` (issue 32 §1), shared with the GPU crate's tests
+//! The exact reference of `world_exact.rs`, shared with the GPU crate's tests
 //! (included there by path): overlap decisions from the input's numbers, the world f32 vertices
 //! as read and the grid's origin and voxel size as the file states them (f64). It never uses the
 //! project's transform (`Grid::to_grid`): a voxel `i` is the world box `[origin + i·s, origin +
