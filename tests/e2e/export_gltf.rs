@@ -164,7 +164,20 @@ fn glb_triangles(path: &Path, unit: f64) -> (Vec<Tri>, Vec<String>) {
                 let n: [f32; 3] = std::array::from_fn(|a| nrm[i][a] as f32);
                 let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
                 assert!((len - 1.0).abs() < 1e-3, "normal {n:?} not unit");
-                let c: [u8; 4] = std::array::from_fn(|a| (col[i][a] * 255.0).round() as u8);
+                // COLOR_0 is linear (glTF): back to the stored sRGB byte, by IEC 61966-2-1
+                let c: [u8; 4] = std::array::from_fn(|a| {
+                    let l = col[i][a];
+                    let s = if a == 3 || l <= 0.0031308 {
+                        if a == 3 {
+                            l
+                        } else {
+                            l * 12.92
+                        }
+                    } else {
+                        1.055 * l.powf(1.0 / 2.4) - 0.055
+                    };
+                    (s * 255.0).round() as u8
+                });
                 (grid(w, unit), n, c, name.clone())
             };
             for t in idx.chunks_exact(3) {

@@ -424,7 +424,10 @@ fn sparse_indices(
         // a meshopt-compressed view is read decoded, the others from their buffer
         let (bytes, start) = match decoded.get(view.index()).and_then(Option::as_ref) {
             Some(d) => (Some(d), ix.offset()),
-            None => (buffers.get(view.buffer().index()), view.offset() + ix.offset()),
+            None => (
+                buffers.get(view.buffer().index()),
+                view.offset() + ix.offset(),
+            ),
         };
         let data = bytes
             .and_then(|b| b.get(start..start + sp.count() * size))

@@ -5,9 +5,11 @@
 //! primitive per material (FORMAT.md 14.3; the names from the manifest's `"materials"`).
 //!
 //! The cubes sit on the node's grid, so vertex data is compact with `KHR_mesh_quantization`:
-//! a vertex is 20 bytes, interleaved: position as unsigned shorts in voxel units inside the
+//! a vertex is 24 bytes, interleaved: position as unsigned shorts in voxel units inside the
 //! node (`0 ..= 256`, the glTF node's `translation` is the node's corner and its `scale` the
-//! voxel edge), normal as normalized shorts, colour (`COLOR_0`) as normalized unsigned bytes.
+//! voxel edge), normal as normalized shorts, colour (`COLOR_0`) as normalized unsigned shorts
+//! holding the **linear** value of the stored sRGB colour ([`crate::color`]: glTF vertex
+//! colours are linear; 16 bits so that every sRGB byte comes back exactly).
 //! Quads are two triangles over four vertices (`u16` indices where a primitive has at most
 //! 65536 vertices, `u32` above).
 //!
@@ -28,8 +30,8 @@ use crate::export::{shading_normal, ExportSummary};
 use crate::faces::{level_nodes, unit_face_corners, Face};
 use crate::RenderError;
 
-/// Bytes of one vertex: position `u16×3` + pad, normal `i16×3` + pad, colour `u8×4`.
-pub const GLB_VERTEX_BYTES: u64 = 20;
+/// Bytes of one vertex: position `u16×3` + pad, normal `i16×3` + pad, linear colour `u16×4`.
+pub const GLB_VERTEX_BYTES: u64 = 24;
 
 /// The quads of one node for one material: interleaved vertex records, 4 per quad.
 #[derive(Clone, Debug, Default)]
@@ -97,6 +99,7 @@ fn node_primitives(
     } else {
         None
     };
+    let linear = crate::color::srgb_to_linear_u16_table();
     let mut by_material: BTreeMap<u32, Primitive> = BTreeMap::new();
     for (j, v) in buf.iter().enumerate() {
         let mask = v.mask();
@@ -133,7 +136,14 @@ fn node_primitives(
                     rec[2 * a..2 * a + 2].copy_from_slice(&g[a].to_le_bytes());
                     rec[8 + 2 * a..10 + 2 * a].copy_from_slice(&n[a].to_le_bytes());
                 }
-                rec[16..20].copy_from_slice(&face.rgba);
+                for (k, &c) in face.rgba.iter().enumerate() {
+                    let c = if k < 3 {
+                        linear[c as usize]
+                    } else {
+                        c as u16 * 257
+                    };
+                    rec[16 + 2 * k..18 + 2 * k].copy_from_slice(&c.to_le_bytes());
+                }
                 p.vertices.extend_from_slice(&rec);
             }
             p.quads += 1;
@@ -295,7 +305,7 @@ impl Document {
             let idx = self.view(s.index_bytes(), None, Target::ElementArrayBuffer);
             let pos = self.accessor(verts, 0, v, C::U16, T::Vec3, false, Some((s.min, s.max)));
             let nrm = self.accessor(verts, 8, v, C::I16, T::Vec3, true, None);
-            let col = self.accessor(verts, 16, v, C::U8, T::Vec4, true, None);
+            let col = self.accessor(verts, 16, v, C::U16, T::Vec4, true, None);
             let wide = if s.wide_indices() { C::U32 } else { C::U16 };
             let ind = self.accessor(idx, 0, 6 * s.quads, wide, T::Scalar, false, None);
             let mut attributes = BTreeMap::new();

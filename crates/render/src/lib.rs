@@ -8,8 +8,8 @@
 //!   ([`Lod`], [`cut::select`]: the voxels' real size in pixels, frustum culled); the camera frames the bulk of the model's voxels
 //!   ([`robust_bounds`], so stray fragments do not shrink it) from a [`View`].
 //! - [`export_ply`] writes one level as a quad mesh (binary PLY with normals and colours);
-//!   [`export_glb_with`] the same quads as glTF 2.0 binary, [`node_glb`] one node's (a 3D
-//!   Tiles tile), [`export_tileset_with`] an OGC 3D Tiles 1.1 tileset of them.
+//!   [`export_glb_with`] the same quads as glTF 2.0 binary, [`node_glb`] one node's,
+//!   [`export_tileset_with`] an OGC 3D Tiles 1.1 tileset of compressed tiles ([`tile_content`]).
 //! - [`view`] streams nodes by that same cut into a fixed GPU budget (least recently used
 //!   eviction, an upload limit per frame) and draws frames along a camera path (`voxlod view`),
 //!   or in a window with the `window` feature.
@@ -38,6 +38,7 @@
 //! [`Renderer::new`], [`frame`] and [`Renderer::render`].
 
 mod camera;
+mod color;
 pub mod cut;
 mod draw;
 mod error;
@@ -48,10 +49,12 @@ mod glb;
 mod pass;
 mod picture;
 mod source_draw;
+mod tile_glb;
 mod tileset;
 pub mod view;
 
 pub use camera::{model_bounds, robust_bounds, up_from_shape, Shot, View};
+pub use color::{linear_to_srgb, srgb_to_linear};
 pub use draw::{Renderer, BACKGROUND};
 pub use error::RenderError;
 pub use export::{export_ply, export_ply_with, shading_normal, ExportSummary};
@@ -61,7 +64,11 @@ pub use faces::{
 };
 pub use glb::{export_glb_with, node_glb, NodeGlb, UpAxis, GLB_VERTEX_BYTES};
 pub use picture::Picture;
-pub use tileset::{export_tileset_with, tile_uri, TilesetSummary};
+pub use tile_glb::{tile_content, TileContent, TileFrame};
+pub use tileset::{
+    bottom_centre, export_tileset_with, root_transform, rotation_to_z, tile_uri, wgs84_to_ecef,
+    TilesetOptions, TilesetSummary, DEFAULT_MAX_SSE, GEOMETRIC_ERROR_PER_EDGE,
+};
 
 use voxlod_format::Reader;
 

@@ -81,7 +81,7 @@ pub(crate) fn parse_image_size(s: &str) -> Result<(u32, u32), String> {
     Ok((p(w)?, p(h)?))
 }
 
-fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
+pub(crate) fn parse_vec3(s: &str) -> Result<[f64; 3], String> {
     let v: Vec<f64> = s
         .split(',')
         .map(|c| c.trim().parse::<f64>())
@@ -196,7 +196,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
 
 /// The up vector and where it came from: `--up`, the manifest's `input.up` (three numbers),
 /// the model's shape ([`voxlod_render::up_from_shape`] on its robust bounds), or the default +Y.
-fn pick_up(r: &Reader, given: Option<[f64; 3]>) -> Result<([f64; 3], &'static str)> {
+pub(crate) fn pick_up(r: &Reader, given: Option<[f64; 3]>) -> Result<([f64; 3], &'static str)> {
     if let Some(u) = given {
         return Ok((u, "--up"));
     }

@@ -29,13 +29,29 @@ pub struct ExportArgs {
     #[arg(short, long, required_unless_present = "tiles")]
     output: Option<PathBuf>,
     /// Write an OGC 3D Tiles 1.1 tileset into this new folder instead: `tileset.json` and one
-    /// `.glb` per node of levels --level and coarser.
+    /// `.glb` per node of levels --level and coarser (meshopt-compressed, linear colours; a
+    /// node over 4 MB split in octants), the model's up as +z, geometric error 8 voxel edges
+    /// (voxels at most 2 px at the consumers' default screen-space error of 16).
     #[arg(long = "3d-tiles", id = "tiles", value_name = "DIR", conflicts_with_all = ["output", "source"])]
     tiles: Option<PathBuf>,
     /// With --3d-tiles: cut by geometric error instead of --level: the finest level written
     /// is the coarsest whose voxel edge is at most E (world units).
     #[arg(long, value_name = "E", requires = "tiles", conflicts_with = "level")]
     error: Option<f64>,
+    /// With --3d-tiles: the model's up, x,y,z, turned onto the tileset's up [default: as
+    /// `render` takes it: the manifest's `input.up`, else 0,0,1 for a model flat in z, else
+    /// 0,1,0]. The output says which was used.
+    #[arg(long, value_parser = crate::render::parse_vec3, allow_hyphen_values = true, requires = "tiles")]
+    up: Option<[f64; 3]>,
+    /// With --3d-tiles: place the model on the globe, its bottom centre at LON,LAT,HEIGHT
+    /// (degrees, degrees, metres above the WGS 84 ellipsoid), east-north-up (the root tile's
+    /// `transform`); without it the tileset keeps the file's coordinates, turned z-up.
+    #[arg(long, value_parser = parse_origin, value_name = "LON,LAT,HEIGHT", allow_hyphen_values = true, requires = "tiles")]
+    origin: Option<[f64; 3]>,
+    /// With --3d-tiles: the length of one file unit: m, dm, cm, mm, km, in, ft, or metres as a
+    /// number (3D Tiles are in metres).
+    #[arg(long, value_parser = parse_units, default_value = "m", allow_hyphen_values = true, requires = "tiles")]
+    units: f64,
     /// Export the source triangles stored beside the leaves (a file built with
     /// --source-geometry) instead of voxel quads.
     #[arg(long)]
@@ -51,6 +67,38 @@ pub struct ExportArgs {
     /// free space of the output's file system is refused whatever this says.
     #[arg(long, value_parser = parse_size, value_name = "SIZE")]
     max_size: Option<u64>,
+}
+
+/// `--origin LON,LAT,HEIGHT`: degrees in range, a finite height.
+fn parse_origin(s: &str) -> Result<[f64; 3], String> {
+    let [lon, lat, h] = crate::render::parse_vec3(s)
+        .map_err(|_| format!("'{s}' is not LON,LAT,HEIGHT (e.g. 7.44,46.95,600)"))?;
+    if !(-180.0..=180.0).contains(&lon) || !(-90.0..=90.0).contains(&lat) || !h.is_finite() {
+        return Err(format!(
+            "'{s}': longitude must be in -180..180, latitude in -90..90 degrees, height in metres"
+        ));
+    }
+    Ok([lon, lat, h])
+}
+
+/// `--units`: metres per file unit, by name or as a positive number.
+fn parse_units(s: &str) -> Result<f64, String> {
+    let named = match s.to_ascii_lowercase().as_str() {
+        "m" => Some(1.0),
+        "dm" => Some(0.1),
+        "cm" => Some(0.01),
+        "mm" => Some(0.001),
+        "km" => Some(1000.0),
+        "in" => Some(0.0254),
+        "ft" => Some(0.3048),
+        _ => None,
+    };
+    match named.or_else(|| s.parse::<f64>().ok()) {
+        Some(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!(
+            "'{s}' is not a unit: m, dm, cm, mm, km, in, ft, or metres per unit as a positive number"
+        )),
+    }
 }
 
 /// The folder an output is written in (`.` for a bare file name).
@@ -145,7 +193,12 @@ fn run_source(
 
 pub fn run(a: ExportArgs) -> Result<()> {
     if let Some(dir) = &a.tiles {
-        return tiles::run(&a.file, dir, a.level, a.error, a.max_size, a.force);
+        let place = tiles::Placement {
+            up: a.up,
+            origin: a.origin,
+            scale: a.units,
+        };
+        return tiles::run(&a.file, dir, a.level, a.error, a.max_size, a.force, &place);
     }
     let output = a.output.clone().expect("clap: -o or --3d-tiles");
     // the output is checked (not the input, not another kind of file) and locked first, and

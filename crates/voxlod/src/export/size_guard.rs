@@ -42,7 +42,7 @@ impl SizeLimit {
     }
 
     /// The smaller limit and how to name it.
-    fn limit(&self) -> (u64, String) {
+    pub fn limit(&self) -> (u64, String) {
         let cap = match self.max_size {
             Some(m) => (m, format!("--max-size {}", format_size(m))),
             None => (

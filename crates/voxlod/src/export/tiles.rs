@@ -1,8 +1,9 @@
 //! `voxlod export FILE --3d-tiles DIR [--level K | --error E]`: the octree as an OGC 3D Tiles
 //! 1.1 tileset (`voxlod_render::export_tileset_with`). The folder is written whole or not at
 //! all: the tiles go into a staging folder beside `DIR`, renamed to `DIR` at the end (an
-//! earlier tileset there is replaced only with `--force`); the size is known and checked
-//! (`size_guard`) before the first tile is written.
+//! earlier tileset there is replaced only with `--force`); tiles are written as they are
+//! compressed, up to the size limit (`size_guard`): past it the rest are only sized, the
+//! export is refused with the exact size and the staging folder removed.
 
 use std::path::{Path, PathBuf};
 
@@ -53,15 +54,32 @@ fn check_target(dir: &Path, force: bool) -> Result<()> {
     Ok(())
 }
 
+/// Where the tileset is put: `--up`, `--origin`, `--units`.
+pub struct Placement {
+    /// The model's up, if given (else as `render` picks it).
+    pub up: Option<[f64; 3]>,
+    /// Longitude, latitude (degrees) and height (metres) of the model's bottom centre.
+    pub origin: Option<[f64; 3]>,
+    /// Metres per file unit.
+    pub scale: f64,
+}
+
 /// True if `name` is a decimal number (a level folder).
 fn is_number(name: &str) -> bool {
     !name.is_empty() && name.bytes().all(|b| b.is_ascii_digit())
 }
 
-/// True if `name` is a tile of a level folder: `X-Y-Z.glb`.
+/// True if `name` is a tile of a level folder: `X-Y-Z.glb`, or a part of a node split for size
+/// `X-Y-Z-o1-….glb` (up to eight octant digits 0..=7).
 fn is_tile(name: &str) -> bool {
-    name.strip_suffix(".glb")
-        .is_some_and(|n| n.split('-').count() == 3 && n.split('-').all(is_number))
+    name.strip_suffix(".glb").is_some_and(|n| {
+        let parts: Vec<&str> = n.split('-').collect();
+        (3..=11).contains(&parts.len())
+            && parts.iter().all(|p| is_number(p))
+            && parts[3..]
+                .iter()
+                .all(|p| p.len() == 1 && p.as_bytes()[0] <= b'7')
+    })
 }
 
 /// The first entry of `dir` that a tileset does not write (`tileset.json`, level folders `L`
@@ -104,6 +122,7 @@ pub fn run(
     error: Option<f64>,
     max_size: Option<u64>,
     force: bool,
+    place: &Placement,
 ) -> Result<()> {
     check_target(dir, force)?;
     let r = Reader::open(file)?;
@@ -131,7 +150,19 @@ pub fn run(
     let stage_path = guard.staged().to_path_buf();
     let limit = SizeLimit::for_dir(max_size, &parent);
     let voxels = level_voxels(&r);
-    let s = voxlod_render::export_tileset_with(&r, level, &stage_path, &mut |s| {
+    let (up, up_from) = crate::render::pick_up(&r, place.up)?;
+    let opts = voxlod_render::TilesetOptions {
+        min_level: level,
+        up,
+        origin: place.origin,
+        scale: place.scale,
+        max_bytes: limit.limit().0,
+    };
+    // the tiles are written as they are made, at most up to the limit (past it the rest are
+    // only sized, for the message), and the staging folder is removed if the export fails
+    std::fs::create_dir(&stage_path)
+        .with_context(|| format!("{}: cannot create", stage_path.display()))?;
+    let s = voxlod_render::export_tileset_with(&r, &opts, &stage_path, &mut |s| {
         // other cuts: bytes in proportion to the voxels of the levels they hold
         let cut_voxels = |l: u32| voxels[l as usize..].iter().sum::<u64>();
         let per_voxel = s.bytes as f64 / cut_voxels(level).max(1) as f64;
@@ -145,33 +176,32 @@ pub fn run(
                 &estimate,
             )
             .map_err(|e| voxlod_render::RenderError::Option(e.to_string()))?;
-        std::fs::create_dir(&stage_path).map_err(|e| {
-            voxlod_render::RenderError::Option(format!(
-                "{}: cannot create: {e}",
-                stage_path.display()
-            ))
-        })?;
-        eprintln!(
-            "writing a 3D Tiles tileset of levels {level}..={} of {}: {} tiles, {} quads, {} to {}",
-            r.spec().levels - 1,
-            file.display(),
-            s.tiles,
-            s.quads,
-            format_size(s.bytes),
-            dir.display()
-        );
         Ok(())
     })?;
     // into place: exchanged atomically with an earlier tileset, which is then removed
     guard.commit_folder()?;
     println!(
-        "wrote {}: 3D Tiles 1.1, levels {level}..={}, {} tiles ({} with content), {} quads, {}",
+        "wrote {}: 3D Tiles 1.1, levels {level}..={}, {} tiles ({} with content), {} quads, {} ({:.2} bytes a voxel; largest tile {})",
         dir.display(),
         r.spec().levels - 1,
         s.tiles,
         s.contents,
         s.quads,
-        format_size(s.bytes)
+        format_size(s.bytes),
+        s.bytes as f64 / s.voxels.max(1) as f64,
+        format_size(s.largest_tile),
+    );
+    let placed = match place.origin {
+        Some([lon, lat, h]) => format!(
+            "its bottom centre at longitude {lon}°, latitude {lat}°, height {h} m, east-north-up"
+        ),
+        None => "at the file's coordinates (--origin places it on the globe)".into(),
+    };
+    println!(
+        "  up: {} ({up_from}) is the tileset's +z; {placed}; {} m per file unit; geometric error {}× the voxel edge (voxels at most 2 px at a maximum screen-space error of 16)",
+        up.map(|c| c.to_string()).join(","),
+        place.scale,
+        voxlod_render::GEOMETRIC_ERROR_PER_EDGE,
     );
     Ok(())
 }
