@@ -22,8 +22,8 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use voxlod_format::Reader;
-use voxlod_render::view::{FlyPath, StreamConfig, Viewer};
-use voxlod_render::{cut, Renderer};
+use voxlod_render::cut;
+use voxlod_render::view::{StreamConfig, Viewer};
 use voxlod_voxelize::Mode;
 
 /// The Munich city model at 4096³ (conservative, as `voxlod build` by default); built once.
@@ -44,18 +44,6 @@ fn munich() -> Option<&'static Path> {
     })
     .as_ref()
     .map(|(_, f)| f.as_path())
-}
-
-fn renderer() -> Renderer {
-    match Renderer::new() {
-        Ok(x) => x,
-        Err(e) => panic!("no GPU adapter: the viewer test needs one (lavapipe: apt-get install mesa-vulkan-drivers libvulkan1): {e}"),
-    }
-}
-
-fn street() -> FlyPath {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/munich-street.json");
-    FlyPath::load(&p).unwrap()
 }
 
 /// `voxlod view`'s defaults: 256 MiB of cache, 4 MiB uploaded per frame, 1 px.
@@ -79,8 +67,8 @@ fn iou(a: &[bool], b: &[bool]) -> f64 {
 fn the_street_frame_is_complete_in_the_default_cache() {
     let Some(file) = munich() else { return };
     let r = Reader::open(file).unwrap();
-    let mut viewer = Viewer::new(&r, renderer(), defaults(false)).unwrap();
-    let path = street();
+    let mut viewer = Viewer::new(&r, common::renderer(), defaults(false)).unwrap();
+    let path = common::fly_path("munich-street.json");
     let shot = path.shot(0, viewer.bounds(), 800, 600);
     assert_eq!(shot.eye.to_array(), [-200.0, 50.0, 4.0]);
     let f = viewer.complete_frame(&shot).unwrap();
@@ -112,10 +100,10 @@ fn the_street_frame_is_complete_in_the_default_cache() {
 fn occlusion_culling_draws_fewer_faces_for_the_same_pictures() {
     let Some(file) = munich() else { return };
     let r = Reader::open(file).unwrap();
-    let path = street();
+    let path = common::fly_path("munich-street.json");
     let (w, h) = (400, 300);
-    let mut with = Viewer::new(&r, renderer(), defaults(true)).unwrap();
-    let mut without = Viewer::new(&r, renderer(), defaults(false)).unwrap();
+    let mut with = Viewer::new(&r, common::renderer(), defaults(true)).unwrap();
+    let mut without = Viewer::new(&r, common::renderer(), defaults(false)).unwrap();
     let (mut faces_with, mut faces_without, mut occluded) = (0u64, 0u64, 0usize);
     for i in 0..path.frames {
         let shot = path.shot(i, with.bounds(), w, h);

@@ -13,13 +13,6 @@ use voxlod_format::{encode_node, FileSpec, Reader, Writer, MODE_THIN};
 use voxlod_render::{frame, Lod, Picture, Renderer, View};
 use voxlod_voxelize::Mode;
 
-fn renderer() -> Renderer {
-    match Renderer::new() {
-        Ok(x) => x,
-        Err(e) => panic!("no GPU adapter: the render test needs one (lavapipe: apt-get install mesa-vulkan-drivers libvulkan1): {e}"),
-    }
-}
-
 /// The picture of level 0 seen from `direction`, and the renderer's light for it (from the
 /// upper left behind the eye, fixed to the camera).
 fn picture(r: &Reader, renderer: &Renderer, direction: [f64; 3], up: [f64; 3]) -> (Picture, DVec3) {
@@ -75,7 +68,7 @@ fn an_open_sheet_is_drawn_and_lit_from_behind() {
     w.finish(&serde_json::json!({})).unwrap();
     let r = Reader::open(&path).unwrap();
 
-    let mut renderer = renderer();
+    let mut renderer = common::renderer();
     assert!(!renderer.two_sided(), "one-sided by default");
     renderer.set_two_sided(true);
     let up = [0.0, 1.0, 0.0];
@@ -119,7 +112,7 @@ fn closed_surfaces_look_the_same_two_sided() {
     let file = dir.path().join("bunny.voxlod");
     common::build(&m, "npm-bunny/bunny.ply", &file, 512, Mode::Thin);
     let r = Reader::open(&file).unwrap();
-    let mut renderer = renderer();
+    let mut renderer = common::renderer();
     renderer.set_two_sided(true);
     for direction in [[0.55, 0.35, 1.0], [-1.0, 0.2, -0.3]] {
         let (two, _) = picture(&r, &renderer, direction, [0.0, 1.0, 0.0]);

@@ -18,8 +18,8 @@ use std::sync::OnceLock;
 use glam::{DMat4, DVec3, DVec4};
 use viewing::{ancestors, voxel_bytes};
 use voxlod_format::{Aabb, Reader};
-use voxlod_render::view::{fly, FlyPath, StreamConfig, Viewer};
-use voxlod_render::{cut, Renderer, Shot, BACKGROUND};
+use voxlod_render::view::{fly, StreamConfig, Viewer};
+use voxlod_render::{cut, Shot, BACKGROUND};
 use voxlod_voxelize::Mode;
 
 /// The dragon (its 2.8 MB "res3" scan) at 1024³: three levels, 37 nodes; built once.
@@ -42,18 +42,6 @@ fn dragon() -> Option<&'static Path> {
     .map(|(_, f)| f.as_path())
 }
 
-fn renderer() -> Renderer {
-    match Renderer::new() {
-        Ok(x) => x,
-        Err(e) => panic!("no GPU adapter: the viewer test needs one (lavapipe: apt-get install mesa-vulkan-drivers libvulkan1): {e}"),
-    }
-}
-
-fn fly_in() -> FlyPath {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/fly-in.json");
-    FlyPath::load(&p).unwrap()
-}
-
 /// Fraction of pixels that differ from the clear colour.
 fn covered(rgba: &[u8]) -> f64 {
     let n = rgba
@@ -67,7 +55,7 @@ fn covered(rgba: &[u8]) -> f64 {
 fn fly_in_streams_within_its_budgets() {
     let Some(file) = dragon() else { return };
     let r = Reader::open(file).unwrap();
-    let renderer = renderer();
+    let renderer = common::renderer();
     let sizes: Vec<u64> = (0..r.nodes().len()).map(|i| voxel_bytes(&r, i)).collect();
     let total: u64 = sizes.iter().sum();
     let largest = *sizes.iter().max().unwrap();
@@ -83,7 +71,7 @@ fn fly_in_streams_within_its_budgets() {
     assert!(config.cache_bytes < total && config.upload_bytes_per_frame < largest);
     let mut viewer = Viewer::new(&r, renderer, config).unwrap();
     // the shipped fly-in, then a rest at the close-up while the stream catches up
-    let mut path = fly_in();
+    let mut path = common::fly_path("fly-in.json");
     path.keyframes.push(*path.keyframes.last().unwrap());
     path.frames = 40;
     let mut stats = Vec::new();
@@ -229,8 +217,8 @@ fn the_cut_matches_a_cpu_recomputation() {
     let Some(file) = dragon() else { return };
     let r = Reader::open(file).unwrap();
     assert_eq!(r.spec().levels, 3);
-    let renderer = renderer();
-    let path = fly_in();
+    let renderer = common::renderer();
+    let path = common::fly_path("fly-in.json");
     let mut viewer = Viewer::new(
         &r,
         renderer,

@@ -18,7 +18,7 @@ use std::collections::BTreeSet;
 use viewing::{ancestors, voxel_bytes};
 use voxlod_format::Reader;
 use voxlod_render::view::{FlyPath, FrameStats, StreamConfig, Viewer};
-use voxlod_render::{cut, Renderer, BACKGROUND};
+use voxlod_render::{cut, BACKGROUND};
 use voxlod_testkit::mesh::{icosphere, write_ply};
 use voxlod_voxelize::Mode;
 
@@ -37,13 +37,6 @@ const SPHERE_PATH: &str = r#"{"keyframes": [
     {"eye": [0.1, 0.15, 0.5], "target": [0.0, 0.0, 0.0]},
     {"eye": [0.1, 0.15, 0.5], "target": [0.0, 0.0, 0.0]}
   ], "frames": 24}"#;
-
-fn renderer() -> Renderer {
-    match Renderer::new() {
-        Ok(x) => x,
-        Err(e) => panic!("no GPU adapter: the viewer test needs one (lavapipe: apt-get install mesa-vulkan-drivers libvulkan1): {e}"),
-    }
-}
 
 /// Triangles stored beside node `i` and the bytes of their GPU entry: 28 bytes per stored
 /// (shared) vertex, 12 per triangle.
@@ -68,7 +61,7 @@ fn run(r: &Reader, config: StreamConfig, path: &str, min_cover: f64) -> Vec<Chec
     let faces: Vec<u64> = (0..n).map(|i| voxel_bytes(r, i)).collect();
     let tris: Vec<Option<(u64, u64)>> = (0..n).map(|i| triangle_entry(r, i)).collect();
     let path: FlyPath = serde_json::from_str(path).unwrap();
-    let mut viewer = Viewer::new(r, renderer(), config).unwrap();
+    let mut viewer = Viewer::new(r, common::renderer(), config).unwrap();
     let mut out = Vec::new();
     for i in 0..path.frames {
         let f = viewer

@@ -34,3 +34,19 @@ pub fn build_with(
     };
     voxlod_pipeline::build(&meshes.join(mesh), out, &s).unwrap();
 }
+
+/// The GPU renderer; no adapter is a failure, never a skip (lavapipe without a GPU).
+pub fn renderer() -> voxlod_render::Renderer {
+    match voxlod_render::Renderer::new() {
+        Ok(x) => x,
+        Err(e) => panic!("no GPU adapter: the render tests need one (lavapipe: apt-get install mesa-vulkan-drivers libvulkan1): {e}"),
+    }
+}
+
+/// The camera path `configs/NAME` of the repository.
+pub fn fly_path(name: &str) -> voxlod_render::view::FlyPath {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../configs")
+        .join(name);
+    voxlod_render::view::FlyPath::load(&p).unwrap()
+}
